@@ -1,0 +1,118 @@
+"""Frozen configuration of a robot and its planner.
+
+Scenario files name these fields without the unit suffix (`d_safety` -> `d_safety_m`,
+`t_max` -> `t_max_s`, `v_max` -> `v_max_mps`); see `world.scenario`. SI units throughout.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+PLANNER_NAMES: tuple[str, ...] = ("eifp-mpc", "eifp", "ifp", "orca")
+
+
+@dataclass(frozen=True)
+class RobotLimits:
+    """Actuation limits of a unicycle robot.
+
+    Args:
+        v_max_mps: largest forward speed.
+        v_min_mps: smallest forward speed (0: the robot never reverses).
+        omega_max_radps: largest |turn rate|.
+        accel_max_mps2: largest |dv/dt| a planner may command.
+        alpha_max_radps2: largest |d omega/dt| a planner may command.
+    """
+
+    v_max_mps: float = 1.1
+    v_min_mps: float = 0.0
+    omega_max_radps: float = 1.5
+    accel_max_mps2: float = 1.5
+    alpha_max_radps2: float = 6.0
+
+
+@dataclass(frozen=True)
+class MpcConfig:
+    """LTV-MPC tracker solved with OSQP (eIFP-MPC).
+
+    Args:
+        horizon_steps: N, number of control steps.
+        dt_s: step length of the prediction model (Eq. 1).
+        q_position: weight on squared position error per step [1/m^2].
+        q_heading: weight on squared heading error per step [1/rad^2].
+        q_terminal: multiplier on the last step's state weight.
+        r_v: weight on (v - v_ref)^2.
+        r_omega: weight on (omega - omega_ref)^2.
+        r_dv: weight on squared change of v between steps.
+        r_domega: weight on squared change of omega between steps.
+        max_constraints: neighbours turned into half-plane constraints (nearest first).
+        slack_weight: linear and quadratic weight on half-plane slack (soft constraints).
+        max_iter: OSQP iteration cap per solve.
+        eps_abs: OSQP absolute tolerance.
+        eps_rel: OSQP relative tolerance.
+    """
+
+    horizon_steps: int = 20
+    dt_s: float = 0.1
+    q_position: float = 10.0
+    q_heading: float = 0.5
+    q_terminal: float = 2.0
+    r_v: float = 1.0
+    r_omega: float = 0.2
+    r_dv: float = 2.0
+    r_domega: float = 0.5
+    max_constraints: int = 4
+    slack_weight: float = 1.0e4
+    max_iter: int = 200
+    eps_abs: float = 1.0e-3
+    eps_rel: float = 1.0e-3
+
+
+@dataclass(frozen=True)
+class PlannerConfig:
+    """Parameters shared by the four planners; each file key maps onto one field.
+
+    Args:
+        d_safety_m: safety margin added to the inflated radius L (Eq. 7).
+        d_thresh_m: DCPA threshold of Eq. (5); None means 5 * r_robot + d_safety_m.
+        t_max_s: TCPA horizon T_max of Eq. (5).
+        sensing_radius_m: others farther than this (centre to centre) are not seen.
+        max_neighbors: at most this many nearest others enter planning (bounds the work).
+        max_depth: IFP/eIFP iteration depth (via-points per plan).
+        w_length: w_g of Eq. (14), weight on the normalised length.
+        w_distance: w_d of Eq. (14), weight on the inverse distance to predicted paths [m].
+        w_angle: w_a of Eq. (14), weight on the angular misalignment.
+        ghost_horizon_s: how far ahead a neighbour's ghost goal is projected.
+        ghost_clearance_m: candidates closer than this to a ghost path are discarded;
+            None means the pair's inflated radius L.
+        side_hysteresis: a via-point on the other side than last time for the same threat
+            must beat the kept side's cost by this fraction.
+        estimation_window_s: history length used to estimate others' velocity and linearity.
+        lookahead_s: how far ahead on the reference the tracking law aims.
+        heading_gain: proportional gain of the tracking law on heading error [1/s].
+        orca_time_horizon_s: ORCA's time horizon for other agents.
+        mpc: the MPC tracker's parameters (eIFP-MPC only).
+    """
+
+    d_safety_m: float = 0.3
+    d_thresh_m: float | None = None
+    t_max_s: float = 8.0
+    sensing_radius_m: float = 10.0
+    max_neighbors: int = 10
+    max_depth: int = 3
+    w_length: float = 1.0
+    w_distance: float = 1.0
+    w_angle: float = 0.3
+    ghost_horizon_s: float = 4.0
+    ghost_clearance_m: float | None = None
+    side_hysteresis: float = 0.15
+    estimation_window_s: float = 0.5
+    lookahead_s: float = 0.6
+    heading_gain: float = 2.5
+    orca_time_horizon_s: float = 4.0
+    mpc: MpcConfig = field(default_factory=MpcConfig)
+
+    def dcpa_threshold_m(self, robot_radius_m: float) -> float:
+        """D_thresh of Eq. (5): configured, or 5 * r_robot + d_safety."""
+        if self.d_thresh_m is not None:
+            return self.d_thresh_m
+        return 5.0 * robot_radius_m + self.d_safety_m

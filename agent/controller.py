@@ -1,0 +1,139 @@
+"""One robot's sense -> estimate -> plan cycle, shared by the robot process and lockstep runs.
+
+The controller holds what a robot knows: the newest pose snapshot it accepted, the history
+of the others' poses (`NeighborTracker`), its planner's memory and the command it sent
+last (its odometry for its own speed). It has no transport and no clock: the robot
+process and the lockstep runner feed it snapshots and the current sim time.
+
+Latency compensation (on by default): a snapshot stamped `stamp_s` is `age = now_s -
+stamp_s` old when the robot plans at `now_s`. Before planning, the robot forward-predicts
+its own pose with the command it has been applying (the unicycle arc of Eq. 1) and the
+others' positions with their estimated velocities, both over `age`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from agent.config import PlannerConfig
+from agent.estimation import NeighborTracker
+from agent.types import EgoState, Observation, Others, PlanResult, PlanStatus, PoseSnapshot
+from world.scenario import RobotSpec
+
+MAX_COMPENSATED_AGE_S = 1.0
+"""Poses older than this are not extrapolated further (the prediction would be fiction)."""
+
+
+class RobotController:
+    """Sense, estimate and plan for one robot.
+
+    Args:
+        spec: the robot (id, goal, radius, limits, planner name).
+        config: planner parameters.
+        goal_tolerance_m: the robot stops when this close to its goal.
+        compensate_latency: forward-predict by the snapshot's age before planning.
+    """
+
+    def __init__(self, spec: RobotSpec, config: PlannerConfig, goal_tolerance_m: float,
+                 *, compensate_latency: bool = True) -> None:
+        from agent.planners import make_planner
+
+        self.spec = spec
+        self.config = config
+        self.goal_tolerance_m = float(goal_tolerance_m)
+        self.compensate_latency = compensate_latency
+        self.planner = make_planner(spec.planner, config)
+        self.tracker = NeighborTracker(spec.id, config.estimation_window_s)
+        self.snapshot: PoseSnapshot | None = None
+        self.command = (0.0, 0.0)
+        self.rejected_stale = 0
+        self._goal = np.asarray(spec.goal, dtype=float)
+
+    def observe(self, snapshot: PoseSnapshot) -> bool:
+        """Accept a snapshot if it is newer than the last one and shows this robot.
+
+        Returns:
+            False (and counts it) for a stale, duplicated or out-of-order snapshot, or one
+            in which this robot does not appear.
+        """
+        last = self.snapshot
+        if last is not None and (snapshot.tick <= last.tick or snapshot.stamp_s < last.stamp_s):
+            self.rejected_stale += 1
+            return False
+        if not np.any(snapshot.ids == self.spec.id):
+            self.rejected_stale += 1
+            return False
+        self.tracker.update(snapshot)
+        self.snapshot = snapshot
+        return True
+
+    def observation(self, now_s: float) -> Observation:
+        """What the robot knows at `now_s`, forward-predicted by the snapshot's age."""
+        snap = self.snapshot
+        if snap is None:
+            raise RuntimeError("no snapshot observed yet")
+        row = int(np.flatnonzero(snap.ids == self.spec.id)[0])
+        x, y, heading = snap.pose[row]
+        others = self.tracker.others()
+        v, omega = self.command
+        age = float(np.clip(now_s - snap.stamp_s, 0.0, MAX_COMPENSATED_AGE_S))
+        if self.compensate_latency and age > 0.0:
+            x, y, heading = _predict_unicycle(x, y, heading, v, omega, age)
+            others = _advance(others, age)
+        return Observation(
+            robot_id=self.spec.id,
+            ego=EgoState(x_m=x, y_m=y, heading_rad=heading, v_mps=v, omega_radps=omega),
+            goal_m=self._goal,
+            radius_m=self.spec.radius_m,
+            limits=self.spec.limits,
+            goal_tolerance_m=self.goal_tolerance_m,
+            others=others,
+        )
+
+    def plan(self, now_s: float) -> PlanResult:
+        """Plan on the newest snapshot; without any snapshot, brake (status STALE)."""
+        if self.snapshot is None:
+            return self.brake()
+        result = self.planner.plan(self.observation(now_s), now_s)
+        self.command = (result.v_mps, result.omega_radps)
+        return result
+
+    def brake(self) -> PlanResult:
+        """Stop command used when the robot cannot plan (no fresh poses)."""
+        self.command = (0.0, 0.0)
+        here = np.zeros((2, 2))
+        if self.snapshot is not None:
+            row = int(np.flatnonzero(self.snapshot.ids == self.spec.id)[0])
+            here[:] = self.snapshot.pose[row, :2]
+        return PlanResult(v_mps=0.0, omega_radps=0.0, status=PlanStatus.STALE, waypoints_m=here)
+
+
+def _predict_unicycle(x: float, y: float, heading: float, v: float, omega: float,
+                      age_s: float) -> tuple[float, float, float]:
+    """Constant-(v, omega) arc over age_s."""
+    dtheta = omega * age_s
+    if abs(dtheta) < 1e-9:
+        return x + v * age_s * np.cos(heading), y + v * age_s * np.sin(heading), heading
+    r = v / omega
+    new_heading = heading + dtheta
+    return (
+        x + r * (np.sin(new_heading) - np.sin(heading)),
+        y - r * (np.cos(new_heading) - np.cos(heading)),
+        float(np.angle(np.exp(1j * new_heading))),
+    )
+
+
+def _advance(others: Others, age_s: float) -> Others:
+    """The others moved on for age_s at their estimated velocities."""
+    if len(others) == 0:
+        return others
+    shift = others.velocity_mps * age_s
+    return Others(
+        ids=others.ids,
+        position_m=others.position_m + shift,
+        velocity_mps=others.velocity_mps,
+        radius_m=others.radius_m,
+        linearity=others.linearity,
+        track_start_m=others.track_start_m,
+        is_robot=others.is_robot,
+    )

@@ -1,0 +1,125 @@
+"""Estimating the others' motion from observed poses only (pure).
+
+A robot never receives another's velocity, plan or goal: it keeps a short history of the
+poses it observed and estimates, per other disc,
+- velocity: least-squares slope of position against time over the last
+  `window_s` (a constant-velocity fit; robust to one noisy sample, exact for straight motion);
+- linearity w_j of Eq. (14) (our choice, the paper leaves it open): the straightness index
+  |p_last - p_first| / (path length over the window), in [0, 1]; 1 for a straight track,
+  lower for a turning or dithering one, 0 for a disc that has not moved (< 1 cm);
+- s_j, the ghost path's start: the oldest position inside the window.
+All neighbours are handled at once with arrays of shape (H samples, n discs).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from agent.types import Others, PoseSnapshot
+
+_MIN_TRAVEL_M = 0.01
+
+
+class NeighborTracker:
+    """Short pose history of every other disc and the estimates built from it.
+
+    Args:
+        own_id: this robot's id (excluded from the estimates).
+        window_s: history length used for the estimates.
+        max_samples: ring size H; older samples fall out even inside the window.
+    """
+
+    def __init__(self, own_id: int, window_s: float = 0.5, max_samples: int = 8) -> None:
+        if not window_s > 0.0:
+            raise ValueError("window_s must be positive")
+        if max_samples < 2:
+            raise ValueError("max_samples must be >= 2")
+        self.own_id = int(own_id)
+        self.window_s = float(window_s)
+        self.max_samples = int(max_samples)
+        self._col: dict[int, int] = {}
+        self._ids = np.zeros(0, dtype=np.int64)
+        self._radius = np.zeros(0)
+        self._t = np.full(self.max_samples, -np.inf)
+        self._pos = np.zeros((self.max_samples, 0, 2))
+        self._seen = np.zeros((self.max_samples, 0), dtype=bool)
+        self._latest = np.zeros(0, dtype=bool)
+        self._row = -1
+
+    def reset(self) -> None:
+        """Forget all history."""
+        self.__init__(self.own_id, self.window_s, self.max_samples)  # type: ignore[misc]
+
+    def _grow(self, new_ids: list[int]) -> None:
+        for rid in new_ids:
+            self._col[rid] = len(self._col)
+        extra = len(new_ids)
+        self._ids = np.concatenate([self._ids, np.array(new_ids, dtype=np.int64)])
+        self._radius = np.concatenate([self._radius, np.zeros(extra)])
+        self._pos = np.concatenate([self._pos, np.zeros((self.max_samples, extra, 2))], axis=1)
+        self._seen = np.concatenate(
+            [self._seen, np.zeros((self.max_samples, extra), dtype=bool)], axis=1
+        )
+        self._latest = np.concatenate([self._latest, np.zeros(extra, dtype=bool)])
+
+    def update(self, snapshot: PoseSnapshot) -> None:
+        """Add one observed snapshot (the caller drops stale or out-of-order ones)."""
+        mask = snapshot.ids != self.own_id
+        ids = snapshot.ids[mask]
+        new = [int(i) for i in ids.tolist() if int(i) not in self._col]
+        if new:
+            self._grow(new)
+        cols = np.fromiter((self._col[int(i)] for i in ids.tolist()), dtype=np.int64,
+                           count=ids.shape[0])
+        self._row = (self._row + 1) % self.max_samples
+        r = self._row
+        self._t[r] = snapshot.stamp_s
+        self._seen[r] = False
+        self._seen[r, cols] = True
+        self._pos[r, cols] = snapshot.pose[mask, :2]
+        self._radius[cols] = snapshot.radius_m[mask]
+        self._latest = self._seen[r].copy()
+
+    def others(self) -> Others:
+        """Estimates for every disc seen in the latest snapshot (ids in first-seen order)."""
+        if self._row < 0 or not np.any(self._latest):
+            return Others.empty()
+        r = self._row
+        t_now = self._t[r]
+        order = np.argsort(self._t)  # oldest first; unused rows have -inf
+        t = self._t[order]
+        pos = self._pos[order][:, self._latest]  # (H, k, 2)
+        seen = self._seen[order][:, self._latest]  # (H, k)
+        use = seen & (t_now - t <= self.window_s + 1e-9)[:, None]
+        w = use.astype(float)
+        count = w.sum(axis=0)  # (k,)
+        tt = np.where(np.isfinite(t), t - t_now, 0.0)[:, None]  # relative times, (H, 1)
+        safe_count = np.maximum(count, 1.0)
+        t_mean = (w * tt).sum(axis=0) / safe_count
+        p_mean = (w[..., None] * pos).sum(axis=0) / safe_count[:, None]
+        dt = (tt - t_mean) * w
+        var_t = (dt * (tt - t_mean)).sum(axis=0)
+        cov = (dt[..., None] * (pos - p_mean)).sum(axis=0)
+        ok = (count >= 2) & (var_t > 1e-12)
+        velocity = np.where(ok[:, None], cov / np.where(ok, var_t, 1.0)[:, None], 0.0)
+
+        # Oldest used sample per disc (ghost path start s_j) and straightness of the track.
+        first = np.argmax(use, axis=0)
+        k = np.arange(pos.shape[1])
+        start = pos[first, k]
+        latest = pos[-1]
+        steps = np.linalg.norm(np.diff(pos, axis=0), axis=2)  # (H-1, k)
+        both = use[1:] & use[:-1]
+        path = (steps * both).sum(axis=0)
+        chord = np.linalg.norm(latest - start, axis=1)
+        linearity = np.where(path > _MIN_TRAVEL_M, chord / np.maximum(path, 1e-12), 0.0)
+        ids = self._ids[self._latest]
+        return Others(
+            ids=ids,
+            position_m=latest,
+            velocity_mps=velocity,
+            radius_m=self._radius[self._latest],
+            linearity=np.clip(linearity, 0.0, 1.0),
+            track_start_m=start,
+            is_robot=ids >= 0,
+        )

@@ -1,0 +1,63 @@
+"""Velocity, linearity and ghost-start estimates from observed poses only."""
+
+import math
+
+import numpy as np
+import pytest
+
+from agent.estimation import NeighborTracker
+from agent.types import PoseSnapshot
+
+
+def snap(t, tick, rows):
+    ids = [r[0] for r in rows]
+    pose = [[r[1], r[2], 0.0] for r in rows]
+    return PoseSnapshot(stamp_s=t, tick=tick, ids=ids, pose=pose, radius_m=[0.5] * len(rows))
+
+
+def test_constant_velocity_is_recovered_exactly():
+    tr = NeighborTracker(own_id=0, window_s=0.5)
+    for k in range(8):
+        t = 0.1 * k
+        tr.update(snap(t, k, [(0, 0.0, 0.0), (1, 2.0 + 1.5 * t, -0.5 * t), (-1, 5.0, 5.0)]))
+    o = tr.others()
+    assert o.ids.tolist() == [1, -1]
+    np.testing.assert_allclose(o.velocity_mps[0], [1.5, -0.5], atol=1e-9)
+    np.testing.assert_allclose(o.velocity_mps[1], [0.0, 0.0], atol=1e-12)
+    assert o.linearity[0] == pytest.approx(1.0)
+    assert o.linearity[1] == 0.0  # never moved
+    # Ghost start s_j is the oldest sample inside the 0.5 s window: t = 0.2.
+    np.testing.assert_allclose(o.track_start_m[0], [2.0 + 1.5 * 0.2, -0.1], atol=1e-9)
+    assert o.is_robot.tolist() == [True, False]
+
+
+def test_turning_track_has_lower_linearity():
+    tr = NeighborTracker(own_id=0, window_s=1.0, max_samples=12)
+    for k in range(11):
+        a = 0.3 * k  # a robot circling with radius 1
+        tr.update(snap(0.1 * k, k, [(0, 0, 0), (3, math.cos(a), math.sin(a))]))
+    o = tr.others()
+    assert 0.3 < o.linearity[0] < 0.9
+
+
+def test_single_sample_gives_zero_velocity():
+    tr = NeighborTracker(own_id=0)
+    tr.update(snap(0.0, 0, [(0, 0, 0), (1, 1, 1)]))
+    o = tr.others()
+    np.testing.assert_array_equal(o.velocity_mps, [[0.0, 0.0]])
+
+
+def test_only_latest_discs_are_reported_and_new_ids_join():
+    tr = NeighborTracker(own_id=0)
+    tr.update(snap(0.0, 0, [(0, 0, 0), (1, 1, 1)]))
+    tr.update(snap(0.1, 1, [(0, 0, 0), (2, 4, 4)]))
+    o = tr.others()
+    assert o.ids.tolist() == [2]
+    assert len(NeighborTracker(own_id=0).others()) == 0
+
+
+def test_rejects_bad_parameters():
+    with pytest.raises(ValueError):
+        NeighborTracker(0, window_s=0.0)
+    with pytest.raises(ValueError):
+        NeighborTracker(0, max_samples=1)

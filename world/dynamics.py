@@ -1,0 +1,233 @@
+"""Ground-truth world dynamics: unicycles, moving discs, contacts and arrival (pure).
+
+The world integrates every robot's unicycle (Eq. 1) with the latest command held constant
+over a tick (zero-order hold). It integrates the arc exactly rather than with the Euler
+step of Eq. (1): the ground truth should not share the robots' model error. Commands are
+clamped to the robot's limits; a robot whose command is older than `cmd_timeout_s`, or
+whose process is offline, brakes at its maximum deceleration with zero turn rate.
+No I/O, no clock: time advances only through `step(dt_s)`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from agent.types import PoseSnapshot
+from world.scenario import Scenario
+
+CONTACT_OVERLAP_M = 1.0e-3
+"""Two discs are in contact when they overlap by more than this (1 mm)."""
+
+
+@dataclass(frozen=True)
+class TickEvents:
+    """What changed during one tick.
+
+    Args:
+        arrivals: robot ids that reached their goal this tick.
+        new_contacts: (id_a, id_b, overlap_m) for pairs that came into contact this tick;
+            obstacle ids are negative.
+        timeouts: robot ids whose command went stale this tick (they brake).
+    """
+
+    arrivals: tuple[int, ...] = ()
+    new_contacts: tuple[tuple[int, int, float], ...] = ()
+    timeouts: tuple[int, ...] = ()
+
+
+def integrate_unicycle(pose: np.ndarray, v_mps: np.ndarray, omega_radps: np.ndarray,
+                       dt_s: float) -> np.ndarray:
+    """Exact constant-(v, omega) arc integration of Eq. (1)'s continuous model.
+
+    Args:
+        pose: (n, 3) x [m], y [m], heading [rad].
+        v_mps: (n,) forward speeds.
+        omega_radps: (n,) turn rates.
+        dt_s: step length.
+
+    Returns:
+        (n, 3) poses after dt_s; headings wrapped to (-pi, pi].
+    """
+    theta = pose[:, 2]
+    dtheta = omega_radps * dt_s
+    # sin(x)/x with the straight-line limit where the turn is negligible.
+    small = np.abs(dtheta) < 1e-9
+    safe = np.where(small, 1.0, dtheta)
+    sinc = np.where(small, 1.0 - dtheta**2 / 6.0, np.sin(safe) / safe)
+    cosc = np.where(small, dtheta / 2.0, (1.0 - np.cos(safe)) / safe)
+    ds = v_mps * dt_s
+    out = np.empty_like(pose)
+    c, s = np.cos(theta), np.sin(theta)
+    out[:, 0] = pose[:, 0] + ds * (c * sinc - s * cosc)
+    out[:, 1] = pose[:, 1] + ds * (s * sinc + c * cosc)
+    out[:, 2] = np.angle(np.exp(1j * (theta + dtheta)))
+    return out
+
+
+def pair_gaps(centers_m: np.ndarray, radius_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Gap (distance minus both radii) for every unordered pair.
+
+    Args:
+        centers_m: (n, 2) disc centres.
+        radius_m: (n,) disc radii.
+
+    Returns:
+        (pairs (P, 2) int indices i < j, gaps_m (P,)).
+    """
+    n = centers_m.shape[0]
+    i, j = np.triu_indices(n, k=1)
+    d = np.hypot(centers_m[i, 0] - centers_m[j, 0], centers_m[i, 1] - centers_m[j, 1])
+    return np.stack([i, j], axis=1), d - radius_m[i] - radius_m[j]
+
+
+class WorldSim:
+    """The simulated world of one scenario (pure state machine).
+
+    Attributes:
+        t_s: sim time.
+        tick: number of completed steps.
+        robot_ids: (n,) robot ids in scenario order.
+        pose: (n, 3) ground-truth poses.
+        applied: (n, 2) (v, omega) applied during the last tick.
+        arrived: (n,) bool, latched on first arrival.
+        arrival_time_s: (n,) sim time of arrival, NaN before.
+        offline: (n,) bool, robots whose process is gone (they brake and stay as obstacles).
+        min_gap_m: smallest gap seen between any two discs so far.
+        timeout_count: number of command time-outs so far.
+    """
+
+    def __init__(self, scenario: Scenario, *, cmd_timeout_s: float = 0.5) -> None:
+        if not cmd_timeout_s > 0.0:
+            raise ValueError("cmd_timeout_s must be positive")
+        self.scenario = scenario
+        self.cmd_timeout_s = float(cmd_timeout_s)
+        robots = scenario.robots
+        self.robot_ids = np.array([r.id for r in robots], dtype=np.int64)
+        self._index = {int(rid): k for k, rid in enumerate(self.robot_ids)}
+        self.pose = np.array([r.start for r in robots], dtype=float).reshape(-1, 3)
+        self.goal_m = np.array([r.goal for r in robots], dtype=float).reshape(-1, 2)
+        self.radius_m = np.array([r.radius_m for r in robots], dtype=float)
+        self.v_min_mps = np.array([r.limits.v_min_mps for r in robots], dtype=float)
+        self.v_max_mps = np.array([r.limits.v_max_mps for r in robots], dtype=float)
+        self.omega_max_radps = np.array([r.limits.omega_max_radps for r in robots], dtype=float)
+        self.decel_mps2 = np.array([r.limits.accel_max_mps2 for r in robots], dtype=float)
+        obstacles = scenario.obstacles
+        self.obstacle_ids = np.array([o.id for o in obstacles], dtype=np.int64)
+        self._obstacle_c0 = np.array([o.center for o in obstacles], dtype=float).reshape(-1, 2)
+        self._obstacle_v = np.array([o.velocity for o in obstacles], dtype=float).reshape(-1, 2)
+        self.obstacle_radius_m = np.array([o.radius_m for o in obstacles], dtype=float)
+        self.goal_tolerance_m = scenario.goal_tolerance_m
+        n = len(robots)
+        self.t_s = 0.0
+        self.tick = 0
+        self.command = np.zeros((n, 2))
+        self.command_time_s = np.full(n, -np.inf)
+        self.applied = np.zeros((n, 2))
+        self.arrived = np.zeros(n, dtype=bool)
+        self.arrival_time_s = np.full(n, np.nan)
+        self.offline = np.zeros(n, dtype=bool)
+        self._stale = np.ones(n, dtype=bool)
+        self._had_command = np.zeros(n, dtype=bool)
+        self._in_contact: set[tuple[int, int]] = set()
+        self.contact_count = 0
+        self.timeout_count = 0
+        self.min_gap_m = np.inf
+        self._all_ids = np.concatenate([self.robot_ids, self.obstacle_ids])
+        self._all_radius = np.concatenate([self.radius_m, self.obstacle_radius_m])
+        self._check_arrivals()
+
+    def index_of(self, robot_id: int) -> int:
+        """Row of `robot_id` in the state arrays; KeyError for an unknown id."""
+        return self._index[int(robot_id)]
+
+    def set_command(self, robot_id: int, v_mps: float, omega_radps: float) -> None:
+        """Hold (v, omega), clamped to the robot's limits, from now until the next command."""
+        k = self.index_of(robot_id)
+        v = float(np.clip(v_mps, self.v_min_mps[k], self.v_max_mps[k]))
+        w = float(np.clip(omega_radps, -self.omega_max_radps[k], self.omega_max_radps[k]))
+        if not (np.isfinite(v) and np.isfinite(w)):
+            raise ValueError(f"robot {robot_id}: non-finite command")
+        self.command[k] = (v, w)
+        self.command_time_s[k] = self.t_s
+        self._had_command[k] = True
+
+    def set_offline(self, robot_id: int, offline: bool) -> None:
+        """Mark a robot's process as gone (it brakes and stays put) or back."""
+        k = self.index_of(robot_id)
+        self.offline[k] = bool(offline)
+        if offline:
+            self.command[k] = 0.0
+
+    def obstacle_positions_m(self, t_s: float | None = None) -> np.ndarray:
+        """(m, 2) obstacle centres at `t_s` (default: now); obstacles move at constant velocity."""
+        t = self.t_s if t_s is None else t_s
+        return self._obstacle_c0 + self._obstacle_v * t
+
+    def step(self, dt_s: float) -> TickEvents:
+        """Advance by dt_s with the held commands; report arrivals, contacts and time-outs."""
+        if not dt_s > 0.0:
+            raise ValueError("dt_s must be positive")
+        stale = (self.t_s - self.command_time_s) > self.cmd_timeout_s
+        went_stale = stale & ~self._stale & self._had_command & ~self.offline
+        self._stale = stale
+        timeouts = tuple(int(i) for i in self.robot_ids[went_stale])
+        self.timeout_count += len(timeouts)
+
+        v_cmd = self.command[:, 0].copy()
+        w_cmd = self.command[:, 1].copy()
+        braking = stale | self.offline
+        # Braking: decelerate at the robot's limit towards v = 0, no turning.
+        v_brake = np.maximum(self.applied[:, 0] - self.decel_mps2 * dt_s, 0.0)
+        v = np.where(braking, v_brake, v_cmd)
+        w = np.where(braking, 0.0, w_cmd)
+        self.applied = np.stack([v, w], axis=1)
+        self.pose = integrate_unicycle(self.pose, v, w, dt_s)
+        self.t_s += dt_s
+        self.tick += 1
+        arrivals = self._check_arrivals()
+        contacts = self._check_contacts()
+        return TickEvents(arrivals=arrivals, new_contacts=contacts, timeouts=timeouts)
+
+    def _check_arrivals(self) -> tuple[int, ...]:
+        dist = np.hypot(*(self.pose[:, :2] - self.goal_m).T)
+        new = (dist <= self.goal_tolerance_m) & ~self.arrived
+        self.arrived |= new
+        self.arrival_time_s[new] = self.t_s
+        return tuple(int(i) for i in self.robot_ids[new])
+
+    def _check_contacts(self) -> tuple[tuple[int, int, float], ...]:
+        centers = np.concatenate([self.pose[:, :2], self.obstacle_positions_m()])
+        pairs, gaps = pair_gaps(centers, self._all_radius)
+        # Obstacle-obstacle pairs are scenery, not contacts.
+        n = self.robot_ids.shape[0]
+        robot_pair = pairs[:, 0] < n
+        if np.any(robot_pair):
+            self.min_gap_m = min(self.min_gap_m, float(gaps[robot_pair].min()))
+        touching = robot_pair & (gaps < -CONTACT_OVERLAP_M)
+        now = {
+            (int(self._all_ids[a]), int(self._all_ids[b])): float(-g)
+            for (a, b), g in zip(pairs[touching], gaps[touching])
+        }
+        new = tuple((a, b, ov) for (a, b), ov in now.items() if (a, b) not in self._in_contact)
+        self._in_contact = set(now)
+        self.contact_count += len(new)
+        return new
+
+    def all_arrived(self) -> bool:
+        """True when every robot has reached its goal at least once."""
+        return bool(np.all(self.arrived))
+
+    def snapshot(self) -> PoseSnapshot:
+        """What a sensor sees now: every robot's and obstacle's pose and radius."""
+        m = self.obstacle_ids.shape[0]
+        obstacle_pose = np.zeros((m, 3))
+        obstacle_pose[:, :2] = self.obstacle_positions_m()
+        return PoseSnapshot(
+            stamp_s=self.t_s,
+            tick=self.tick,
+            ids=self._all_ids,
+            pose=np.concatenate([self.pose, obstacle_pose]),
+            radius_m=self._all_radius,
+        )

@@ -1,0 +1,96 @@
+"""The run directory writer (an I/O edge, used by the world process and the lockstep runner).
+
+Files (SI units):
+- `scenario.yaml`: the resolved scenario.
+- `trajectory.csv`: `t,robot,x,y,theta,v,omega`, one row per robot per world tick.
+- `commands.csv`: `t_applied,robot,seq,pose_stamp,v,omega,plan_ms,status,side,resolved`
+  (the first eight columns are the documented format; `side` and `resolved` let metrics
+  count avoidance-side flips).
+- `events.jsonl`: one JSON object per line with at least `kind` and `t`.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+
+from world.scenario import Scenario
+
+TRAJECTORY_HEADER = "t,robot,x,y,theta,v,omega\n"
+COMMANDS_HEADER = "t_applied,robot,seq,pose_stamp,v,omega,plan_ms,status,side,resolved\n"
+
+
+class RunRecorder:
+    """Writes one run directory; line-buffered enough that a killed run leaves usable files."""
+
+    def __init__(self, out_dir: Path, scenario: Scenario) -> None:
+        from world.scenario import dump_scenario
+
+        self.out_dir = Path(out_dir)
+        self.out_dir.mkdir(parents=True, exist_ok=True)
+        dump_scenario(scenario, self.out_dir / "scenario.yaml")
+        self._traj: IO[str] = open(self.out_dir / "trajectory.csv", "w", buffering=1 << 16)
+        self._traj.write(TRAJECTORY_HEADER)
+        self._cmds: IO[str] = open(self.out_dir / "commands.csv", "w", buffering=1 << 16)
+        self._cmds.write(COMMANDS_HEADER)
+        self._events: IO[str] = open(self.out_dir / "events.jsonl", "w", buffering=1)
+        self.event_counts: dict[str, int] = {}
+        self._closed = False
+
+    def record_tick(self, t_s: float, robot_ids: np.ndarray, pose: np.ndarray,
+                    applied: np.ndarray) -> None:
+        """One row per robot: ground-truth pose and the (v, omega) applied during the tick."""
+        t = f"{t_s:.4f}"
+        rows = [
+            f"{t},{rid},{p[0]:.5f},{p[1]:.5f},{p[2]:.5f},{u[0]:.4f},{u[1]:.4f}\n"
+            for rid, p, u in zip(robot_ids.tolist(), pose.tolist(), applied.tolist())
+        ]
+        self._traj.writelines(rows)
+
+    def record_command(self, t_applied_s: float, robot_id: int, seq: int, pose_stamp_s: float,
+                       v: float, omega: float, plan_ms: float, status: str, side: int = 0,
+                       resolved: int | None = None) -> None:
+        """One applied command."""
+        res = "" if resolved is None else str(int(resolved))
+        self._cmds.write(
+            f"{t_applied_s:.4f},{int(robot_id)},{int(seq)},{pose_stamp_s:.4f},{v:.5f},"
+            f"{omega:.5f},{plan_ms:.4f},{status},{int(side)},{res}\n"
+        )
+
+    def event(self, kind: str, t_s: float, **fields: Any) -> None:
+        """Append one event line; flushed at once so watchers see it."""
+        record = {"kind": kind, "t": round(float(t_s), 4), **fields}
+        self._events.write(json.dumps(record, default=_json_default) + "\n")
+        self.event_counts[kind] = self.event_counts.get(kind, 0) + 1
+
+    def flush(self) -> None:
+        """Push buffered rows to disk."""
+        for f in (self._traj, self._cmds, self._events):
+            f.flush()
+
+    def close(self) -> None:
+        """Flush and close every file (idempotent)."""
+        if self._closed:
+            return
+        self._closed = True
+        for f in (self._traj, self._cmds, self._events):
+            f.close()
+
+    def __enter__(self) -> RunRecorder:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _json_default(obj: object) -> object:
+    if isinstance(obj, np.integer):
+        return int(obj)
+    if isinstance(obj, np.floating):
+        return float(obj)
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
