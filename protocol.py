@@ -1,4 +1,879 @@
 """The wire protocol shared by the world, the robots and the orchestrator.
 
-Every Zenoh key expression and every message schema lives here and nowhere else.
+Every Zenoh key expression and every message schema lives here and nowhere else; nothing
+else builds key strings or serialises messages. This module never imports zenoh.
+
+Key expressions (all prefixed by the run id, so two runs on one machine never cross):
+
+- ``eifp/<run>/poses``             world -> robots, `PosesMsg`, once per world tick.
+- ``eifp/<run>/cmd/<id>``          robot <id> -> world, `CommandMsg`.
+- ``eifp/<run>/config/<id>``       queryable served by the world, replies `RunConfigMsg`.
+- ``eifp/<run>/control``           world -> all, `ControlMsg` (run started / ended).
+- ``eifp/<run>/alive/world``       liveliness token of the world process.
+- ``eifp/<run>/alive/robot/<id>``  liveliness token of robot process <id>.
+
+Messages are msgpack maps with string keys. Every map carries ``"schema"`` (`SCHEMA_VERSION`)
+and ``"type"`` (``"poses"``, ``"cmd"``, ``"config"``, ``"control"``), so a message
+published on the wrong key is rejected too. Keys are checked strictly: a missing or an
+extra key is an error. Numeric arrays of `PosesMsg` travel as msgpack ``bin`` holding
+little-endian ``float64`` (``<f8``) or ``int32`` (``<i4``) values, one column per field.
+
+Decoding validates types, sizes, finiteness, ranges and the schema version, and every
+malformation raises the one typed error `ProtocolError`.
 """
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+import types
+import typing
+from collections.abc import Collection, Iterable, Mapping
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import msgpack
+import numpy as np
+
+from agent.config import PLANNER_NAMES, PlannerConfig
+from agent.types import PlanStatus, PoseSnapshot, Side
+from world.scenario import RobotSpec
+
+SCHEMA_VERSION = 1
+"""Bumped on any incompatible change of a message schema."""
+
+KEY_ROOT = "eifp"
+MAX_MESSAGE_BYTES = 1 << 20
+"""Largest payload accepted (1 MiB)."""
+MAX_ROBOTS = 4096
+MAX_OBSTACLES = 4096
+MAX_ROBOT_ID = 2**31 - 1
+MIN_OBSTACLE_ID = -(2**31)
+MAX_COORD_M = 1.0e6
+"""|x|, |y| larger than this (1000 km) is treated as garbage."""
+MAX_RADIUS_M = 1.0e3
+MAX_SPEED = 1.0e3
+"""|v| [m/s] and |omega| [rad/s] larger than this are treated as garbage."""
+MAX_REASON_CHARS = 256
+MAX_SEQ = 2**63 - 1
+MAX_RUN_ID_CHARS = 64
+
+_RUN_ID_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")
+_ROBOT_ID_RE = re.compile(r"0|[1-9][0-9]{0,9}")
+_F8 = np.dtype("<f8")
+_I4 = np.dtype("<i4")
+
+
+class ProtocolError(ValueError):
+    """A message, key expression or run id that does not follow this protocol."""
+
+
+# ---------------------------------------------------------------------------------------------
+# Key expressions
+# ---------------------------------------------------------------------------------------------
+
+
+def validate_run_id(run_id: object) -> str:
+    """Return `run_id` if it is safe inside a key expression and a directory name.
+
+    Allowed: 1..64 characters of ``[A-Za-z0-9_.-]``, starting with a letter or digit (no
+    ``/``, wildcards, ``$``, ``?``, ``#`` or whitespace).
+    """
+    if not isinstance(run_id, str):
+        raise ProtocolError(f"run id must be a string, got {type(run_id).__name__}")
+    if not 0 < len(run_id) <= MAX_RUN_ID_CHARS or _RUN_ID_RE.fullmatch(run_id) is None:
+        raise ProtocolError(
+            f"bad run id {run_id!r}: 1..{MAX_RUN_ID_CHARS} chars of [A-Za-z0-9_.-], "
+            "starting with a letter or digit"
+        )
+    return run_id
+
+
+def _check_robot_id(robot_id: object) -> int:
+    if isinstance(robot_id, bool) or not isinstance(robot_id, int | np.integer):
+        raise ProtocolError(f"robot id must be an int, got {type(robot_id).__name__}")
+    rid = int(robot_id)
+    if not 0 <= rid <= MAX_ROBOT_ID:
+        raise ProtocolError(f"robot id {rid} out of range [0, {MAX_ROBOT_ID}]")
+    return rid
+
+
+@dataclass(frozen=True)
+class RunKeys:
+    """Every key expression of one run.
+
+    Args:
+        run_id: validated with `validate_run_id`.
+    """
+
+    run_id: str
+
+    def __post_init__(self) -> None:
+        validate_run_id(self.run_id)
+
+    @property
+    def prefix(self) -> str:
+        """``eifp/<run>``."""
+        return f"{KEY_ROOT}/{self.run_id}"
+
+    @property
+    def poses(self) -> str:
+        """World -> robots pose stream."""
+        return f"{self.prefix}/poses"
+
+    @property
+    def control(self) -> str:
+        """World -> all run start/end announcements."""
+        return f"{self.prefix}/control"
+
+    def cmd(self, robot_id: int) -> str:
+        """Robot -> world command stream of one robot."""
+        return f"{self.prefix}/cmd/{_check_robot_id(robot_id)}"
+
+    @property
+    def cmd_all(self) -> str:
+        """Wildcard over every robot's command stream (the world subscribes to it)."""
+        return f"{self.prefix}/cmd/*"
+
+    def config(self, robot_id: int) -> str:
+        """Selector a robot queries for its `RunConfigMsg`."""
+        return f"{self.prefix}/config/{_check_robot_id(robot_id)}"
+
+    @property
+    def config_all(self) -> str:
+        """Key expression of the world's configuration queryable."""
+        return f"{self.prefix}/config/*"
+
+    @property
+    def alive_world(self) -> str:
+        """Liveliness token of the world."""
+        return f"{self.prefix}/alive/world"
+
+    def alive_robot(self, robot_id: int) -> str:
+        """Liveliness token of one robot process."""
+        return f"{self.prefix}/alive/robot/{_check_robot_id(robot_id)}"
+
+    @property
+    def alive_robot_all(self) -> str:
+        """Wildcard over every robot's liveliness token."""
+        return f"{self.prefix}/alive/robot/*"
+
+    def _id_after(self, key: object, middle: str) -> int:
+        key = str(key)
+        head = f"{self.prefix}/{middle}/"
+        if not key.startswith(head):
+            raise ProtocolError(f"key {key!r} is not under {head!r}")
+        tail = key[len(head):]
+        if _ROBOT_ID_RE.fullmatch(tail) is None:
+            raise ProtocolError(f"key {key!r}: bad robot id {tail!r}")
+        return _check_robot_id(int(tail))
+
+    def robot_id_of_cmd(self, key: object) -> int:
+        """Robot id in a ``cmd/<id>`` key (str or zenoh.KeyExpr)."""
+        return self._id_after(key, "cmd")
+
+    def robot_id_of_config(self, key: object) -> int:
+        """Robot id in a ``config/<id>`` key."""
+        return self._id_after(key, "config")
+
+    def robot_id_of_alive(self, key: object) -> int:
+        """Robot id in an ``alive/robot/<id>`` key."""
+        return self._id_after(key, "alive/robot")
+
+
+# ---------------------------------------------------------------------------------------------
+# Shared transport settings (JSON5 values for zenoh.Config.insert_json5; no zenoh import)
+# ---------------------------------------------------------------------------------------------
+
+LINK_LEASE_MS = 1000
+"""Transport lease: a hung (SIGSTOPped) peer is noticed after about this long."""
+
+
+def session_settings(
+    *,
+    mode: Literal["router", "client"],
+    listen: Iterable[str] = (),
+    connect: Iterable[str] = (),
+    connect_timeout_ms: int = -1,
+) -> dict[str, str]:
+    """Zenoh configuration every process of a run uses, as ``key -> JSON5 value``.
+
+    Multicast scouting is off and endpoints are explicit; the link lease is
+    `LINK_LEASE_MS` on both sides so crashed or hung processes are noticed quickly.
+
+    Args:
+        mode: ``"router"`` (the world) or ``"client"`` (robots, tools).
+        listen: endpoints to listen on, e.g. ``tcp/127.0.0.1:7447``.
+        connect: endpoints to connect to.
+        connect_timeout_ms: how long `zenoh.open` waits for a connect endpoint (-1: forever).
+    """
+    import json
+
+    if mode not in ("router", "client"):
+        raise ValueError(f"mode must be 'router' or 'client', got {mode!r}")
+    settings = {
+        "mode": json.dumps(mode),
+        "scouting/multicast/enabled": "false",
+        "transport/link/tx/lease": str(LINK_LEASE_MS),
+    }
+    listen = list(listen)
+    connect = list(connect)
+    if listen:
+        settings["listen/endpoints"] = json.dumps(listen)
+    if connect:
+        settings["connect/endpoints"] = json.dumps(connect)
+        settings["connect/timeout_ms"] = str(int(connect_timeout_ms))
+    return settings
+
+
+# ---------------------------------------------------------------------------------------------
+# Decoding helpers: each raises ProtocolError naming the field
+# ---------------------------------------------------------------------------------------------
+
+
+def _no_duplicate_keys(pairs: list[tuple[Any, Any]]) -> dict[Any, Any]:
+    out = dict(pairs)
+    if len(out) != len(pairs):
+        raise ProtocolError("duplicate map key")
+    return out
+
+
+def _unpack(data: object) -> Any:
+    if isinstance(data, memoryview | bytearray):
+        data = bytes(data)
+    if not isinstance(data, bytes):
+        raise ProtocolError(f"payload must be bytes, got {type(data).__name__}")
+    if len(data) > MAX_MESSAGE_BYTES:
+        raise ProtocolError(f"payload of {len(data)} bytes exceeds {MAX_MESSAGE_BYTES}")
+    try:
+        return msgpack.unpackb(
+            data,
+            raw=False,
+            strict_map_key=True,
+            object_pairs_hook=_no_duplicate_keys,
+            max_str_len=MAX_MESSAGE_BYTES,
+            max_bin_len=MAX_MESSAGE_BYTES,
+            max_array_len=2 * (MAX_ROBOTS + MAX_OBSTACLES),
+            max_map_len=256,
+            max_ext_len=0,
+        )
+    except ProtocolError:
+        raise
+    except Exception as exc:  # msgpack raises many kinds (FormatError, StackError, ...)
+        raise ProtocolError(f"not valid msgpack: {type(exc).__name__}: {exc}") from exc
+
+
+def _as_map(obj: object, where: str, keys: Collection[str]) -> dict[str, Any]:
+    if not isinstance(obj, dict):
+        raise ProtocolError(f"{where}: expected a map, got {type(obj).__name__}")
+    got = set(obj)
+    want = set(keys)
+    if got != want:
+        missing = sorted(map(str, want - got))
+        extra = sorted(map(str, got - want))
+        raise ProtocolError(f"{where}: missing keys {missing}, unknown keys {extra}")
+    return obj
+
+
+def _open_envelope(data: object, msg_type: str, keys: Collection[str]) -> dict[str, Any]:
+    obj = _unpack(data)
+    if not isinstance(obj, dict):
+        raise ProtocolError(f"expected a map, got {type(obj).__name__}")
+    version = obj.get("schema")
+    if isinstance(version, bool) or not isinstance(version, int):
+        raise ProtocolError(f"missing or non-integer schema version: {version!r}")
+    if version != SCHEMA_VERSION:
+        raise ProtocolError(f"schema version {version}, expected {SCHEMA_VERSION}")
+    if obj.get("type") != msg_type:
+        raise ProtocolError(f"message type {obj.get('type')!r}, expected {msg_type!r}")
+    return _as_map(obj, msg_type, {"schema", "type", *keys})
+
+
+def _pack(msg_type: str, body: Mapping[str, Any]) -> bytes:
+    data = msgpack.packb({"schema": SCHEMA_VERSION, "type": msg_type, **body}, use_bin_type=True)
+    if len(data) > MAX_MESSAGE_BYTES:
+        raise ProtocolError(f"{msg_type}: encoded size {len(data)} exceeds {MAX_MESSAGE_BYTES}")
+    return data
+
+
+def _float(value: object, where: str, lo: float = -math.inf, hi: float = math.inf,
+           *, lo_open: bool = False) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
+        raise ProtocolError(f"{where}: expected a number, got {type(value).__name__}")
+    try:
+        out = float(value)
+    except OverflowError as exc:
+        raise ProtocolError(f"{where}: number too large") from exc
+    if not math.isfinite(out):
+        raise ProtocolError(f"{where}: non-finite value {out!r}")
+    if out < lo or out > hi or (lo_open and out == lo):
+        bracket = "(" if lo_open else "["
+        raise ProtocolError(f"{where}: {out!r} outside {bracket}{lo}, {hi}]")
+    return out
+
+
+def _int(value: object, where: str, lo: int, hi: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int | np.integer):
+        raise ProtocolError(f"{where}: expected an int, got {type(value).__name__}")
+    out = int(value)
+    if not lo <= out <= hi:
+        raise ProtocolError(f"{where}: {out} outside [{lo}, {hi}]")
+    return out
+
+
+def _str(value: object, where: str, max_chars: int = MAX_REASON_CHARS) -> str:
+    if not isinstance(value, str):
+        raise ProtocolError(f"{where}: expected a string, got {type(value).__name__}")
+    if len(value) > max_chars:
+        raise ProtocolError(f"{where}: longer than {max_chars} characters")
+    return value
+
+
+def _column(value: object, where: str, dtype: np.dtype, n: int | None, max_n: int) -> np.ndarray:
+    """One packed column: ``bin`` of n little-endian `dtype` items, returned read-only (n,)."""
+    if not isinstance(value, bytes):
+        raise ProtocolError(f"{where}: expected bin, got {type(value).__name__}")
+    if len(value) % dtype.itemsize:
+        raise ProtocolError(f"{where}: {len(value)} bytes is not a multiple of {dtype.itemsize}")
+    count = len(value) // dtype.itemsize
+    if count > max_n:
+        raise ProtocolError(f"{where}: {count} items exceeds {max_n}")
+    if n is not None and count != n:
+        raise ProtocolError(f"{where}: {count} items, expected {n}")
+    return np.frombuffer(value, dtype=dtype)
+
+
+def _frozen(arr: object, dtype: type, shape: tuple[int, ...], where: str) -> np.ndarray:
+    out = np.array(arr, dtype=dtype)
+    if out.shape != shape:
+        raise ProtocolError(f"{where}: shape {out.shape}, expected {shape}")
+    out.flags.writeable = False
+    return out
+
+
+def _known_set(known_ids: Collection[int] | None) -> frozenset[int] | set[int] | None:
+    """`known_ids` as a set of Python ints (kept as is if it already is a set)."""
+    if known_ids is None or isinstance(known_ids, set | frozenset):
+        return known_ids
+    return frozenset(np.asarray(known_ids, dtype=np.int64).reshape(-1).tolist())
+
+
+def _check_ids(ids: np.ndarray, where: str, lo: int, hi: int,
+               known_ids: frozenset[int] | set[int] | None) -> None:
+    if ids.size == 0:
+        return
+    values = ids.tolist()
+    if min(values) < lo or max(values) > hi:
+        raise ProtocolError(f"{where}: id outside [{lo}, {hi}]")
+    unique = set(values)
+    if len(unique) != len(values):
+        raise ProtocolError(f"{where}: duplicate ids")
+    if known_ids is not None and not unique <= known_ids:
+        raise ProtocolError(f"{where}: unknown ids {sorted(unique - known_ids)[:8]}")
+
+
+def _check_values(arr: np.ndarray, where: str, lo: float, hi: float,
+                  *, lo_open: bool = False) -> None:
+    if arr.size == 0:
+        return
+    # min/max propagate NaN, so one pass each checks finiteness and range.
+    low, high = float(arr.min()), float(arr.max())
+    if not (math.isfinite(low) and math.isfinite(high)):
+        raise ProtocolError(f"{where}: non-finite value")
+    if low < lo or high > hi or (lo_open and low <= lo):
+        raise ProtocolError(f"{where}: value outside {'(' if lo_open else '['}{lo}, {hi}]")
+
+
+# ---------------------------------------------------------------------------------------------
+# Messages
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class PosesMsg:
+    """World -> robots: every disc's pose at one world tick (the robots' only sensor).
+
+    Wire body: ``t`` (float), ``tick`` (int), ``robots`` {``id`` <i4, ``x``, ``y``,
+    ``theta``, ``radius`` <f8}, ``obstacles`` {``id`` <i4, ``x``, ``y``, ``radius`` <f8}.
+
+    Args:
+        t_s: sim time at which the poses were true (>= 0).
+        tick: world tick that produced them (>= 0).
+        robot_ids: (n,) ids >= 0, unique, n <= `MAX_ROBOTS`.
+        robot_pose: (n, 3) x [m], y [m], heading [rad].
+        robot_radius_m: (n,) radii > 0.
+        obstacle_ids: (m,) ids < 0, unique, m <= `MAX_OBSTACLES`.
+        obstacle_xy_m: (m, 2) obstacle centres.
+        obstacle_radius_m: (m,) radii > 0.
+
+    Arrays are stored as read-only copies; an invalid message raises `ProtocolError`.
+    """
+
+    t_s: float
+    tick: int
+    robot_ids: np.ndarray
+    robot_pose: np.ndarray
+    robot_radius_m: np.ndarray
+    obstacle_ids: np.ndarray
+    obstacle_xy_m: np.ndarray
+    obstacle_radius_m: np.ndarray
+
+    TYPE: typing.ClassVar[str] = "poses"
+
+    def __post_init__(self) -> None:
+        self._validate(known_ids=None)
+
+    def _validate(self, known_ids: Collection[int] | None) -> None:
+        set_ = object.__setattr__
+        known = _known_set(known_ids)
+        set_(self, "t_s", _float(self.t_s, "poses.t", 0.0))
+        set_(self, "tick", _int(self.tick, "poses.tick", 0, MAX_SEQ))
+        try:
+            rid = np.asarray(self.robot_ids)
+            oid = np.asarray(self.obstacle_ids)
+            if rid.ndim != 1 or oid.ndim != 1:
+                raise ProtocolError("poses: ids must be 1-d")
+            n, m = rid.shape[0], oid.shape[0]
+            if n > MAX_ROBOTS or m > MAX_OBSTACLES:
+                raise ProtocolError(f"poses: {n} robots / {m} obstacles exceed the caps")
+            if rid.size and not np.issubdtype(rid.dtype, np.integer):
+                raise ProtocolError("poses.robots.id: ids must be integers")
+            if oid.size and not np.issubdtype(oid.dtype, np.integer):
+                raise ProtocolError("poses.obstacles.id: ids must be integers")
+            fields = {
+                "robot_ids": _frozen(rid, np.int64, (n,), "poses.robot_ids"),
+                "robot_pose": _frozen(self.robot_pose, np.float64, (n, 3), "poses.robot_pose"),
+                "robot_radius_m": _frozen(self.robot_radius_m, np.float64, (n,),
+                                          "poses.robot_radius_m"),
+                "obstacle_ids": _frozen(oid, np.int64, (m,), "poses.obstacle_ids"),
+                "obstacle_xy_m": _frozen(self.obstacle_xy_m, np.float64, (m, 2),
+                                         "poses.obstacle_xy_m"),
+                "obstacle_radius_m": _frozen(self.obstacle_radius_m, np.float64, (m,),
+                                             "poses.obstacle_radius_m"),
+            }
+        except (TypeError, ValueError) as exc:
+            if isinstance(exc, ProtocolError):
+                raise
+            raise ProtocolError(f"poses: bad array: {exc}") from exc
+        _check_ids(fields["robot_ids"], "poses.robots.id", 0, MAX_ROBOT_ID, known)
+        _check_ids(fields["obstacle_ids"], "poses.obstacles.id", MIN_OBSTACLE_ID, -1, known)
+        _check_values(fields["robot_pose"][:, :2], "poses.robots.xy", -MAX_COORD_M, MAX_COORD_M)
+        _check_values(fields["robot_pose"][:, 2], "poses.robots.theta", -1e3, 1e3)
+        _check_values(fields["robot_radius_m"], "poses.robots.radius", 0.0, MAX_RADIUS_M,
+                      lo_open=True)
+        _check_values(fields["obstacle_xy_m"], "poses.obstacles.xy", -MAX_COORD_M, MAX_COORD_M)
+        _check_values(fields["obstacle_radius_m"], "poses.obstacles.radius", 0.0, MAX_RADIUS_M,
+                      lo_open=True)
+        for name, value in fields.items():
+            set_(self, name, value)
+
+    @property
+    def n_robots(self) -> int:
+        """Number of robots in the message."""
+        return int(self.robot_ids.shape[0])
+
+    def encode(self) -> bytes:
+        """Serialise to msgpack."""
+        return _pack(self.TYPE, {
+            "t": self.t_s,
+            "tick": self.tick,
+            "robots": {
+                "id": self.robot_ids.astype(_I4).tobytes(),
+                "x": self.robot_pose[:, 0].astype(_F8).tobytes(),
+                "y": self.robot_pose[:, 1].astype(_F8).tobytes(),
+                "theta": self.robot_pose[:, 2].astype(_F8).tobytes(),
+                "radius": self.robot_radius_m.astype(_F8).tobytes(),
+            },
+            "obstacles": {
+                "id": self.obstacle_ids.astype(_I4).tobytes(),
+                "x": self.obstacle_xy_m[:, 0].astype(_F8).tobytes(),
+                "y": self.obstacle_xy_m[:, 1].astype(_F8).tobytes(),
+                "radius": self.obstacle_radius_m.astype(_F8).tobytes(),
+            },
+        })
+
+    @classmethod
+    def decode(cls, data: object, *, known_ids: Collection[int] | None = None) -> PosesMsg:
+        """Parse and validate; `known_ids` (robot and obstacle ids) rejects strangers."""
+        body = _open_envelope(data, cls.TYPE, ("t", "tick", "robots", "obstacles"))
+        robots = _as_map(body["robots"], "poses.robots", ("id", "x", "y", "theta", "radius"))
+        obstacles = _as_map(body["obstacles"], "poses.obstacles", ("id", "x", "y", "radius"))
+        rid = _column(robots["id"], "poses.robots.id", _I4, None, MAX_ROBOTS)
+        n = rid.shape[0]
+        robot_cols = [
+            _column(robots[k], f"poses.robots.{k}", _F8, n, MAX_ROBOTS)
+            for k in ("x", "y", "theta", "radius")
+        ]
+        oid = _column(obstacles["id"], "poses.obstacles.id", _I4, None, MAX_OBSTACLES)
+        m = oid.shape[0]
+        obstacle_cols = [
+            _column(obstacles[k], f"poses.obstacles.{k}", _F8, m, MAX_OBSTACLES)
+            for k in ("x", "y", "radius")
+        ]
+        msg = object.__new__(cls)
+        for name, value in {
+            "t_s": body["t"],
+            "tick": body["tick"],
+            "robot_ids": rid,
+            "robot_pose": np.stack(robot_cols[:3], axis=1).reshape(n, 3),
+            "robot_radius_m": robot_cols[3],
+            "obstacle_ids": oid,
+            "obstacle_xy_m": np.stack(obstacle_cols[:2], axis=1).reshape(m, 2),
+            "obstacle_radius_m": obstacle_cols[2],
+        }.items():
+            object.__setattr__(msg, name, value)
+        msg._validate(known_ids)
+        return msg
+
+    @classmethod
+    def from_snapshot(cls, snapshot: PoseSnapshot) -> PosesMsg:
+        """Split a world snapshot into robots (ids >= 0) and obstacles (ids < 0)."""
+        robots = snapshot.ids >= 0
+        return cls(
+            t_s=snapshot.stamp_s,
+            tick=snapshot.tick,
+            robot_ids=snapshot.ids[robots],
+            robot_pose=snapshot.pose[robots],
+            robot_radius_m=snapshot.radius_m[robots],
+            obstacle_ids=snapshot.ids[~robots],
+            obstacle_xy_m=snapshot.pose[~robots, :2],
+            obstacle_radius_m=snapshot.radius_m[~robots],
+        )
+
+    def to_snapshot(self) -> PoseSnapshot:
+        """Robots then obstacles in one `PoseSnapshot`; obstacles get heading 0."""
+        m = self.obstacle_ids.shape[0]
+        obstacle_pose = np.zeros((m, 3))
+        obstacle_pose[:, :2] = self.obstacle_xy_m
+        return PoseSnapshot(
+            stamp_s=self.t_s,
+            tick=self.tick,
+            ids=np.concatenate([self.robot_ids, self.obstacle_ids]),
+            pose=np.concatenate([self.robot_pose, obstacle_pose]),
+            radius_m=np.concatenate([self.robot_radius_m, self.obstacle_radius_m]),
+        )
+
+
+_STATUS_VALUES = frozenset(s.value for s in PlanStatus)
+
+
+@dataclass(frozen=True)
+class CommandMsg:
+    """Robot -> world: one velocity command.
+
+    Wire body: ``robot`` (int), ``seq`` (int), ``pose_stamp`` (float), ``v``, ``omega``,
+    ``plan_ms`` (float), ``status`` (str), ``side`` (-1|0|1), ``resolved`` (int or nil).
+
+    Args:
+        robot_id: sender (must match the key's id; checked by `decode(expected_robot_id=)`).
+        seq: per-process sequence number, strictly increasing (the world drops stale ones).
+        pose_stamp_s: sim time of the pose the plan was made from.
+        v_mps, omega_radps: the command (the world clamps it to the robot's limits).
+        plan_ms: wall time the plan took.
+        status: a `agent.types.PlanStatus` value.
+        side: a `agent.types.Side` value.
+        resolved_id: id of the threat the chosen via-point resolves, or None.
+    """
+
+    robot_id: int
+    seq: int
+    pose_stamp_s: float
+    v_mps: float
+    omega_radps: float
+    plan_ms: float
+    status: str
+    side: int = 0
+    resolved_id: int | None = None
+
+    TYPE: typing.ClassVar[str] = "cmd"
+
+    def __post_init__(self) -> None:
+        set_ = object.__setattr__
+        set_(self, "robot_id", _int(self.robot_id, "cmd.robot", 0, MAX_ROBOT_ID))
+        set_(self, "seq", _int(self.seq, "cmd.seq", 0, MAX_SEQ))
+        set_(self, "pose_stamp_s", _float(self.pose_stamp_s, "cmd.pose_stamp", 0.0))
+        set_(self, "v_mps", _float(self.v_mps, "cmd.v", -MAX_SPEED, MAX_SPEED))
+        set_(self, "omega_radps", _float(self.omega_radps, "cmd.omega", -MAX_SPEED, MAX_SPEED))
+        set_(self, "plan_ms", _float(self.plan_ms, "cmd.plan_ms", 0.0))
+        status = _str(self.status, "cmd.status", 32)
+        if status not in _STATUS_VALUES:
+            raise ProtocolError(f"cmd.status: unknown status {status!r}")
+        set_(self, "status", str(status))
+        set_(self, "side", _int(self.side, "cmd.side", Side.RIGHT, Side.LEFT))
+        if self.resolved_id is not None:
+            set_(self, "resolved_id",
+                 _int(self.resolved_id, "cmd.resolved", MIN_OBSTACLE_ID, MAX_ROBOT_ID))
+
+    def encode(self) -> bytes:
+        """Serialise to msgpack."""
+        return _pack(self.TYPE, {
+            "robot": self.robot_id,
+            "seq": self.seq,
+            "pose_stamp": self.pose_stamp_s,
+            "v": self.v_mps,
+            "omega": self.omega_radps,
+            "plan_ms": self.plan_ms,
+            "status": self.status,
+            "side": self.side,
+            "resolved": self.resolved_id,
+        })
+
+    @classmethod
+    def decode(cls, data: object, *, known_ids: Collection[int] | None = None,
+               expected_robot_id: int | None = None) -> CommandMsg:
+        """Parse and validate.
+
+        Args:
+            known_ids: if given, the robot id must be one of them.
+            expected_robot_id: if given (the id in the key), the message must carry it.
+        """
+        body = _open_envelope(data, cls.TYPE, (
+            "robot", "seq", "pose_stamp", "v", "omega", "plan_ms", "status", "side", "resolved",
+        ))
+        msg = cls(
+            robot_id=body["robot"],
+            seq=body["seq"],
+            pose_stamp_s=body["pose_stamp"],
+            v_mps=body["v"],
+            omega_radps=body["omega"],
+            plan_ms=body["plan_ms"],
+            status=body["status"],
+            side=body["side"],
+            resolved_id=body["resolved"],
+        )
+        if known_ids is not None and msg.robot_id not in known_ids:
+            raise ProtocolError(f"cmd.robot: unknown robot id {msg.robot_id}")
+        if expected_robot_id is not None and msg.robot_id != expected_robot_id:
+            raise ProtocolError(
+                f"cmd.robot: id {msg.robot_id} sent on the key of robot {expected_robot_id}"
+            )
+        return msg
+
+
+ControlKind = Literal["start", "end"]
+
+
+@dataclass(frozen=True)
+class ControlMsg:
+    """World -> all: the run started or ended.
+
+    Wire body: ``kind`` ("start"|"end"), ``t`` (float), ``reason`` (str).
+
+    Args:
+        kind: ``"start"`` or ``"end"``.
+        t_s: sim time of the announcement.
+        reason: why the run ended (``all_arrived``, ``time_limit``, ``signal``, ...), or "".
+    """
+
+    kind: ControlKind
+    t_s: float
+    reason: str = ""
+
+    TYPE: typing.ClassVar[str] = "control"
+
+    def __post_init__(self) -> None:
+        if self.kind not in ("start", "end"):
+            raise ProtocolError(f"control.kind: {self.kind!r} is not 'start' or 'end'")
+        object.__setattr__(self, "t_s", _float(self.t_s, "control.t", 0.0))
+        object.__setattr__(self, "reason", _str(self.reason, "control.reason"))
+
+    def encode(self) -> bytes:
+        """Serialise to msgpack."""
+        return _pack(self.TYPE, {"kind": self.kind, "t": self.t_s, "reason": self.reason})
+
+    @classmethod
+    def decode(cls, data: object) -> ControlMsg:
+        """Parse and validate."""
+        body = _open_envelope(data, cls.TYPE, ("kind", "t", "reason"))
+        if not isinstance(body["kind"], str):
+            raise ProtocolError("control.kind: expected a string")
+        return cls(kind=body["kind"], t_s=body["t"], reason=body["reason"])
+
+
+# --- Generic, strict (de)serialisation of the shared configuration dataclasses --------------
+
+
+def _dump_value(value: object, hint: Any, where: str) -> Any:
+    """A configuration value as plain msgpack-able data, following its type hint."""
+    if value is None:
+        return None
+    if dataclasses.is_dataclass(hint):
+        return _dump_dataclass(value, where)
+    origin = typing.get_origin(hint)
+    if origin in (types.UnionType, typing.Union):
+        (inner,) = [a for a in typing.get_args(hint) if a is not type(None)]
+        return _dump_value(value, inner, where)
+    if origin is tuple:
+        args = typing.get_args(hint)
+        return [_dump_value(v, a, f"{where}[{i}]") for i, (v, a) in enumerate(zip(value, args))]
+    if hint is float:
+        return float(value)
+    if hint is int:
+        return int(value)
+    if hint in (str, bool):
+        return value
+    raise TypeError(f"{where}: unsupported configuration type {hint!r}")
+
+
+def _dump_dataclass(obj: object, where: str) -> dict[str, Any]:
+    hints = typing.get_type_hints(type(obj))
+    return {
+        f.name: _dump_value(getattr(obj, f.name), hints[f.name], f"{where}.{f.name}")
+        for f in dataclasses.fields(obj)
+    }
+
+
+def _load_value(value: object, hint: Any, where: str) -> Any:
+    """Rebuild a configuration value from msgpack data, checking it against its type hint."""
+    if dataclasses.is_dataclass(hint):
+        return _load_dataclass(value, hint, where)
+    origin = typing.get_origin(hint)
+    if origin in (types.UnionType, typing.Union):
+        args = typing.get_args(hint)
+        if value is None and type(None) in args:
+            return None
+        (inner,) = [a for a in args if a is not type(None)]
+        return _load_value(value, inner, where)
+    if origin is tuple:
+        args = typing.get_args(hint)
+        if not isinstance(value, list) or len(value) != len(args):
+            raise ProtocolError(f"{where}: expected a list of {len(args)} items")
+        return tuple(
+            _load_value(v, a, f"{where}[{i}]") for i, (v, a) in enumerate(zip(value, args))
+        )
+    if hint is float:
+        return _float(value, where)
+    if hint is int:
+        return _int(value, where, -MAX_SEQ - 1, MAX_SEQ)
+    if hint is bool:
+        if not isinstance(value, bool):
+            raise ProtocolError(f"{where}: expected a bool")
+        return value
+    if hint is str:
+        return _str(value, where)
+    raise ProtocolError(f"{where}: unsupported configuration type {hint!r}")
+
+
+def _load_dataclass(data: object, cls: type, where: str) -> Any:
+    fields = dataclasses.fields(cls)
+    body = _as_map(data, where, [f.name for f in fields])
+    hints = typing.get_type_hints(cls)
+    kwargs = {f.name: _load_value(body[f.name], hints[f.name], f"{where}.{f.name}")
+              for f in fields}
+    try:
+        return cls(**kwargs)
+    except (TypeError, ValueError) as exc:
+        raise ProtocolError(f"{where}: {exc}") from exc
+
+
+@dataclass(frozen=True)
+class RunConfigMsg:
+    """World -> one robot (query reply): everything the robot needs to plan in this run.
+
+    Wire body: ``run`` (str), ``robot`` (map of every `RobotSpec` field, ``limits`` nested),
+    ``planner`` (map of every `PlannerConfig` field, ``mpc`` nested), ``goal_tolerance``,
+    ``control_rate``, ``world_rate``, ``time_scale``, ``time_limit``, ``cmd_timeout`` (floats),
+    ``known_ids`` (list of every robot and obstacle id of the run).
+
+    Args:
+        run_id: the run this configuration belongs to.
+        robot: the robot's spec (its id, start, goal, radius, limits, planner name).
+        planner: the shared planner parameters.
+        goal_tolerance_m: a robot has arrived when its centre is this close to its goal.
+        control_rate_hz: planning rate in sim time.
+        world_rate_hz: world tick rate in sim time (poses arrive at this rate).
+        time_scale: sim seconds per wall second the world runs at.
+        time_limit_s: sim time at which the world gives up.
+        cmd_timeout_s: a command older than this (sim time) makes the world brake the robot.
+        known_ids: every robot (>= 0) and obstacle (< 0) id of the run.
+    """
+
+    run_id: str
+    robot: RobotSpec
+    planner: PlannerConfig
+    goal_tolerance_m: float
+    control_rate_hz: float
+    world_rate_hz: float
+    time_scale: float
+    time_limit_s: float
+    cmd_timeout_s: float
+    known_ids: tuple[int, ...]
+
+    TYPE: typing.ClassVar[str] = "config"
+
+    def __post_init__(self) -> None:
+        set_ = object.__setattr__
+        validate_run_id(self.run_id)
+        if not isinstance(self.robot, RobotSpec) or not isinstance(self.planner, PlannerConfig):
+            raise ProtocolError("config: robot must be a RobotSpec, planner a PlannerConfig")
+        # Round-trip the nested dataclasses through the strict loader: one set of checks.
+        try:
+            robot = _dump_dataclass(self.robot, "config.robot")
+            planner = _dump_dataclass(self.planner, "config.planner")
+        except (TypeError, ValueError, OverflowError) as exc:
+            raise ProtocolError(f"config: {exc}") from exc
+        set_(self, "robot", _load_dataclass(robot, RobotSpec, "config.robot"))
+        set_(self, "planner", _load_dataclass(planner, PlannerConfig, "config.planner"))
+        _check_robot_id(self.robot.id)
+        if self.robot.planner not in PLANNER_NAMES:
+            raise ProtocolError(f"config.robot.planner: unknown planner {self.robot.planner!r}")
+        _float(self.robot.radius_m, "config.robot.radius_m", 0.0, MAX_RADIUS_M, lo_open=True)
+        for i, c in enumerate((*self.robot.start[:2], *self.robot.goal)):
+            _float(c, f"config.robot.coordinate[{i}]", -MAX_COORD_M, MAX_COORD_M)
+        for name in ("goal_tolerance_m", "control_rate_hz", "world_rate_hz", "time_scale",
+                     "time_limit_s", "cmd_timeout_s"):
+            set_(self, name, _float(getattr(self, name), f"config.{name}", 0.0, lo_open=True))
+        if isinstance(self.known_ids, str | bytes) or not isinstance(
+                self.known_ids, Iterable):
+            raise ProtocolError("config.known_ids: expected a sequence of ints")
+        ids = tuple(_int(i, "config.known_ids[]", MIN_OBSTACLE_ID, MAX_ROBOT_ID)
+                    for i in self.known_ids)
+        if len(ids) > MAX_ROBOTS + MAX_OBSTACLES or len(set(ids)) != len(ids):
+            raise ProtocolError("config.known_ids: too many or duplicate ids")
+        if self.robot.id not in ids:
+            raise ProtocolError("config.known_ids: does not contain the robot's own id")
+        set_(self, "known_ids", ids)
+
+    def encode(self) -> bytes:
+        """Serialise to msgpack."""
+        return _pack(self.TYPE, {
+            "run": self.run_id,
+            "robot": _dump_dataclass(self.robot, "robot"),
+            "planner": _dump_dataclass(self.planner, "planner"),
+            "goal_tolerance": self.goal_tolerance_m,
+            "control_rate": self.control_rate_hz,
+            "world_rate": self.world_rate_hz,
+            "time_scale": self.time_scale,
+            "time_limit": self.time_limit_s,
+            "cmd_timeout": self.cmd_timeout_s,
+            "known_ids": list(self.known_ids),
+        })
+
+    @classmethod
+    def decode(cls, data: object, *, expected_run_id: str | None = None,
+               expected_robot_id: int | None = None) -> RunConfigMsg:
+        """Parse and validate; optionally insist on this run and this robot."""
+        body = _open_envelope(data, cls.TYPE, (
+            "run", "robot", "planner", "goal_tolerance", "control_rate", "world_rate",
+            "time_scale", "time_limit", "cmd_timeout", "known_ids",
+        ))
+        if not isinstance(body["known_ids"], list):
+            raise ProtocolError("config.known_ids: expected a list")
+        msg = cls(
+            run_id=_str(body["run"], "config.run", MAX_RUN_ID_CHARS),
+            robot=_load_dataclass(body["robot"], RobotSpec, "config.robot"),
+            planner=_load_dataclass(body["planner"], PlannerConfig, "config.planner"),
+            goal_tolerance_m=body["goal_tolerance"],
+            control_rate_hz=body["control_rate"],
+            world_rate_hz=body["world_rate"],
+            time_scale=body["time_scale"],
+            time_limit_s=body["time_limit"],
+            cmd_timeout_s=body["cmd_timeout"],
+            known_ids=tuple(body["known_ids"]),
+        )
+        if expected_run_id is not None and msg.run_id != expected_run_id:
+            raise ProtocolError(f"config.run: {msg.run_id!r}, expected {expected_run_id!r}")
+        if expected_robot_id is not None and msg.robot.id != expected_robot_id:
+            raise ProtocolError(f"config.robot.id: {msg.robot.id}, expected {expected_robot_id}")
+        return msg

@@ -45,6 +45,8 @@ class MpcConfig:
         r_dv: weight on squared change of v between steps.
         r_domega: weight on squared change of omega between steps.
         max_constraints: neighbours turned into half-plane constraints (nearest first).
+        clearance_margin_m: gap the half-planes keep between discs (the via-point planner
+            keeps the larger d_safety; the MPC constraint is the last line of defence).
         slack_weight: linear and quadratic weight on half-plane slack (soft constraints).
         max_iter: OSQP iteration cap per solve.
         eps_abs: OSQP absolute tolerance.
@@ -61,6 +63,7 @@ class MpcConfig:
     r_dv: float = 2.0
     r_domega: float = 0.5
     max_constraints: int = 4
+    clearance_margin_m: float = 0.1
     slack_weight: float = 1.0e4
     max_iter: int = 200
     eps_abs: float = 1.0e-3

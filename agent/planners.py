@@ -1,15 +1,44 @@
 """One interface for the four planners: `ifp`, `eifp`, `eifp-mpc` and `orca`.
 
 `make_planner(name, config)` returns an object with `plan(observation, now_s) -> PlanResult`.
-Planners keep only the memory the method needs (the side chosen last time per threat, the
-MPC warm start); for the same sequence of inputs they return the same decisions.
+
+- `ifp`: the baseline IFP (`agent.ifp`): earliest feasible via-point, iterated; the spline is
+  followed by the unicycle tracking law (`agent.unicycle.track_reference`).
+- `eifp`: eIFP (`agent.eifp`): TCPA ranking and the cost of Eqs. (14)-(16) with side memory;
+  the spline followed by the same tracking law, as the paper's eIFP (no MPC).
+- `eifp-mpc`: eIFP whose spline is tracked by the OSQP LTV-MPC (`agent.mpc`), with the
+  neighbours' constant-velocity predictions as soft half-plane constraints.
+- `orca`: ORCA through `pyrvo` (`agent.orca`) plus a heading controller.
+
+Every planner stops (status ARRIVED) once its centre is within half the goal tolerance of
+the goal: half, so that the world, which judges arrival on ground truth at the full
+tolerance, agrees even when the robot's own pose estimate is slightly off.
+
+Planners keep only the memory the method needs (side per threat for eIFP, the MPC's warm
+start); for the same sequence of inputs they return the same decisions. Stage timings are
+wall time from an injected `timer` (default `time.perf_counter`); they are the only
+non-deterministic output and never influence a decision.
 """
 
 from __future__ import annotations
 
+import time
+from collections.abc import Callable
+from dataclasses import replace
 from typing import Protocol
 
-from agent.types import Observation, PlanResult
+import numpy as np
+
+from agent.config import PLANNER_NAMES, PlannerConfig
+from agent.types import Observation, PlanResult, PlanStatus, Side, StageTimes
+
+Timer = Callable[[], float]
+
+ARRIVAL_FRACTION = 0.5
+"""A planner stops when closer to its goal than this fraction of the goal tolerance."""
+
+CONTROL_PERIOD_S = 0.1
+"""Default command period: the rate limits of the tracking laws use it."""
 
 
 class Planner(Protocol):
@@ -24,3 +53,186 @@ class Planner(Protocol):
     def reset(self) -> None:
         """Forget all memory (side choices, warm starts)."""
         ...
+
+
+def _arrived(observation: Observation) -> PlanResult | None:
+    """The stop result when the robot is at its goal, else None."""
+    ego = observation.ego
+    gap = np.hypot(observation.goal_m[0] - ego.x_m, observation.goal_m[1] - ego.y_m)
+    if gap > ARRIVAL_FRACTION * observation.goal_tolerance_m:
+        return None
+    here = np.array([[ego.x_m, ego.y_m], observation.goal_m])
+    return PlanResult(v_mps=0.0, omega_radps=0.0, status=PlanStatus.ARRIVED, waypoints_m=here)
+
+
+class ViaPointPlanner:
+    """IFP, eIFP and eIFP-MPC: via-points -> cubic spline -> tracker.
+
+    Args:
+        name: `ifp`, `eifp` or `eifp-mpc`.
+        config: planner parameters.
+        control_period_s: the command period (rate limits of the tracking law).
+        timer: wall clock for stage timings only.
+    """
+
+    def __init__(self, name: str, config: PlannerConfig, *,
+                 control_period_s: float = CONTROL_PERIOD_S,
+                 timer: Timer = time.perf_counter) -> None:
+        from agent.eifp import EifpSelector
+        from agent.ifp import plan_ifp
+
+        if name not in ("ifp", "eifp", "eifp-mpc"):
+            raise ValueError(f"not a via-point planner: {name!r}")
+        self.name = name
+        self.config = config
+        self.control_period_s = control_period_s
+        self._timer = timer
+        self._selector = EifpSelector(config) if name != "ifp" else None
+        self._plan_ifp = plan_ifp
+        self._trackers: dict[object, object] = {}
+
+    def reset(self) -> None:
+        """Forget side memory and MPC warm starts."""
+        if self._selector is not None:
+            self._selector.reset()
+        for tracker in self._trackers.values():
+            tracker.reset()  # type: ignore[attr-defined]
+
+    def _mpc(self, observation: Observation):
+        from agent.mpc import MpcTracker
+
+        key = observation.limits
+        tracker = self._trackers.get(key)
+        if tracker is None:
+            tracker = MpcTracker(observation.limits, self.config.mpc)
+            self._trackers[key] = tracker
+        return tracker
+
+    def plan(self, observation: Observation, now_s: float) -> PlanResult:
+        """One cycle: threats and via-points, spline, then MPC or the tracking law."""
+        from agent.spline import build_reference
+        from agent.unicycle import track_reference
+
+        clock = self._timer
+        t0 = clock()
+        done = _arrived(observation)
+        if done is not None:
+            return replace(done, times=StageTimes(total_ms=(clock() - t0) * 1e3))
+        cfg = self.config
+        ego = observation.ego
+        limits = observation.limits
+        if self._selector is None:
+            via = self._plan_ifp(observation, cfg)
+        else:
+            via = self._selector.select(observation)
+        t1 = clock()
+        mpc_cfg = cfg.mpc
+        ref = build_reference(
+            via.waypoints_m, ego.heading_rad, limits.v_max_mps, limits.accel_max_mps2,
+            mpc_cfg.dt_s, mpc_cfg.horizon_steps, v_start_mps=ego.v_mps,
+        )
+        t2 = clock()
+        last = np.array([ego.v_mps, ego.omega_radps])
+        iterations = 0
+        status = via.status
+        if self.name == "eifp-mpc":
+            preds, clearance = self._predictions(observation, ref.t_s)
+            res = self._mpc(observation).solve(
+                np.array([ego.x_m, ego.y_m, ego.heading_rad]), last, ref, preds, clearance
+            )
+            v, omega, iterations = res.v_mps, res.omega_radps, res.iterations
+            if res.status != PlanStatus.OK:
+                status = res.status
+        else:
+            v, omega = track_reference(
+                ego.x_m, ego.y_m, ego.heading_rad, ref.x_m, ref.y_m,
+                float(ref.v_mps[min(1, ref.n_steps)]),
+                max(cfg.lookahead_s * limits.v_max_mps, 0.3), limits, cfg.heading_gain,
+                last_command=last, dt_s=self.control_period_s,
+            )
+        t3 = clock()
+        times = StageTimes(
+            threats_ms=getattr(via, "threats_s", 0.0) * 1e3,
+            viapoints_ms=(t1 - t0) * 1e3 - getattr(via, "threats_s", 0.0) * 1e3,
+            spline_ms=(t2 - t1) * 1e3,
+            control_ms=(t3 - t2) * 1e3,
+            total_ms=(t3 - t0) * 1e3,
+        )
+        return PlanResult(
+            v_mps=float(v), omega_radps=float(omega), status=status,
+            waypoints_m=via.waypoints_m, via_point_m=via.via_point_m, side=via.side,
+            resolved_id=via.resolved_id, threats=via.threats, times=times,
+            solver_iterations=int(iterations),
+        )
+
+    def _predictions(self, observation: Observation,
+                     t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Constant-velocity predictions (K, N+1, 2) of the nearby others and clearances (K,)."""
+        from agent.threats import nearby_others
+
+        cfg = self.config
+        ego = observation.ego
+        near = nearby_others(np.array([ego.x_m, ego.y_m]), observation.others,
+                             cfg.sensing_radius_m, cfg.max_neighbors)
+        preds = near.position_m[:, None, :] + near.velocity_mps[:, None, :] * t_s[None, :, None]
+        clearance = observation.radius_m + near.radius_m + cfg.mpc.clearance_margin_m
+        return preds, clearance
+
+
+class OrcaPlanner:
+    """ORCA (RVO2 via `pyrvo`) with a heading controller; the same interface as the others.
+
+    Args:
+        config: planner parameters.
+        control_period_s: the command period (ORCA's time step and the rate limits).
+        timer: wall clock for stage timings only.
+    """
+
+    name = "orca"
+
+    def __init__(self, config: PlannerConfig, *, control_period_s: float = CONTROL_PERIOD_S,
+                 timer: Timer = time.perf_counter) -> None:
+        self.config = config
+        self.control_period_s = control_period_s
+        self._timer = timer
+        self._controllers: dict[object, object] = {}
+
+    def reset(self) -> None:
+        """ORCA keeps no memory between cycles."""
+
+    def plan(self, observation: Observation, now_s: float) -> PlanResult:
+        """One ORCA cycle."""
+        from agent.orca import OrcaController
+
+        t0 = self._timer()
+        done = _arrived(observation)
+        if done is not None:
+            return replace(done, times=StageTimes(total_ms=(self._timer() - t0) * 1e3))
+        controller = self._controllers.get(observation.limits)
+        if controller is None:
+            controller = OrcaController(observation.limits, self.config, self.control_period_s)
+            self._controllers[observation.limits] = controller
+        ego = observation.ego
+        position = np.array([ego.x_m, ego.y_m])
+        cmd = controller.command(
+            position, ego.heading_rad, ego.velocity_mps, observation.goal_m,
+            observation.radius_m, observation.others,
+            last_command=np.array([ego.v_mps, ego.omega_radps]),
+        )
+        elapsed_ms = (self._timer() - t0) * 1e3
+        return PlanResult(
+            v_mps=float(cmd.v_mps), omega_radps=float(cmd.omega_radps), status=PlanStatus.OK,
+            waypoints_m=np.array([position, observation.goal_m]), side=Side.NONE,
+            times=StageTimes(control_ms=elapsed_ms, total_ms=elapsed_ms),
+        )
+
+
+def make_planner(name: str, config: PlannerConfig, *,
+                 control_period_s: float = CONTROL_PERIOD_S,
+                 timer: Timer = time.perf_counter) -> Planner:
+    """The planner called `name` (one of `PLANNER_NAMES`)."""
+    if name == "orca":
+        return OrcaPlanner(config, control_period_s=control_period_s, timer=timer)
+    if name in PLANNER_NAMES:
+        return ViaPointPlanner(name, config, control_period_s=control_period_s, timer=timer)
+    raise ValueError(f"unknown planner {name!r}; expected one of {', '.join(PLANNER_NAMES)}")

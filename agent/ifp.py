@@ -1,0 +1,332 @@
+"""Iterative Forecast Planner (IFP): the baseline via-point planner.
+
+One planning cycle, as `plan_ifp` runs it:
+
+1. Neighbours: the others inside the sensing radius, at most `max_neighbors`.
+2. Escape: if the robot is inside an inflated disc (Q <= L, Eq. 7) the plan is
+   [P, escape point, goal], status ESCAPE (the deepest disc wins, ties by id).
+3. Threats of Eq. (5) at the robot's measured velocity, ranked by TCPA (Eq. 6). If there
+   are any, the nearest one is resolved from P: its RIGHT/LEFT candidates (Eqs. 8-13) are
+   built and the selector picks one (IFP: the earliest, smallest lambda*). If neither
+   survives the plan is [P, goal], status NO_FEASIBLE.
+4. Iteration (up to `max_depth` via-points in all): every leg of the waypoint list, from
+   the robot outwards, is re-checked with `threats.legs_threats` at top speed, starting at
+   the time the robot reaches the leg's start. The most imminent resolvable threat on a
+   leg gets a via-point, inserted into that leg, built from the leg's start with the
+   others advanced to that time; the shortened leg is then checked again. A leg whose
+   threats all lack candidates is left as it is.
+
+Choices the paper leaves open (documented here, tested in tests/agent/test_ifp.py):
+
+- Step 3 uses the measured velocity v_r as in Eq. (3). A robot that stands still (v_r = 0)
+  sees no static obstacle as a threat under Eq. (5), so when Eq. (5) finds nothing the
+  direct leg P -> goal still goes through the leg check of step 4.
+- The leg check counts other j as a threat when the closest approach on the leg is below
+  its inflated radius L_j (not D_thresh, which is a detection radius): the plan must clear
+  the inflated discs. Grazing within `LEG_GRAZE_TOL_M` is not a threat, so a leg that is
+  tangent to a disc by construction is not flagged by rounding.
+- The leg from a via-point's predecessor to the via-point is tangent to the disc it
+  resolves, so that disc is excluded on that leg; it is checked on every other leg.
+- Via-points are pushed radially `VIA_MARGIN_M` out of the moving disc they resolve
+  (`viapoints.via_point_candidates(margin_m=...)`). On the boundary itself a via-point
+  would have no tangent to the same disc, and a next leg that cuts back into it (the
+  usual case when the goal lies behind the obstacle) could not be fixed; from outside it
+  gets a further tangent, so the iteration wraps the disc with a short polygon. The leg
+  into a pushed via-point still clears the disc (it runs outside the tangent line).
+- A candidate is only built from a leg start outside the disc by more than
+  `ON_DISC_REL_TOL` of L.
+- `ViaPlan.via_point_m` is the first via-point after P (where the robot heads now), with
+  the side and the id of the threat that via-point resolves.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from agent.config import PlannerConfig
+from agent.threats import (
+    as_complex,
+    legs_threats,
+    nearby_others,
+    rank_threats,
+    ranked,
+    require_finite,
+    threat_records,
+)
+from agent.types import Observation, Others, PlanStatus, Side, Threat
+from agent.viapoints import SIDES, candidate_pair, escape_point, inflated_radius
+
+# Closest approaches this close to L still clear the disc [m] (tangent legs, rounding).
+LEG_GRAZE_TOL_M = 1.0e-6
+
+# How far outside its inflated disc a via-point is placed [m].
+VIA_MARGIN_M = 0.05
+
+# A leg start within L * (1 + this) of a disc centre is on the disc: no tangent from it.
+ON_DISC_REL_TOL = 1.0e-6
+
+# select(k, points, times, leg_start, leg_end) -> index into SIDES of the chosen candidate
+# of other k, or None if none is acceptable. points: the (RIGHT, LEFT) via-points as
+# complex numbers x + iy [m]; times: their lambda* [s], inf where infeasible; leg_start,
+# leg_end: the leg A -> B being split, complex [m].
+CandidateSelector = Callable[
+    [int, tuple[complex, complex], tuple[float, float], complex, complex], "int | None"
+]
+
+
+@dataclass(frozen=True)
+class ViaPlan:
+    """The waypoint plan of one IFP/eIFP cycle.
+
+    Args:
+        status: OK, ESCAPE or NO_FEASIBLE.
+        waypoints_m: (M, 2) robot position, via-points in travel order, goal (M >= 2).
+        via_point_m: (2,) the first via-point after the robot's position, or None.
+        side: side of `via_point_m` relative to the threat it resolves (NONE for escape).
+        resolved_id: id of the other `via_point_m` resolves, or None.
+        threats: the threats of Eq. (5) at the measured velocity, ranked by TCPA.
+        resolved_sides: (other id, side) for every via-point, in the order they were chosen.
+    """
+
+    status: PlanStatus
+    waypoints_m: np.ndarray
+    via_point_m: np.ndarray | None = None
+    side: Side = Side.NONE
+    resolved_id: int | None = None
+    threats: tuple[Threat, ...] = ()
+    resolved_sides: tuple[tuple[int, Side], ...] = ()
+
+
+def select_earliest(
+    k: int,
+    points: tuple[complex, complex],
+    times: tuple[float, float],
+    leg_start: complex,
+    leg_end: complex,
+) -> int | None:
+    """IFP's rule: the feasible candidate reached first (smallest lambda*); ties -> RIGHT.
+
+    Args:
+        k: index of the other being resolved (unused).
+        points: the (RIGHT, LEFT) candidates, complex [m] (unused).
+        times: their lambda* [s], inf if infeasible.
+        leg_start, leg_end: the leg being split (unused).
+
+    Returns:
+        Index into `SIDES`, or None if neither is feasible.
+    """
+    right, left = times
+    if right == math.inf and left == math.inf:
+        return None
+    return 1 if left < right else 0  # equal times: RIGHT
+
+
+def validate_inputs(observation: Observation, config: PlannerConfig) -> None:
+    """Raise `ValueError` on non-finite or meaningless planning inputs.
+
+    `Observation`, `EgoState` and `Others` reject non-finite values when constructed, so
+    their arrays are not scanned again here; this checks the scalars the planner reads
+    and the configuration fields it uses, which nothing else validates.
+    """
+    ego = observation.ego
+    require_finite(
+        "observation",
+        ego.x_m,
+        ego.y_m,
+        ego.heading_rad,
+        ego.v_mps,
+        float(observation.goal_m[0]),
+        float(observation.goal_m[1]),
+        observation.radius_m,
+        observation.limits.v_max_mps,
+    )
+    require_finite(
+        "config",
+        config.d_safety_m,
+        config.dcpa_threshold_m(observation.radius_m),
+        config.t_max_s,
+        config.sensing_radius_m,
+        config.w_length,
+        config.w_distance,
+        config.w_angle,
+        config.ghost_horizon_s,
+        config.side_hysteresis,
+        0.0 if config.ghost_clearance_m is None else config.ghost_clearance_m,
+    )
+    if not observation.limits.v_max_mps > 0.0:
+        raise ValueError("limits.v_max_mps: must be positive")
+    if config.max_depth < 1:
+        raise ValueError("config.max_depth: must be at least 1")
+
+
+def plan_ifp(observation: Observation, config: PlannerConfig) -> ViaPlan:
+    """One IFP cycle: earliest-feasible via-points, iterated up to `max_depth`.
+
+    Args:
+        observation: what the robot knows now.
+        config: planner parameters (d_safety, D_thresh, T_max, sensing, max_depth).
+
+    Returns:
+        The waypoint plan; feed `waypoints_m` to `spline.build_reference`.
+
+    Raises:
+        ValueError: on non-finite inputs or configuration.
+    """
+    return plan_via_points(observation, config, lambda _others: select_earliest)
+
+
+def plan_via_points(
+    observation: Observation,
+    config: PlannerConfig,
+    make_selector: Callable[[Others], CandidateSelector],
+) -> ViaPlan:
+    """The IFP cycle (module docstring) with a pluggable candidate selector.
+
+    Args:
+        observation: what the robot knows now.
+        config: planner parameters.
+        make_selector: given the neighbours the cycle plans against (after the sensing
+            radius and neighbour cap), returns the rule that picks one candidate of a
+            threat; IFP's is `select_earliest`, eIFP's cost rule is in `agent.eifp`.
+
+    Raises:
+        ValueError: on non-finite inputs or configuration.
+    """
+    validate_inputs(observation, config)
+    ego = observation.ego
+    p = np.array([ego.x_m, ego.y_m])
+    goal = observation.goal_m
+    others = nearby_others(p, observation.others, config.sensing_radius_m, config.max_neighbors)
+    select = make_selector(others)
+    speed = float(observation.limits.v_max_mps)
+    radius = inflated_radius(observation.radius_m, others.radius_m, config.d_safety_m)
+
+    # Eqs. (3)-(6) at the measured velocity.
+    v_r = ego.v_mps * np.array([math.cos(ego.heading_rad), math.sin(ego.heading_rad)])
+    index, tcpa, dcpa = rank_threats(
+        p, v_r, others, config.dcpa_threshold_m(observation.radius_m), config.t_max_s
+    )
+    threats = threat_records(index, tcpa, dcpa, others)
+    if len(others) == 0:
+        return ViaPlan(status=PlanStatus.OK, waypoints_m=np.stack((p, goal)), threats=threats)
+
+    # Inside an inflated disc: no tangent exists, steer straight out of the deepest one.
+    position = as_complex(others.position_m)
+    gap = np.abs(position - complex(ego.x_m, ego.y_m)) - radius
+    inside = (gap <= 0.0).nonzero()[0]
+    if inside.size:
+        j = int(inside[np.lexsort((others.ids[inside], gap[inside]))[0]])
+        out = escape_point(p, others.position_m[j], float(radius[j]), ego.heading_rad)
+        return ViaPlan(
+            status=PlanStatus.ESCAPE,
+            waypoints_m=np.stack((p, out, goal)),
+            via_point_m=out,
+            side=Side.NONE,
+            resolved_id=int(others.ids[j]),
+            threats=threats,
+        )
+
+    # Waypoints as complex numbers x + iy while the list changes.
+    world = _World(others, radius, speed, select)
+    wps = [complex(ego.x_m, ego.y_m), complex(goal[0], goal[1])]
+    excluded = [-1]  # per leg: index of the other the leg is tangent to, or -1
+    chosen: list[tuple[int, Side] | None] = [None, None]  # per waypoint: (index, side)
+
+    if index.size:
+        k = int(index[0])
+        split = world.resolve(wps[0], 0.0, wps[1], k)
+        if split is None:
+            return ViaPlan(
+                status=PlanStatus.NO_FEASIBLE, waypoints_m=np.stack((p, goal)), threats=threats
+            )
+        wps.insert(1, split[0])
+        excluded[0:1] = [k, -1]
+        chosen.insert(1, (k, split[1]))
+
+    # Iteration: re-check every leg from `first` on; split the first resolvable one.
+    velocity = as_complex(others.velocity_mps)
+    clearance = radius - LEG_GRAZE_TOL_M
+    first = 0
+    while len(wps) - 2 < config.max_depth:
+        arrival = [0.0, *itertools.accumulate(abs(b - a) / speed for a, b in zip(wps, wps[1:]))]
+        hit, leg_tcpa = legs_threats(
+            wps[first:-1],
+            wps[first + 1 :],
+            arrival[first:-1],
+            speed,
+            position,
+            velocity,
+            clearance,
+            config.t_max_s,
+            excluded[first:],
+        )
+        split = None
+        for row in hit.any(axis=1).nonzero()[0].tolist():
+            leg = first + row
+            for hit_k in ranked(hit[row].nonzero()[0], leg_tcpa[row], others.ids).tolist():
+                split = world.resolve(wps[leg], arrival[leg], wps[leg + 1], hit_k)
+                if split is not None:
+                    k = hit_k
+                    break
+            if split is not None:
+                break
+        if split is None:
+            break
+        wps.insert(leg + 1, split[0])
+        excluded[leg : leg + 1] = [k, -1]
+        chosen.insert(leg + 1, (k, split[1]))
+        first = leg
+
+    waypoints = np.array([(z.real, z.imag) for z in wps])
+    resolved = tuple((int(others.ids[c[0]]), c[1]) for c in chosen if c is not None)
+    head = chosen[1]
+    return ViaPlan(
+        status=PlanStatus.OK,
+        waypoints_m=waypoints,
+        via_point_m=None if head is None else waypoints[1].copy(),
+        side=Side.NONE if head is None else head[1],
+        resolved_id=None if head is None else int(others.ids[head[0]]),
+        threats=threats,
+        resolved_sides=resolved,
+    )
+
+
+class _World:
+    """The others of one cycle in plain floats, to build candidates one disc at a time."""
+
+    def __init__(
+        self, others: Others, radius: np.ndarray, speed: float, select: CandidateSelector
+    ) -> None:
+        self.position = others.position_m.tolist()
+        self.velocity = others.velocity_mps.tolist()
+        self.radius = radius.tolist()
+        self.speed = speed
+        self.select = select
+
+    def resolve(
+        self, a: complex, start_time_s: float, b: complex, k: int
+    ) -> tuple[complex, Side] | None:
+        """The via-point that resolves other k on leg a -> b, or None if it has none.
+
+        The candidates are built from a, with other k advanced to the time the robot is
+        there; a start on (or in) the disc, within `ON_DISC_REL_TOL`, has none.
+        """
+        (cx, cy), (vx, vy), l_k = self.position[k], self.velocity[k], self.radius[k]
+        cx += start_time_s * vx
+        cy += start_time_s * vy
+        ax, ay = a.real, a.imag
+        if (cx - ax) ** 2 + (cy - ay) ** 2 <= (l_k * (1.0 + ON_DISC_REL_TOL)) ** 2:
+            return None
+        pair = candidate_pair(ax, ay, cx, cy, vx, vy, l_k, self.speed, VIA_MARGIN_M)
+        if pair is None:
+            return None
+        (xr, yr, tr), (xl, yl, tl) = pair
+        pick = self.select(k, (complex(xr, yr), complex(xl, yl)), (tr, tl), a, b)
+        if pick is None or pair[pick][2] == math.inf:
+            return None
+        return complex(*pair[pick][:2]), SIDES[pick]

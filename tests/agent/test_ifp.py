@@ -1,0 +1,242 @@
+"""The IFP baseline: nearest threat, earliest feasible via-point, iterated legs."""
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from agent.config import PlannerConfig, RobotLimits
+from agent.ifp import VIA_MARGIN_M, ViaPlan, plan_ifp, select_earliest
+from agent.types import EgoState, Observation, Others, PlanStatus, Side
+from agent.viapoints import ESCAPE_MARGIN_M, via_point_candidates
+
+R = 0.2  # robot and obstacle radius
+CFG = PlannerConfig()  # d_safety 0.3 -> L = 0.7 between two 0.2 m discs
+L = 2 * R + CFG.d_safety_m
+
+
+def others(pos, vel=None, ids=None, radius=R, linearity=1.0):
+    pos = np.asarray(pos, dtype=float).reshape(-1, 2)
+    k = pos.shape[0]
+    vel = np.zeros((k, 2)) if vel is None else np.asarray(vel, dtype=float).reshape(-1, 2)
+    return Others(
+        ids=np.arange(1, k + 1) if ids is None else ids,
+        position_m=pos,
+        velocity_mps=vel,
+        radius_m=np.full(k, radius),
+        linearity=np.full(k, linearity),
+        track_start_m=pos - 0.5 * vel,
+        is_robot=np.ones(k, dtype=bool),
+    )
+
+
+def observe(o, x=0.0, y=0.0, heading=0.0, v=0.0, goal=(10.0, 0.0), v_max=1.1):
+    return Observation(
+        robot_id=0,
+        ego=EgoState(x, y, heading, v),
+        goal_m=np.array(goal, dtype=float),
+        radius_m=R,
+        limits=RobotLimits(v_max_mps=v_max),
+        others=o,
+    )
+
+
+def segment_clearance(a, b, c):
+    """Distance from point c to segment a-b."""
+    a, b, c = map(np.asarray, (a, b, c))
+    d = b - a
+    t = np.clip((c - a) @ d / max(d @ d, 1e-300), 0.0, 1.0)
+    return float(np.hypot(*(a + t * d - c)))
+
+
+def test_nobody_around_goes_straight():
+    plan = plan_ifp(observe(Others.empty(), v=1.0), CFG)
+    assert plan.status is PlanStatus.OK
+    np.testing.assert_array_equal(plan.waypoints_m, [[0, 0], [10, 0]])
+    assert plan.via_point_m is None and plan.side is Side.NONE and plan.resolved_id is None
+    assert plan.threats == ()
+
+
+def test_clear_path_is_direct_even_with_others_around():
+    plan = plan_ifp(observe(others([[5, 4], [-3, 0]]), v=1.0), CFG)
+    assert plan.status is PlanStatus.OK and plan.waypoints_m.shape == (2, 2)
+
+
+def test_head_on_threat_gets_the_earliest_tangent_via_point():
+    o = others([[6, 0]], [[-1, 0]], ids=[7])
+    plan = plan_ifp(observe(o, v=1.0), CFG)
+    assert plan.status is PlanStatus.OK
+    assert [t.other_id for t in plan.threats] == [7]
+    assert plan.threats[0].tcpa_s == pytest.approx(3.0)
+    # Symmetric head-on: both sides equally early -> RIGHT (y < 0).
+    cands = via_point_candidates([0, 0], [[6, 0]], [[-1, 0]], [L], 1.1, VIA_MARGIN_M)
+    assert cands.time_s[0, 0] == pytest.approx(cands.time_s[0, 1])
+    assert plan.side is Side.RIGHT and plan.resolved_id == 7
+    np.testing.assert_allclose(plan.via_point_m, cands.point_m[0, 0], atol=1e-12)
+    assert plan.via_point_m[1] < 0
+    np.testing.assert_array_equal(plan.waypoints_m[[0, -1]], [[0, 0], [10, 0]])
+    assert plan.resolved_sides == ((7, Side.RIGHT),)
+
+
+def test_moving_threat_picks_the_smaller_lambda():
+    # Crossing from the right (moving +y): the tangent points move up; the one that
+    # comes towards the robot's cone first wins.
+    o = others([[5, -3]], [[0, 0.6]])
+    plan = plan_ifp(observe(o, v=1.0), CFG)
+    cands = via_point_candidates([0, 0], [[5, -3]], [[0, 0.6]], [L], 1.1, VIA_MARGIN_M)
+    best = int(np.argmin(cands.time_s[0]))
+    assert cands.time_s[0, 0] != pytest.approx(cands.time_s[0, 1])
+    assert plan.status is PlanStatus.OK
+    np.testing.assert_allclose(plan.via_point_m, cands.point_m[0, best], atol=1e-12)
+    assert plan.side is (Side.RIGHT, Side.LEFT)[best]
+
+
+def test_select_earliest_rule():
+    pts = (0j, 1j)
+    assert select_earliest(0, pts, (2.0, 1.0), 0j, 1 + 0j) == 1
+    assert select_earliest(0, pts, (1.0, 1.0), 0j, 1 + 0j) == 0  # tie -> RIGHT
+    assert select_earliest(0, pts, (1.0, math.inf), 0j, 1 + 0j) == 0
+    assert select_earliest(0, pts, (math.inf, math.inf), 0j, 1 + 0j) is None
+
+
+def test_stopped_robot_still_avoids_a_static_obstacle_on_its_way():
+    # v = 0: Eq. (5) sees no threat (v_rel = 0), but the direct leg is checked too.
+    plan = plan_ifp(observe(others([[5, 0.1]]), v=0.0), CFG)
+    assert plan.threats == ()
+    assert plan.status is PlanStatus.OK and plan.via_point_m is not None
+    wps = plan.waypoints_m
+    for a, b in zip(wps[:-1], wps[1:]):
+        assert segment_clearance(a, b, [5, 0.1]) >= L - 1e-6
+
+
+def test_iteration_resolves_a_second_obstacle_behind_the_first():
+    # The via-point around the first disc leads straight into the second.
+    o = others([[4, 0], [8, -0.6]])
+    plan = plan_ifp(observe(o, v=1.0, goal=(14.0, 0.0)), CFG)
+    assert plan.status is PlanStatus.OK
+    wps = plan.waypoints_m
+    assert 3 <= len(wps) <= CFG.max_depth + 2
+    for a, b in zip(wps[:-1], wps[1:]):
+        for c in o.position_m:
+            assert segment_clearance(a, b, c) >= L - 1e-6
+    assert {i for i, _ in plan.resolved_sides} == {1, 2}
+
+
+def test_depth_limit_is_respected():
+    rng = np.random.default_rng(11)
+    o = others(rng.uniform([2, -2], [12, 2], size=(12, 2)))
+    for depth in (1, 2, 3):
+        plan = plan_ifp(observe(o, v=1.0, goal=(14.0, 0.0)), PlannerConfig(max_depth=depth))
+        assert len(plan.waypoints_m) - 2 <= depth
+
+
+def test_inside_an_inflated_disc_escapes_straight_out():
+    o = others([[0.5, 0.0], [6, 0]], ids=[3, 4])
+    plan = plan_ifp(observe(o, v=1.0), CFG)
+    assert plan.status is PlanStatus.ESCAPE
+    assert plan.resolved_id == 3 and plan.side is Side.NONE
+    np.testing.assert_allclose(plan.via_point_m, [0.5 - L - ESCAPE_MARGIN_M, 0.0])
+    np.testing.assert_allclose(plan.waypoints_m, [[0, 0], plan.via_point_m, [10, 0]])
+
+
+def test_escape_from_the_deepest_disc_and_coincident_is_finite():
+    o = others([[0.0, 0.0], [0.6, 0.0]], ids=[5, 6])
+    plan = plan_ifp(observe(o, heading=0.0, v=1.0), CFG)
+    assert plan.status is PlanStatus.ESCAPE and plan.resolved_id == 5
+    # Coincident: out to the right of the heading (+x -> -y).
+    np.testing.assert_allclose(plan.via_point_m, [0.0, -(L + ESCAPE_MARGIN_M)], atol=1e-12)
+    assert np.all(np.isfinite(plan.waypoints_m))
+
+
+def test_no_feasible_candidate_for_the_nearest_threat():
+    # A slow robot (v_max 0.1) facing a fast head-on obstacle: the tangent points sweep
+    # past faster than the robot's cone can meet them.
+    o = others([[5, 0]], [[-2, 0]])
+    plan = plan_ifp(observe(o, v=0.1, v_max=0.1), CFG)
+    assert plan.status is PlanStatus.NO_FEASIBLE
+    assert len(plan.threats) == 1
+    np.testing.assert_array_equal(plan.waypoints_m, [[0, 0], [10, 0]])
+    assert plan.via_point_m is None
+
+
+def test_deterministic_and_independent_of_the_order_of_others():
+    rng = np.random.default_rng(2)
+    pos = rng.uniform([1, -4], [12, 4], size=(10, 2))
+    vel = rng.uniform(-1, 1, size=(10, 2))
+    ids = np.arange(10, 20)
+    a = plan_ifp(observe(others(pos, vel, ids), v=1.0), CFG)
+    b = plan_ifp(observe(others(pos, vel, ids), v=1.0), CFG)
+    perm = rng.permutation(10)
+    c = plan_ifp(observe(others(pos[perm], vel[perm], ids[perm]), v=1.0), CFG)
+    assert _decision(a) == _decision(b) == _decision(c)
+
+
+def _decision(plan: ViaPlan):
+    return (
+        plan.status,
+        plan.waypoints_m.round(12).tolist(),
+        plan.side,
+        plan.resolved_id,
+        plan.threats,
+        plan.resolved_sides,
+    )
+
+
+@pytest.mark.parametrize(
+    "config",
+    [
+        PlannerConfig(d_safety_m=math.nan),
+        PlannerConfig(t_max_s=math.inf),
+        PlannerConfig(w_length=math.nan),
+        PlannerConfig(ghost_clearance_m=math.nan),
+        PlannerConfig(max_depth=0),
+    ],
+)
+def test_bad_configuration_raises(config):
+    with pytest.raises(ValueError):
+        plan_ifp(observe(others([[5, 0]]), v=1.0), config)
+
+
+def test_non_finite_observation_raises():
+    with pytest.raises(ValueError):
+        plan_ifp(observe(others([[5, 0]]), v=1.0, v_max=math.inf), CFG)
+    with pytest.raises(ValueError):
+        plan_ifp(observe(others([[5, 0]]), v=1.0, v_max=0.0), CFG)
+    obs = observe(others([[5, 0]]), v=1.0)
+    object.__setattr__(obs.ego, "x_m", math.nan)  # bypassing the constructor's check
+    with pytest.raises(ValueError):
+        plan_ifp(obs, CFG)
+    with pytest.raises(ValueError):
+        observe(others([[5, math.nan]]))  # the constructor already refuses
+
+
+def test_sensing_radius_and_neighbour_cap_apply():
+    o = others([[5, 0]], [[-1, 0]])
+    plan = plan_ifp(observe(o, v=1.0), PlannerConfig(sensing_radius_m=4.0))
+    assert plan.threats == () and plan.waypoints_m.shape == (2, 2)
+
+
+coord = st.floats(-15, 15, allow_nan=False)
+
+
+@settings(max_examples=150, deadline=None)
+@given(
+    st.lists(st.tuples(coord, coord, st.floats(-1.5, 1.5), st.floats(-1.5, 1.5)), max_size=10),
+    st.floats(0, 1.1),
+    st.floats(-math.pi, math.pi),
+    st.tuples(coord, coord),
+)
+def test_property_finite_inputs_give_a_finite_well_formed_plan(rows, v, heading, goal):
+    arr = np.array(rows).reshape(-1, 4)
+    o = others(arr[:, :2], arr[:, 2:]) if len(rows) else Others.empty()
+    plan = plan_ifp(observe(o, v=v, heading=heading, goal=goal), CFG)
+    wps = plan.waypoints_m
+    assert np.all(np.isfinite(wps))
+    assert 2 <= len(wps) <= CFG.max_depth + 2
+    np.testing.assert_array_equal(wps[0], [0, 0])
+    np.testing.assert_array_equal(wps[-1], goal)
+    assert plan.status in (PlanStatus.OK, PlanStatus.ESCAPE, PlanStatus.NO_FEASIBLE)
+    if plan.via_point_m is not None:
+        np.testing.assert_array_equal(plan.via_point_m, wps[1])

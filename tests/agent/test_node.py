@@ -1,0 +1,91 @@
+"""Tests of the robot process's pure parts: the sim-time plan schedule and the arguments."""
+
+from __future__ import annotations
+
+import pytest
+
+from agent.node import AgentOptions, PlanSchedule, parse_args
+
+
+def test_schedule_plans_on_first_pose_then_every_period() -> None:
+    schedule = PlanSchedule(0.1)
+    planned = []
+    for tick in range(26):  # poses every 0.02 s of sim time, 0.00 .. 0.50
+        stamp = tick * 0.02
+        if schedule.due(stamp):
+            planned.append(round(stamp, 6))
+            assert schedule.planned(stamp) == 0
+    assert planned == [0.0, 0.1, 0.2, 0.3, 0.4, 0.5]
+    assert schedule.skipped == 0
+
+
+def test_schedule_starts_at_first_stamp_seen() -> None:
+    schedule = PlanSchedule(0.1)
+    assert schedule.due(3.14)
+    schedule.planned(3.14)
+    assert not schedule.due(3.2)
+    assert schedule.due(3.24)
+
+
+def test_schedule_skips_missed_slots_instead_of_a_backlog() -> None:
+    schedule = PlanSchedule(0.1)
+    schedule.due(0.0)
+    schedule.planned(0.0)
+    # The robot was stalled: the next pose it sees is stamped 0.36 (slots 0.1..0.3 passed).
+    assert schedule.due(0.36)
+    assert schedule.planned(0.36) == 2  # 0.2 and 0.3 skipped (0.1 is the one planned late)
+    assert not schedule.due(0.38)
+    assert schedule.due(0.4)
+    assert schedule.skipped == 2
+
+
+def test_schedule_tolerates_float_accumulation() -> None:
+    schedule = PlanSchedule(0.1)
+    stamp = 0.0
+    plans = 0
+    for _ in range(5000):  # stamps accumulated as the world does: t += dt
+        if schedule.due(stamp):
+            schedule.planned(stamp)
+            plans += 1
+        stamp += 0.02
+    assert plans == 1000 and schedule.skipped == 0
+
+
+def test_schedule_rejects_bad_period() -> None:
+    with pytest.raises(ValueError):
+        PlanSchedule(0.0)
+
+
+def test_parse_args() -> None:
+    opts = parse_args(["--run", "r-1", "--id", "3", "--connect", "tcp/127.0.0.1:7447"])
+    assert opts == AgentOptions(run_id="r-1", robot_id=3, connect="tcp/127.0.0.1:7447")
+    opts = parse_args(
+        [
+            "--run",
+            "r",
+            "--id",
+            "0",
+            "--connect",
+            "tcp/h:1",
+            "--control-rate-hz",
+            "20",
+            "--startup-timeout-s",
+            "5",
+        ]
+    )
+    assert opts.control_rate_hz == 20.0 and opts.startup_timeout_s == 5.0
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["--run", "bad/run", "--id", "0", "--connect", "tcp/h:1"],
+        ["--run", "r", "--id", "-1", "--connect", "tcp/h:1"],
+        ["--run", "r", "--id", "0"],
+        ["--run", "r", "--id", "0", "--connect", "tcp/h:1", "--control-rate-hz", "0"],
+        ["--run", "r", "--id", "0", "--connect", "tcp/h:1", "--control-rate-hz", "nan"],
+    ],
+)
+def test_parse_args_rejects(argv) -> None:
+    with pytest.raises(SystemExit):
+        parse_args(argv)

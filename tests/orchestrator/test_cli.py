@@ -1,0 +1,197 @@
+"""The `orchestrator` CLI: list, run (lockstep and the distributed glue), exit statuses,
+sweep, report and the bench hook."""
+
+from __future__ import annotations
+
+import csv
+import json
+import subprocess
+import sys
+import types
+from pathlib import Path
+
+import pytest
+
+from orchestrator import cli
+from orchestrator.cli import main
+
+METRIC_KEYS = ("robots", "arrived", "success", "contacts", "min_gap_m", "path_ratio_mean",
+               "time_ratio_mean", "oscillations_per_robot", "side_flips_per_robot",
+               "plan_ms_p50", "plan_ms_p99", "latency_ms_p50", "latency_ms_p99",
+               "deadline_miss_rate", "per_robot")
+BAD = """\
+name: bad
+time_limit: 60
+robots:
+  - {id: 0, start: [0, 0, 0], goal: [5, 0]}
+  - {id: 1, start: [0, 5], goal: [5, 5]}
+"""
+
+
+@pytest.fixture(scope="module")
+def two_runs(tmp_path_factory) -> Path:
+    """Two lockstep runs of setup_a (ifp, seeds 0 and 1 with start jitter)."""
+    root = tmp_path_factory.mktemp("runs")
+    for seed in (0, 1):
+        rc = main(["run", "setup_a", "--mode", "lockstep", "--planner", "ifp", "--seed",
+                   str(seed), "--start-jitter-m", "0.5", "--out", str(root / f"s{seed}"),
+                   "--quiet"])
+        assert rc in (0, 1)
+    return root
+
+
+def test_list_shows_setups_families_and_planners(capsys):
+    assert main(["list"]) == 0
+    out = capsys.readouterr().out
+    for name in ("setup_a", "setup_g", "circle", "crossing", "random", "eifp-mpc", "orca"):
+        assert name in out
+
+
+def test_bad_scenario_exits_2_naming_file_and_field(tmp_path, capsys):
+    path = tmp_path / "setup_x.yaml"
+    path.write_text(BAD)
+    assert main(["run", str(path), "--mode", "lockstep"]) == 2
+    err = capsys.readouterr().err
+    assert "setup_x.yaml" in err and "robots[1].start: expected [x, y, theta]" in err
+
+
+def test_bad_scenario_exit_status_of_the_real_process(tmp_path):
+    path = tmp_path / "setup_x.yaml"
+    path.write_text(BAD)
+    proc = subprocess.run([sys.executable, "-m", "orchestrator", "run", str(path)],
+                          capture_output=True, text=True, timeout=60, check=False)
+    assert proc.returncode == 2
+    assert "setup_x.yaml: robots[1].start" in proc.stderr
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    (["run", "setup_z"], "unknown setup or family"),
+    (["run", "setup_a", "--agents", "5"], "fixed size of 2 robots"),
+    (["run", "setup_a", "--start-jitter-m", "-1"], "jitter must be >= 0"),
+    (["run", "setup_a", "--time-scale", "0"], "--time-scale: must be > 0"),
+])
+def test_bad_options_exit_2(argv, message, capsys):
+    assert main(argv) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_usage_errors_exit_2(capsys):
+    assert main(["run", "setup_a", "--planner", "rrt"]) == 2
+    assert main([]) == 2
+
+
+def test_lockstep_run_of_setup_a_writes_everything(two_runs, capsys):
+    run = two_runs / "s0"
+    for name in ("scenario.yaml", "trajectory.csv", "commands.csv", "events.jsonl",
+                 "metrics.json", "run.json", "trajectory.png"):
+        assert (run / name).stat().st_size > 0, name
+    metrics = json.loads((run / "metrics.json").read_text())
+    for key in METRIC_KEYS:
+        assert key in metrics, key
+    assert metrics["robots"] == 2 and len(metrics["per_robot"]) == 2
+    info = json.loads((run / "run.json").read_text())
+    assert info["scenario"] == "setup_a" and info["planner"] == "ifp" and info["seed"] == 0
+
+
+def test_run_exit_status_follows_success_and_prints_summary(tmp_path, capsys):
+    out = tmp_path / "run"
+    rc = main(["run", "setup_a", "--mode", "lockstep", "--planner", "ifp", "--out", str(out)])
+    captured = capsys.readouterr()
+    success = json.loads((out / "metrics.json").read_text())["success"]
+    assert rc == (0 if success else 1)
+    assert "robots arrived" in captured.out and str(out) in captured.out
+    assert "setup_a ifp lockstep" in captured.err  # the progress line
+    # The same directory again is refused rather than mixed.
+    assert main(["run", "setup_a", "--mode", "lockstep", "--out", str(out)]) == 2
+
+
+def test_distributed_mode_calls_run_distributed_and_computes_metrics(tmp_path, monkeypatch,
+                                                                     capsys):
+    from orchestrator import distributed
+    from orchestrator.lockstep import run_lockstep
+    from world.scenario import load_scenario
+
+    calls = {}
+
+    def fake(scenario_path, out_dir, run_id, *, rate_hz, time_scale, on_progress):
+        calls.update(path=Path(scenario_path), run_id=run_id, rate_hz=rate_hz,
+                     time_scale=time_scale)
+        run_lockstep(load_scenario(scenario_path), out_dir, on_progress=on_progress)
+        (Path(out_dir) / "metrics.json").unlink()  # the world does not write metrics
+        return 0
+
+    monkeypatch.setattr(distributed, "run_distributed", fake)
+    out = tmp_path / "dist"
+    rc = main(["run", "setup_a", "--planner", "ifp", "--time-scale", "4", "--out", str(out)])
+    assert rc in (0, 1)
+    assert calls["time_scale"] == 4.0 and calls["rate_hz"] == 50.0
+    assert calls["path"].parent == out and calls["run_id"].startswith("setup_a-0-")
+    assert json.loads((out / "metrics.json").read_text())["robots"] == 2
+    assert json.loads((out / "run.json").read_text())["mode"] == "distributed"
+
+
+def test_distributed_world_crash_without_files_exits_3(tmp_path, monkeypatch, capsys):
+    from orchestrator import distributed
+
+    monkeypatch.setattr(distributed, "run_distributed", lambda *a, **k: 139)
+    assert main(["run", "setup_a", "--out", str(tmp_path / "x")]) == 3
+    assert "world exit status 139" in capsys.readouterr().err
+
+
+def test_report_over_two_runs_prints_table_and_writes_plots(two_runs, tmp_path, capsys):
+    out = tmp_path / "report"
+    assert main(["report", str(two_runs / "s0"), str(two_runs / "s1"), "--paper",
+                 "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "2 runs" in text and "setup_a" in text and "ifp" in text
+    assert "±" in text  # mean ± std over the two seeds
+    assert "54.286" in text and "502.26" in text  # the paper's Table I
+    for name in ("report_plan_ms_mean.png", "report_oscillations_per_robot.png",
+                 "report_path_length_mean_m.png", "report_time_to_goal_mean_s.png",
+                 "report_all.png", "report.csv", "report.json"):
+        assert (out / name).stat().st_size > 0, name
+    with open(out / "report.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert rows[0]["setup"] == "setup_a" and rows[0]["runs"] == "2"
+
+
+def test_report_of_an_empty_directory_exits_2(tmp_path, capsys):
+    assert main(["report", str(tmp_path)]) == 2
+    assert main(["report", str(tmp_path / "missing")]) == 2
+
+
+def test_sweep_runs_subprocesses_and_writes_tables(tmp_path, capsys):
+    out = tmp_path / "sweep"
+    rc = main(["sweep", "--setups", "a", "--planners", "ifp", "--seeds", "1",
+               "--mode", "lockstep", "--jobs", "1", "--out", str(out)])
+    assert rc in (0, 1)
+    with open(out / "sweep.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == 1 and rows[0]["planner"] == "ifp" and rows[0]["exit"] in ("0", "1")
+    assert json.loads((out / "sweep.json").read_text())["runs"][0]["setup"] == "a"
+    assert (out / "a-ifp-0" / "metrics.json").exists()
+    captured = capsys.readouterr()
+    assert "a-ifp-0: exit" in captured.err and "ifp" in captured.out
+    assert main(["sweep", "--setups", "setup_q", "--planners", "ifp", "--out",
+                 str(tmp_path / "bad")]) == 2
+
+
+def test_bench_hook_calls_orchestrator_bench(monkeypatch):
+    got = {}
+    fake = types.ModuleType("orchestrator.bench")
+    fake.main = lambda args: got.setdefault("args", args) and 0  # type: ignore[attr-defined]
+    monkeypatch.setitem(sys.modules, "orchestrator.bench", fake)
+    import orchestrator
+
+    monkeypatch.setattr(orchestrator, "bench", fake, raising=False)
+    assert main(["bench", "--quick", "x"]) == 0
+    assert got["args"] == ["--quick", "x"]
+
+
+def test_unexpected_errors_exit_3(monkeypatch, capsys):
+    def boom(args):
+        raise RuntimeError("kaput")
+
+    monkeypatch.setattr(cli, "cmd_list", boom)  # build_parser binds the module's function
+    assert main(["list"]) == 3
+    assert "RuntimeError: kaput" in capsys.readouterr().err

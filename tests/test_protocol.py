@@ -1,0 +1,586 @@
+"""Tests of the wire protocol: round trips, one rejection test per kind of malformation, and
+fuzzing (arbitrary bytes / msgpack objects / mutated valid messages decode to a valid
+message or raise ProtocolError, never anything else)."""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import math
+
+import msgpack
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import protocol
+from agent.config import MpcConfig, PlannerConfig, RobotLimits
+from agent.types import PlanStatus, PoseSnapshot, Side
+from protocol import (
+    MAX_MESSAGE_BYTES,
+    MAX_ROBOTS,
+    SCHEMA_VERSION,
+    CommandMsg,
+    ControlMsg,
+    PosesMsg,
+    ProtocolError,
+    RunConfigMsg,
+    RunKeys,
+    session_settings,
+    validate_run_id,
+)
+from world.scenario import RobotSpec
+
+FUZZ = settings(max_examples=300, deadline=None, database=None,
+                suppress_health_check=[HealthCheck.too_slow])
+
+
+def make_poses(n: int = 3, m: int = 2, t_s: float = 1.25, tick: int = 62) -> PosesMsg:
+    rng = np.random.default_rng(7)
+    return PosesMsg(
+        t_s=t_s,
+        tick=tick,
+        robot_ids=np.arange(n),
+        robot_pose=rng.uniform(-5.0, 5.0, size=(n, 3)),
+        robot_radius_m=np.full(n, 0.5),
+        obstacle_ids=-1 - np.arange(m),
+        obstacle_xy_m=rng.uniform(-5.0, 5.0, size=(m, 2)),
+        obstacle_radius_m=np.full(m, 0.3),
+    )
+
+
+def make_command(**overrides: object) -> CommandMsg:
+    fields = dict(robot_id=2, seq=17, pose_stamp_s=3.2, v_mps=0.9, omega_radps=-0.4,
+                  plan_ms=4.5, status="ok", side=1, resolved_id=5)
+    fields.update(overrides)
+    return CommandMsg(**fields)
+
+
+def make_config() -> RunConfigMsg:
+    spec = RobotSpec(id=2, start=(-4.0, 0.5, 0.1), goal=(4.0, -0.5), radius_m=0.4,
+                     limits=RobotLimits(v_max_mps=0.8, omega_max_radps=1.2), planner="eifp")
+    planner = PlannerConfig(d_safety_m=0.25, d_thresh_m=2.0, ghost_clearance_m=None,
+                            max_neighbors=7, mpc=MpcConfig(horizon_steps=15, r_v=0.7))
+    return RunConfigMsg(run_id="run-1", robot=spec, planner=planner, goal_tolerance_m=0.2,
+                        control_rate_hz=10.0, world_rate_hz=50.0, time_scale=1.0, time_limit_s=60.0,
+                        cmd_timeout_s=0.5, known_ids=(0, 1, 2, -1))
+
+
+def raw(msg: object) -> dict:
+    """The msgpack map of an encoded message, for hand mutation."""
+    return msgpack.unpackb(msg.encode())
+
+
+def pack(obj: object) -> bytes:
+    return msgpack.packb(obj, use_bin_type=True)
+
+
+DECODERS = (PosesMsg.decode, CommandMsg.decode, RunConfigMsg.decode, ControlMsg.decode)
+
+
+# --- Round trips ---------------------------------------------------------------------------
+
+
+def test_poses_round_trip() -> None:
+    msg = make_poses()
+    back = PosesMsg.decode(msg.encode(), known_ids={0, 1, 2, -1, -2})
+    assert back.t_s == msg.t_s and back.tick == msg.tick
+    for name in ("robot_ids", "robot_pose", "robot_radius_m", "obstacle_ids", "obstacle_xy_m",
+                 "obstacle_radius_m"):
+        np.testing.assert_array_equal(getattr(back, name), getattr(msg, name))
+    assert back.n_robots == 3
+
+
+def test_poses_empty_round_trip() -> None:
+    msg = make_poses(n=0, m=0)
+    back = PosesMsg.decode(msg.encode())
+    assert back.robot_pose.shape == (0, 3) and back.obstacle_xy_m.shape == (0, 2)
+
+
+def test_poses_arrays_are_read_only() -> None:
+    msg = PosesMsg.decode(make_poses().encode())
+    with pytest.raises(ValueError):
+        msg.robot_pose[0, 0] = 1.0
+
+
+def test_poses_snapshot_round_trip() -> None:
+    snap = PoseSnapshot(stamp_s=2.0, tick=100, ids=np.array([0, 1, -1]),
+                        pose=np.array([[0.0, 1.0, 0.5], [2.0, 3.0, -1.0], [5.0, 6.0, 0.0]]),
+                        radius_m=np.array([0.5, 0.4, 1.0]))
+    msg = PosesMsg.from_snapshot(snap)
+    np.testing.assert_array_equal(msg.robot_ids, [0, 1])
+    np.testing.assert_array_equal(msg.obstacle_ids, [-1])
+    np.testing.assert_array_equal(msg.obstacle_xy_m, [[5.0, 6.0]])
+    back = PosesMsg.decode(msg.encode()).to_snapshot()
+    assert back.stamp_s == 2.0 and back.tick == 100
+    np.testing.assert_array_equal(back.ids, snap.ids)
+    np.testing.assert_array_equal(back.pose, snap.pose)
+    np.testing.assert_array_equal(back.radius_m, snap.radius_m)
+    np.testing.assert_array_equal(back.is_robot, [True, True, False])
+
+
+def test_to_snapshot_gives_obstacles_zero_heading() -> None:
+    snap = make_poses(n=1, m=2).to_snapshot()
+    np.testing.assert_array_equal(snap.ids, [0, -1, -2])
+    np.testing.assert_array_equal(snap.pose[1:, 2], [0.0, 0.0])
+
+
+def test_command_round_trip() -> None:
+    msg = make_command(status=PlanStatus.ESCAPE, side=Side.RIGHT, resolved_id=None)
+    back = CommandMsg.decode(msg.encode(), known_ids={0, 1, 2}, expected_robot_id=2)
+    assert back == msg
+    assert back.status == "escape" and back.side == -1 and back.resolved_id is None
+
+
+def test_command_round_trip_every_status_and_side() -> None:
+    for status in PlanStatus:
+        for side in Side:
+            msg = make_command(status=status, side=side)
+            assert CommandMsg.decode(msg.encode()) == msg
+
+
+def test_config_round_trip_rebuilds_nested_dataclasses() -> None:
+    msg = make_config()
+    back = RunConfigMsg.decode(msg.encode(), expected_run_id="run-1", expected_robot_id=2)
+    assert back == msg
+    assert isinstance(back.robot, RobotSpec) and isinstance(back.robot.limits, RobotLimits)
+    assert isinstance(back.planner.mpc, MpcConfig)
+    assert back.planner.mpc.horizon_steps == 15 and back.planner.d_thresh_m == 2.0
+    assert back.planner.ghost_clearance_m is None
+    assert back.robot.start == (-4.0, 0.5, 0.1) and back.robot.goal == (4.0, -0.5)
+
+
+def test_config_round_trip_with_defaults() -> None:
+    msg = RunConfigMsg(run_id="r", robot=RobotSpec(id=0, start=(0, 0, 0), goal=(1, 1)),
+                       planner=PlannerConfig(), goal_tolerance_m=0.25, control_rate_hz=10,
+                       world_rate_hz=50, time_scale=2, time_limit_s=30, cmd_timeout_s=0.5,
+                       known_ids=[0])
+    back = RunConfigMsg.decode(msg.encode())
+    assert back == msg and back.planner == PlannerConfig()
+    assert isinstance(back.robot.start[0], float)
+
+
+def test_config_wire_covers_every_dataclass_field() -> None:
+    body = raw(make_config())
+    assert set(body["robot"]) == {f.name for f in dataclasses.fields(RobotSpec)}
+    assert set(body["planner"]) == {f.name for f in dataclasses.fields(PlannerConfig)}
+    assert set(body["planner"]["mpc"]) == {f.name for f in dataclasses.fields(MpcConfig)}
+    assert set(body["robot"]["limits"]) == {f.name for f in dataclasses.fields(RobotLimits)}
+
+
+def test_control_round_trip() -> None:
+    for msg in (ControlMsg("start", 0.0), ControlMsg("end", 12.5, "all_arrived")):
+        assert ControlMsg.decode(msg.encode()) == msg
+
+
+def test_every_message_carries_schema_and_type() -> None:
+    for msg, kind in ((make_poses(), "poses"), (make_command(), "cmd"), (make_config(), "config"),
+                      (ControlMsg("start", 0.0), "control")):
+        body = raw(msg)
+        assert body["schema"] == SCHEMA_VERSION and body["type"] == kind
+
+
+# --- Rejections: one test per kind of malformation ------------------------------------------
+
+
+@pytest.mark.parametrize("decode", DECODERS)
+def test_rejects_random_bytes(decode) -> None:
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        with pytest.raises(ProtocolError):
+            decode(rng.bytes(int(rng.integers(0, 300))))
+
+
+@pytest.mark.parametrize("msg", [make_poses(), make_command(), make_config(),
+                                 ControlMsg("end", 1.0, "time_limit")])
+def test_rejects_every_truncation(msg) -> None:
+    data = msg.encode()
+    for cut in range(len(data)):
+        with pytest.raises(ProtocolError):
+            type(msg).decode(data[:cut])
+
+
+def test_rejects_trailing_bytes() -> None:
+    with pytest.raises(ProtocolError, match="msgpack"):
+        CommandMsg.decode(make_command().encode() + b"\x00")
+
+
+@pytest.mark.parametrize("payload", [None, "text", 12, [1, 2], object()])
+def test_rejects_non_bytes_payload(payload) -> None:
+    with pytest.raises(ProtocolError, match="bytes"):
+        CommandMsg.decode(payload)
+
+
+def test_accepts_bytearray_and_memoryview() -> None:
+    data = make_command().encode()
+    assert CommandMsg.decode(bytearray(data)) == CommandMsg.decode(memoryview(data))
+
+
+@pytest.mark.parametrize("key, value", [
+    ("seq", "17"), ("seq", 1.5), ("seq", True), ("v", "fast"), ("v", None), ("status", 3),
+    ("side", 2), ("side", 0.0), ("robot", -1), ("seq", -1), ("plan_ms", -1.0),
+    ("status", "bogus"), ("resolved", "x"), ("pose_stamp", [1.0]), ("v", 1e9),
+])
+def test_command_rejects_wrong_type_or_range(key, value) -> None:
+    body = raw(make_command())
+    body[key] = value
+    with pytest.raises(ProtocolError):
+        CommandMsg.decode(pack(body))
+
+
+@pytest.mark.parametrize("msg", [make_poses(), make_command(), make_config(),
+                                 ControlMsg("start", 0.0)])
+def test_rejects_each_missing_key(msg) -> None:
+    body = raw(msg)
+    for key in body:
+        broken = dict(body)
+        del broken[key]
+        with pytest.raises(ProtocolError):
+            type(msg).decode(pack(broken))
+
+
+@pytest.mark.parametrize("msg", [make_poses(), make_command(), make_config(),
+                                 ControlMsg("start", 0.0)])
+def test_rejects_extra_key(msg) -> None:
+    body = raw(msg)
+    body["extra"] = 1
+    with pytest.raises(ProtocolError, match="unknown keys"):
+        type(msg).decode(pack(body))
+
+
+def test_rejects_missing_and_extra_nested_keys() -> None:
+    for path in (("robots",), ("obstacles",)):
+        body = raw(make_poses())
+        del body[path[0]]["x"]
+        with pytest.raises(ProtocolError, match="missing keys"):
+            PosesMsg.decode(pack(body))
+    for path in (("robot", "limits"), ("planner", "mpc"), ("planner",), ("robot",)):
+        body = raw(make_config())
+        node = body
+        for p in path:
+            node = node[p]
+        node["surprise"] = 1.0
+        with pytest.raises(ProtocolError, match="surprise"):
+            RunConfigMsg.decode(pack(body))
+        del node["surprise"]
+        node.pop(next(iter(node)))
+        with pytest.raises(ProtocolError, match="missing keys"):
+            RunConfigMsg.decode(pack(body))
+
+
+def test_rejects_duplicate_map_keys() -> None:
+    # Hand-built map of 3 entries where "type" appears twice.
+    data = b"\x83" + pack("schema") + pack(1) + pack("type") + pack("cmd") + pack("type") \
+        + pack("cmd")
+    with pytest.raises(ProtocolError, match="duplicate"):
+        CommandMsg.decode(data)
+
+
+@pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
+def test_rejects_non_finite(bad) -> None:
+    for key in ("v", "omega", "pose_stamp", "plan_ms"):
+        body = raw(make_command())
+        body[key] = bad
+        with pytest.raises(ProtocolError, match="non-finite"):
+            CommandMsg.decode(pack(body))
+    for column in ("x", "y", "theta", "radius"):
+        body = raw(make_poses())
+        values = np.frombuffer(body["robots"][column], dtype="<f8").copy()
+        values[1] = bad
+        body["robots"][column] = values.tobytes()
+        with pytest.raises(ProtocolError, match="non-finite"):
+            PosesMsg.decode(pack(body))
+    body = raw(make_poses())
+    body["t"] = bad
+    with pytest.raises(ProtocolError, match="non-finite"):
+        PosesMsg.decode(pack(body))
+    body = raw(make_config())
+    body["planner"]["mpc"]["dt_s"] = bad
+    with pytest.raises(ProtocolError, match="non-finite"):
+        RunConfigMsg.decode(pack(body))
+    with pytest.raises(ProtocolError):
+        ControlMsg.decode(pack({**raw(ControlMsg("end", 1.0)), "t": bad}))
+
+
+def test_poses_rejects_array_length_mismatch() -> None:
+    for group, column in (("robots", "theta"), ("robots", "radius"), ("obstacles", "y")):
+        body = raw(make_poses())
+        body[group][column] = body[group][column][:-8]
+        with pytest.raises(ProtocolError, match="expected"):
+            PosesMsg.decode(pack(body))
+    body = raw(make_poses())
+    body["robots"]["x"] = body["robots"]["x"][:-3]  # not a whole number of float64
+    with pytest.raises(ProtocolError, match="multiple"):
+        PosesMsg.decode(pack(body))
+
+
+def test_poses_rejects_columns_as_lists() -> None:
+    body = raw(make_poses())
+    body["robots"]["x"] = [0.0, 1.0, 2.0]
+    with pytest.raises(ProtocolError, match="bin"):
+        PosesMsg.decode(pack(body))
+
+
+def test_poses_rejects_huge_array() -> None:
+    n = MAX_ROBOTS + 1
+    zeros = np.zeros(n).tobytes()
+    body = raw(make_poses())
+    body["robots"] = {"id": np.arange(n, dtype="<i4").tobytes(), "x": zeros, "y": zeros,
+                      "theta": zeros, "radius": np.ones(n).tobytes()}
+    with pytest.raises(ProtocolError, match="exceeds"):
+        PosesMsg.decode(pack(body))
+    with pytest.raises(ProtocolError, match="cap"):
+        make_poses(n=MAX_ROBOTS + 1, m=0)
+
+
+def test_rejects_oversized_payload() -> None:
+    body = raw(ControlMsg("end", 1.0))
+    body["reason"] = "x" * (MAX_MESSAGE_BYTES + 10)
+    with pytest.raises(ProtocolError, match="exceeds"):
+        ControlMsg.decode(pack(body))
+    with pytest.raises(ProtocolError):
+        ControlMsg("end", 1.0, "x" * 10_000)
+
+
+def test_rejects_unknown_robot_id() -> None:
+    with pytest.raises(ProtocolError, match="unknown"):
+        PosesMsg.decode(make_poses().encode(), known_ids={0, 1, -1, -2})  # robot 2 unknown
+    with pytest.raises(ProtocolError, match="unknown"):
+        PosesMsg.decode(make_poses().encode(), known_ids={0, 1, 2, -1})  # obstacle -2 unknown
+    with pytest.raises(ProtocolError, match="unknown"):
+        CommandMsg.decode(make_command(robot_id=9).encode(), known_ids={0, 1, 2})
+    with pytest.raises(ProtocolError, match="key of robot"):
+        CommandMsg.decode(make_command(robot_id=1).encode(), expected_robot_id=2)
+    with pytest.raises(ProtocolError, match="expected 3"):
+        RunConfigMsg.decode(make_config().encode(), expected_robot_id=3)
+    with pytest.raises(ProtocolError, match="expected 'other'"):
+        RunConfigMsg.decode(make_config().encode(), expected_run_id="other")
+
+
+def test_poses_rejects_bad_ids_and_radii() -> None:
+    base = make_poses()
+    cases = {
+        "duplicate": dict(robot_ids=[0, 0, 1]),
+        "negative robot": dict(robot_ids=[0, -3, 1]),
+        "positive obstacle": dict(obstacle_ids=[-1, 4]),
+        "zero radius": dict(robot_radius_m=[0.5, 0.0, 0.5]),
+        "negative radius": dict(obstacle_radius_m=[0.3, -0.3]),
+        "float ids": dict(robot_ids=[0.0, 1.0, 2.5]),
+        "far away": dict(obstacle_xy_m=[[0.0, 0.0], [1e9, 0.0]]),
+        "bad shape": dict(robot_pose=np.zeros((3, 2))),
+    }
+    for name, change in cases.items():
+        fields = {f.name: getattr(base, f.name) for f in dataclasses.fields(base)}
+        fields.update(change)
+        with pytest.raises(ProtocolError):
+            PosesMsg(**fields)
+            pytest.fail(name)
+    body = raw(base)
+    body["robots"]["radius"] = np.array([0.5, -1.0, 0.5]).tobytes()
+    with pytest.raises(ProtocolError, match="radius"):
+        PosesMsg.decode(pack(body))
+
+
+@pytest.mark.parametrize("version", [0, SCHEMA_VERSION + 1, "1", 1.0, None, True])
+def test_rejects_bad_schema_version(version) -> None:
+    for msg in (make_poses(), make_command(), make_config(), ControlMsg("start", 0.0)):
+        body = raw(msg)
+        body["schema"] = version
+        with pytest.raises(ProtocolError, match="schema"):
+            type(msg).decode(pack(body))
+
+
+def test_rejects_message_of_another_type() -> None:
+    with pytest.raises(ProtocolError, match="type"):
+        CommandMsg.decode(make_poses().encode())
+    with pytest.raises(ProtocolError, match="type"):
+        PosesMsg.decode(ControlMsg("end", 1.0).encode())
+
+
+def test_rejects_non_map_top_level() -> None:
+    for obj in ([1, 2], 5, "poses", None, b"bin"):
+        with pytest.raises(ProtocolError, match="map"):
+            PosesMsg.decode(pack(obj))
+
+
+def test_control_rejects_unknown_kind() -> None:
+    body = raw(ControlMsg("start", 0.0))
+    body["kind"] = "pause"
+    with pytest.raises(ProtocolError, match="kind"):
+        ControlMsg.decode(pack(body))
+
+
+def test_config_rejects_bad_values() -> None:
+    mutations = [
+        (("robot", "planner"), "rrt"),
+        (("robot", "radius_m"), 0.0),
+        (("robot", "id"), -1),
+        (("robot", "start"), [0.0, 0.0]),
+        (("robot", "goal"), "here"),
+        (("planner", "max_depth"), 2.5),
+        (("planner", "d_thresh_m"), "none"),
+        (("planner", "mpc", "horizon_steps"), None),
+        (("control_rate",), 0.0),
+        (("time_scale",), -1.0),
+        (("goal_tolerance",), -0.1),
+        (("known_ids",), [0, 1]),  # lacks the robot's own id
+        (("known_ids",), [2, 2]),
+        (("known_ids",), "abc"),
+        (("run",), "bad run/id"),
+    ]
+    for path, value in mutations:
+        body = raw(make_config())
+        node = body
+        for p in path[:-1]:
+            node = node[p]
+        node[path[-1]] = value
+        with pytest.raises(ProtocolError):
+            RunConfigMsg.decode(pack(body))
+            pytest.fail(f"{path} = {value!r} accepted")
+
+
+# --- Key expressions and run ids -------------------------------------------------------------
+
+
+@pytest.mark.parametrize("run_id", ["a", "run-1", "2024_05_01.exp.3", "X" * 64])
+def test_valid_run_ids(run_id) -> None:
+    assert validate_run_id(run_id) == run_id
+
+
+@pytest.mark.parametrize("run_id", ["", "a/b", "*", "a*", "**", "$x", "a?b", "a#b", "a b",
+                                    "-lead", ".hidden", "X" * 65, "é", "a\n", None, 5])
+def test_rejects_bad_run_ids(run_id) -> None:
+    with pytest.raises(ProtocolError, match="run id"):
+        validate_run_id(run_id)
+    with pytest.raises(ProtocolError):
+        RunKeys(run_id)
+
+
+def test_key_expressions_are_prefixed_by_run() -> None:
+    a, b = RunKeys("run-a"), RunKeys("run-b")
+    keys_a = {a.poses, a.control, a.cmd(3), a.config(3), a.alive_world, a.alive_robot(3)}
+    keys_b = {b.poses, b.control, b.cmd(3), b.config(3), b.alive_world, b.alive_robot(3)}
+    assert all(k.startswith("eifp/run-a/") for k in keys_a)
+    assert not keys_a & keys_b
+    assert a.cmd(3) == "eifp/run-a/cmd/3" and a.alive_robot(0) == "eifp/run-a/alive/robot/0"
+    assert a.config_all == "eifp/run-a/config/*" and a.cmd_all == "eifp/run-a/cmd/*"
+
+
+def test_robot_id_parsed_from_keys() -> None:
+    k = RunKeys("r1")
+    assert k.robot_id_of_cmd(k.cmd(12)) == 12
+    assert k.robot_id_of_alive(k.alive_robot(0)) == 0
+    assert k.robot_id_of_config(k.config(4095)) == 4095
+    for bad in ("eifp/r1/cmd/", "eifp/r1/cmd/-1", "eifp/r1/cmd/01", "eifp/r1/cmd/1/2",
+                "eifp/r2/cmd/1", "eifp/r1/cmd/x", "eifp/r1/cmd/99999999999"):
+        with pytest.raises(ProtocolError):
+            k.robot_id_of_cmd(bad)
+    with pytest.raises(ProtocolError):
+        k.cmd(-1)
+
+
+def test_session_settings() -> None:
+    router = session_settings(mode="router", listen=["tcp/127.0.0.1:7447"])
+    assert router["mode"] == '"router"' and router["scouting/multicast/enabled"] == "false"
+    assert router["transport/link/tx/lease"] == str(protocol.LINK_LEASE_MS)
+    assert "connect/endpoints" not in router
+    client = session_settings(mode="client", connect=["tcp/127.0.0.1:1"], connect_timeout_ms=500)
+    assert client["connect/endpoints"] == '["tcp/127.0.0.1:1"]'
+    assert client["connect/timeout_ms"] == "500"
+    with pytest.raises(ValueError):
+        session_settings(mode="peer")  # type: ignore[arg-type]
+
+
+# --- Fuzzing ---------------------------------------------------------------------------------
+
+
+def decode_or_protocol_error(decode, data: object) -> None:
+    """Either a valid message or ProtocolError; any other exception fails the test."""
+    try:
+        msg = decode(data)
+    except ProtocolError:
+        return
+    # A decoded message re-encodes and decodes to itself (it is a valid message).
+    assert type(msg).decode(msg.encode()) is not None
+
+
+msgpack_objects = st.recursive(
+    st.none() | st.booleans() | st.integers(min_value=-(2**63), max_value=2**64 - 1)
+    | st.floats(allow_nan=True, allow_infinity=True) | st.text(max_size=20)
+    | st.binary(max_size=64),
+    lambda children: st.lists(children, max_size=6)
+    | st.dictionaries(st.text(max_size=12), children, max_size=6),
+    max_leaves=30,
+)
+
+
+@FUZZ
+@given(data=st.binary(max_size=1024))
+def test_fuzz_arbitrary_bytes(data: bytes) -> None:
+    for decode in DECODERS:
+        decode_or_protocol_error(decode, data)
+
+
+@FUZZ
+@given(obj=msgpack_objects)
+def test_fuzz_arbitrary_msgpack_objects(obj: object) -> None:
+    data = pack(obj)
+    for decode in DECODERS:
+        decode_or_protocol_error(decode, data)
+
+
+VALID_BODIES = {
+    "poses": (PosesMsg.decode, raw(make_poses())),
+    "cmd": (CommandMsg.decode, raw(make_command())),
+    "config": (RunConfigMsg.decode, raw(make_config())),
+    "control": (ControlMsg.decode, raw(ControlMsg("end", 2.0, "signal"))),
+}
+
+
+def _paths(node: object, prefix: tuple = ()) -> list[tuple]:
+    """Every key path into nested maps and lists."""
+    out = []
+    if isinstance(node, dict):
+        for k, v in node.items():
+            out.append((*prefix, k))
+            out.extend(_paths(v, (*prefix, k)))
+    elif isinstance(node, list):
+        for i, v in enumerate(node):
+            out.append((*prefix, i))
+            out.extend(_paths(v, (*prefix, i)))
+    return out
+
+
+@FUZZ
+@given(kind=st.sampled_from(sorted(VALID_BODIES)), pick=st.integers(min_value=0),
+       action=st.sampled_from(["replace", "delete", "add"]), value=msgpack_objects)
+def test_fuzz_mutated_valid_messages(kind: str, pick: int, action: str, value: object) -> None:
+    decode, body = VALID_BODIES[kind]
+    body = copy.deepcopy(body)
+    paths = _paths(body)
+    path = paths[pick % len(paths)]
+    parent = body
+    for p in path[:-1]:
+        parent = parent[p]
+    last = path[-1]
+    if action == "replace":
+        parent[last] = value
+    elif action == "delete":
+        del parent[last]
+    elif isinstance(parent, dict):
+        parent[f"x{last}"] = value
+    else:
+        parent.append(value)
+    decode_or_protocol_error(decode, pack(body))
+
+
+@FUZZ
+@given(n=st.integers(0, 5), columns=st.lists(st.binary(max_size=48), min_size=9, max_size=9))
+def test_fuzz_pose_columns(n: int, columns: list[bytes]) -> None:
+    body = raw(make_poses())
+    keys = [("robots", k) for k in ("id", "x", "y", "theta", "radius")] + [
+        ("obstacles", k) for k in ("id", "x", "y", "radius")]
+    for (group, key), col in zip(keys, columns):
+        body[group][key] = col
+    decode_or_protocol_error(PosesMsg.decode, pack(body))

@@ -1,0 +1,189 @@
+"""Tests of the world process's Zenoh edge, in-process: a `WorldNode` on a router session and a
+client session playing the robots, on a free loopback port. The test drives the node's
+drain methods itself (no loop thread), waiting on outcomes with deadlines."""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+import zenoh
+
+from orchestrator.distributed import free_tcp_endpoint
+from protocol import CommandMsg, ControlMsg, PosesMsg, RunConfigMsg, RunKeys, session_settings
+from world.node import WorldNode, WorldOptions, _StopFlag, parse_args, run_configs
+from world.recorder import RunRecorder
+from world.scenario import scenario_from_dict
+
+pytestmark = pytest.mark.timeout(60)
+
+DEADLINE_S = 10.0
+SCENARIO = {
+    "name": "node_test",
+    "time_limit": 20,
+    "defaults": {"radius": 0.3},
+    "robots": [
+        {"id": 0, "start": [-3.0, 0.0, 0.0], "goal": [3.0, 0.0]},
+        {"id": 4, "start": [3.0, 1.0, 3.14], "goal": [-3.0, 1.0]},
+    ],
+    "obstacles": [{"center": [0.0, 5.0], "radius": 0.5}],
+}
+
+
+def open_session(mode: str, endpoint: str) -> zenoh.Session:
+    conf = zenoh.Config()
+    if mode == "router":
+        settings = session_settings(mode="router", listen=[endpoint])
+    else:
+        settings = session_settings(mode="client", connect=[endpoint], connect_timeout_ms=5000)
+    for key, value in settings.items():
+        conf.insert_json5(key, value)
+    return zenoh.open(conf)
+
+
+def until(condition: Callable[[], bool], step: Callable[[], None], what: str) -> None:
+    """Run `step` until `condition` holds; fail after DEADLINE_S."""
+    deadline = time.monotonic() + DEADLINE_S
+    while not condition():
+        assert time.monotonic() < deadline, f"timed out waiting for {what}"
+        step()
+        time.sleep(0.005)
+
+
+class Rig:
+    def __init__(self, tmp_path: Path) -> None:
+        self.endpoint = free_tcp_endpoint()
+        self.options = WorldOptions(run_id="node-test", scenario_path=tmp_path / "unused.yaml",
+                                    listen=self.endpoint, out_dir=tmp_path / "run")
+        self.scenario = scenario_from_dict(SCENARIO, "test")
+        self.keys = RunKeys(self.options.run_id)
+        self.recorder = RunRecorder(self.options.out_dir, self.scenario)
+        self.router = open_session("router", self.endpoint)
+        self.node = WorldNode(self.router, self.scenario, self.options, self.recorder,
+                              _StopFlag())
+        self.client = open_session("client", self.endpoint)
+
+    def events(self, kind: str) -> list[dict]:
+        self.recorder.flush()
+        lines = (self.options.out_dir / "events.jsonl").read_text().splitlines()
+        return [e for e in map(json.loads, lines) if e["kind"] == kind]
+
+    def close(self) -> None:
+        self.client.close()
+        self.router.close()
+        self.recorder.close()
+
+
+@pytest.fixture
+def rig(tmp_path: Path) -> Iterator[Rig]:
+    r = Rig(tmp_path)
+    try:
+        yield r
+    finally:
+        r.close()
+
+
+def test_serves_each_robot_its_configuration(rig: Rig) -> None:
+    replies = rig.client.get(rig.keys.config(4), timeout=DEADLINE_S)
+    got: list = []
+    until(lambda: bool(got), lambda: (rig.node.serve_queries(),
+                                      got.extend(filter(None, [replies.try_recv()]))),
+          "the configuration reply")
+    config = RunConfigMsg.decode(got[0].ok.payload.to_bytes(), expected_run_id="node-test",
+                                 expected_robot_id=4)
+    assert config.robot == rig.scenario.robot(4)
+    assert config.planner == rig.scenario.planner_config
+    assert set(config.known_ids) == {0, 4, -1}
+    assert config.world_rate_hz == 50.0 and config.cmd_timeout_s == 0.5
+
+    replies = rig.client.get(rig.keys.config(9), timeout=DEADLINE_S)  # not in the scenario
+    got.clear()
+    until(lambda: bool(got), lambda: (rig.node.serve_queries(),
+                                      got.extend(filter(None, [replies.try_recv()]))),
+          "the error reply")
+    assert got[0].ok is None and b"no robot" in got[0].err.payload.to_bytes()
+    assert rig.node.counts["bad_queries"] == 1
+
+
+def test_liveliness_join_loss_and_rejoin(rig: Rig) -> None:
+    node = rig.node
+    token = rig.client.liveliness().declare_token(rig.keys.alive_robot(0))
+    until(lambda: 0 in node.alive, node.poll_liveliness, "robot 0 to join")
+    assert rig.events("robot_joined")[0]["robot"] == 0
+    stray = rig.client.liveliness().declare_token(rig.keys.alive_robot(99))
+    until(lambda: bool(rig.events("unknown_robot")), node.poll_liveliness, "unknown robot")
+
+    token.undeclare()
+    until(lambda: 0 in node.lost, node.poll_liveliness, "robot 0 to be lost")
+    assert bool(node.sim.offline[node.sim.index_of(0)])
+    assert rig.events("robot_lost")[0]["robot"] == 0 and "wall" in rig.events("robot_lost")[0]
+
+    token = rig.client.liveliness().declare_token(rig.keys.alive_robot(0))
+    until(lambda: 0 in node.alive, node.poll_liveliness, "robot 0 to rejoin")
+    assert not node.sim.offline[node.sim.index_of(0)] and not node.lost
+    assert rig.events("robot_rejoined")[0]["robot"] == 0
+    token.undeclare()
+    stray.undeclare()
+
+
+def test_commands_applied_stale_dropped_garbage_rejected(rig: Rig) -> None:
+    node = rig.node
+    pub0 = rig.client.declare_publisher(rig.keys.cmd(0))
+    pub4 = rig.client.declare_publisher(rig.keys.cmd(4))
+    until(lambda: pub0.matching_status.matching and pub4.matching_status.matching,
+          lambda: None, "command publishers to match")
+
+    def cmd(rid: int, seq: int, v: float) -> bytes:
+        return CommandMsg(rid, seq, 0.0, v, 0.1, 2.0, "ok", 1, -1).encode()
+
+    pub0.put(cmd(0, 5, 0.7))
+    pub0.put(cmd(0, 5, 0.1))  # same seq: stale
+    pub0.put(cmd(0, 3, 0.2))  # older seq: stale
+    pub0.put(cmd(4, 9, 0.3))  # robot 4's command on robot 0's key: rejected
+    pub4.put(b"\xc1garbage")  # not msgpack: rejected
+    pub4.put(ControlMsg("end", 0.0).encode())  # wrong message type: rejected
+    pub4.put(cmd(4, 0, 9.0))  # accepted, clamped to v_max by the world
+    until(lambda: node.counts["commands"] + node.counts["stale"] + node.counts["rejected"] == 7,
+          node.apply_commands, "seven commands")
+    assert node.counts == {**node.counts, "commands": 2, "stale": 2, "rejected": 3}
+    assert node.sim.command[node.sim.index_of(0)].tolist() == [0.7, 0.1]
+    assert node.sim.command[node.sim.index_of(4)][0] == pytest.approx(1.1)  # default v_max
+    reasons = [e["reason"] for e in rig.events("rejected")]
+    assert len(reasons) == 3 and any("key of robot" in r for r in reasons)
+    rig.recorder.flush()
+    rows = (rig.options.out_dir / "commands.csv").read_text().splitlines()
+    assert len(rows) == 3 and rows[1].startswith("0.0000,0,5,")
+
+
+def test_tick_publishes_poses(rig: Rig) -> None:
+    poses = rig.client.declare_subscriber(rig.keys.poses)
+    until(lambda: rig.node.poses_pub.matching_status.matching, lambda: None, "pose subscriber")
+    rig.node.tick()
+    got: list = []
+    until(lambda: bool(got), lambda: got.extend(filter(None, [poses.try_recv()])), "poses")
+    msg = PosesMsg.decode(got[0].payload.to_bytes(), known_ids={0, 4, -1})
+    assert msg.tick == 1 and msg.t_s == pytest.approx(0.02)
+    assert msg.robot_ids.tolist() == [0, 4] and msg.obstacle_ids.tolist() == [-1]
+
+
+def test_run_configs_encode_every_robot(tmp_path: Path) -> None:
+    scenario = scenario_from_dict(SCENARIO, "test")
+    options = WorldOptions(run_id="r", scenario_path=tmp_path / "x.yaml", control_rate_hz=20.0)
+    configs = run_configs(scenario, options)
+    assert set(configs) == {0, 4}
+    assert RunConfigMsg.decode(configs[0]).control_rate_hz == 20.0
+
+
+def test_parse_args_defaults_and_exclusive_endpoints(tmp_path: Path) -> None:
+    opts = parse_args(["--run", "r1", "--scenario", "s.yaml"])
+    assert opts.listen == "tcp/127.0.0.1:7447" and opts.connect is None
+    assert opts.out_dir == Path("runs") / "r1"
+    opts = parse_args(["--run", "r1", "--scenario", "s.yaml", "--connect", "tcp/h:1",
+                       "--time-scale", "4"])
+    assert opts.listen is None and opts.connect == "tcp/h:1" and opts.time_scale == 4.0
+    for bad in (["--listen", "a", "--connect", "b"], ["--rate-hz", "-1"], ["--run", "x/y"]):
+        with pytest.raises(SystemExit):
+            parse_args(["--run", "r1", "--scenario", "s.yaml", *bad])

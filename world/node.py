@@ -1,0 +1,507 @@
+"""The world process: ground truth of a distributed run (an I/O edge around `WorldSim`).
+
+One process simulates every robot's unicycle and publishes poses; robots are separate
+processes that only sense poses and send velocity commands (see `protocol` for the keys).
+
+Lifecycle:
+1. Load the scenario, open the run directory (`RunRecorder`), open a Zenoh session (by
+   default a router listening on one TCP endpoint; with ``--connect`` a client of an
+   existing router), declare the configuration queryable, the command subscriber, the
+   robot liveliness subscriber (history on) and finally the world's own liveliness token.
+2. Wait until every robot's liveliness token is present (deadline ``--wait-robots-s``),
+   then publish a ``start`` `ControlMsg`.
+3. Fixed-rate loop: each tick is ``1 / rate_hz`` of sim time, paced to
+   ``dt / time_scale`` of wall time. Each tick drains liveliness changes, configuration
+   queries and commands (all read from handler channels, never in callbacks), applies the
+   newest command per robot (zero-order hold, `WorldSim.set_command`), steps the world,
+   publishes one `PosesMsg` (DROP, express) and records the tick.
+4. The run ends when every robot has arrived (``all_arrived``), at the scenario's time limit
+   (``time_limit``) or on SIGTERM/SIGINT (``signal``): publish an ``end`` `ControlMsg`, write
+   the ``end`` event, give robots a moment (``--linger-s``) to leave, close everything.
+
+Faults: a malformed command is rejected (`ProtocolError`), counted and logged as a
+``rejected`` event (the first `MAX_REJECT_EVENTS`; the count is always in ``end``); a command
+whose ``seq`` does not increase is dropped as stale and counted. A robot whose liveliness
+token disappears (crash, or hang past the 1 s transport lease) is logged as ``robot_lost``
+and set offline (it brakes and stays as an obstacle); a returning token logs
+``robot_rejoined`` and brings it back (its sequence numbering restarts).
+
+Events (``events.jsonl``, sim time ``t``; ``wall`` is Unix time where detection latency
+matters): world_ready, robot_joined, robot_lost, robot_rejoined, robot_left, unknown_robot,
+start, arrived, contact, cmd_timeout, rejected, startup_timeout, end.
+
+Exit status: 0 if every robot arrived with no contact, 1 otherwise, 2 for a setup error
+(bad arguments, bad scenario, transport could not be opened).
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import math
+import os
+import signal
+import sys
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from types import FrameType
+
+import zenoh
+
+from protocol import (
+    CommandMsg,
+    ControlMsg,
+    PosesMsg,
+    ProtocolError,
+    RunConfigMsg,
+    RunKeys,
+    session_settings,
+    validate_run_id,
+)
+from world.dynamics import WorldSim
+from world.recorder import RunRecorder
+from world.scenario import Scenario, ScenarioError, load_scenario
+
+EXIT_OK = 0
+EXIT_FAILED = 1
+EXIT_SETUP = 2
+
+DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
+MAX_REJECT_EVENTS = 100
+"""Only this many ``rejected`` events are written (a flood must not fill the disk)."""
+CLOSE_TIMEOUT_S = 3.0
+"""Wall time allowed for closing the session before the process leaves without it."""
+IDLE_POLL_S = 0.01
+"""Wall period of the waiting and lingering loops."""
+
+log = logging.getLogger("world")
+
+
+@dataclass(frozen=True)
+class WorldOptions:
+    """Command-line options of the world process.
+
+    Args:
+        run_id: run id (safe characters, see `protocol.validate_run_id`).
+        scenario_path: scenario YAML file.
+        listen: endpoint to listen on as a router (None when `connect` is given).
+        connect: endpoint of an existing router to join as a client.
+        rate_hz: world tick rate in sim time.
+        time_scale: sim seconds per wall second.
+        out_dir: run directory.
+        cmd_timeout_s: sim time after which a robot without a fresh command brakes.
+        wait_robots_s: wall deadline for every robot to be alive before the start.
+        control_rate_hz: planning rate served to the robots in their configuration.
+        linger_s: wall time the world waits after the end for robots to leave.
+    """
+
+    run_id: str
+    scenario_path: Path
+    listen: str | None = DEFAULT_ENDPOINT
+    connect: str | None = None
+    rate_hz: float = 50.0
+    time_scale: float = 1.0
+    out_dir: Path = Path("runs")
+    cmd_timeout_s: float = 0.5
+    wait_robots_s: float = 30.0
+    control_rate_hz: float = 10.0
+    linger_s: float = 3.0
+
+
+def _positive(text: str) -> float:
+    value = float(text)
+    if not (math.isfinite(value) and value > 0.0):
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}")
+    return value
+
+
+def _run_id(text: str) -> str:
+    try:
+        return validate_run_id(text)
+    except ProtocolError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from exc
+
+
+def parse_args(argv: list[str] | None = None) -> WorldOptions:
+    """Parse ``python -m world`` arguments."""
+    parser = argparse.ArgumentParser(prog="python -m world", description=__doc__.split("\n")[0])
+    parser.add_argument("--run", required=True, type=_run_id, help="run id")
+    parser.add_argument("--scenario", required=True, type=Path, help="scenario YAML file")
+    where = parser.add_mutually_exclusive_group()
+    where.add_argument("--listen",
+                       help=f"router endpoint to listen on (default {DEFAULT_ENDPOINT})")
+    where.add_argument("--connect", help="join an existing router at this endpoint, as a client")
+    parser.add_argument("--rate-hz", type=_positive, default=50.0, help="tick rate [1/sim s]")
+    parser.add_argument("--time-scale", type=_positive, default=1.0,
+                        help="sim seconds per wall second")
+    parser.add_argument("--out", type=Path, default=None, help="run directory (runs/<run>)")
+    parser.add_argument("--cmd-timeout-s", type=_positive, default=0.5,
+                        help="a robot without a command for this long (sim) brakes")
+    parser.add_argument("--wait-robots-s", type=_positive, default=30.0,
+                        help="wall deadline for every robot to be alive")
+    parser.add_argument("--control-rate-hz", type=_positive, default=10.0,
+                        help="planning rate served to the robots [1/sim s]")
+    parser.add_argument("--linger-s", type=float, default=3.0,
+                        help="wall time to wait for robots to leave after the end")
+    args = parser.parse_args(argv)
+    listen = None if args.connect else (args.listen or DEFAULT_ENDPOINT)
+    return WorldOptions(
+        run_id=args.run,
+        scenario_path=args.scenario,
+        listen=listen,
+        connect=args.connect,
+        rate_hz=args.rate_hz,
+        time_scale=args.time_scale,
+        out_dir=args.out if args.out is not None else Path("runs") / args.run,
+        cmd_timeout_s=args.cmd_timeout_s,
+        wait_robots_s=args.wait_robots_s,
+        control_rate_hz=args.control_rate_hz,
+        linger_s=max(0.0, args.linger_s),
+    )
+
+
+class _StopFlag:
+    """Set by SIGTERM/SIGINT; the loops poll it and leave (so the session is closed)."""
+
+    def __init__(self) -> None:
+        self.signum: int | None = None
+        self.count = 0
+
+    def __call__(self, signum: int, frame: FrameType | None) -> None:
+        self.signum = signum
+        self.count += 1
+
+    def __bool__(self) -> bool:
+        return self.signum is not None
+
+
+def run_configs(scenario: Scenario, options: WorldOptions) -> dict[int, bytes]:
+    """The encoded `RunConfigMsg` of every robot, served on the configuration queryable."""
+    known = tuple(r.id for r in scenario.robots) + tuple(o.id for o in scenario.obstacles)
+    return {
+        spec.id: RunConfigMsg(
+            run_id=options.run_id,
+            robot=spec,
+            planner=scenario.planner_config,
+            goal_tolerance_m=scenario.goal_tolerance_m,
+            control_rate_hz=options.control_rate_hz,
+            world_rate_hz=options.rate_hz,
+            time_scale=options.time_scale,
+            time_limit_s=scenario.time_limit_s,
+            cmd_timeout_s=options.cmd_timeout_s,
+            known_ids=known,
+        ).encode()
+        for spec in scenario.robots
+    }
+
+
+class WorldNode:
+    """The world's Zenoh edge: owns the declarations, the loops and the counters.
+
+    Args:
+        session: an open Zenoh session (closed by the caller).
+        scenario: the loaded scenario.
+        options: command-line options.
+        recorder: the run directory writer.
+        stop: polled; set by the signal handlers.
+    """
+
+    def __init__(self, session: zenoh.Session, scenario: Scenario, options: WorldOptions,
+                 recorder: RunRecorder, stop: _StopFlag) -> None:
+        self.keys = RunKeys(options.run_id)
+        self.scenario = scenario
+        self.options = options
+        self.recorder = recorder
+        self.stop = stop
+        self.sim = WorldSim(scenario, cmd_timeout_s=options.cmd_timeout_s)
+        self.dt_s = 1.0 / options.rate_hz
+        self.robot_ids = frozenset(int(r) for r in self.sim.robot_ids)
+        self.configs = run_configs(scenario, options)
+        self.alive: set[int] = set()
+        self.lost: set[int] = set()
+        self.last_seq: dict[int, int] = {}
+        self.ended = False
+        self.counts = {"commands": 0, "rejected": 0, "stale": 0, "queries": 0,
+                       "bad_queries": 0, "overruns": 0}
+
+        n = len(scenario.robots)
+        # Handler channels, read from the loop: callbacks never run project code.
+        self.queryable = session.declare_queryable(self.keys.config_all)
+        self.cmd_sub = session.declare_subscriber(
+            self.keys.cmd_all, zenoh.handlers.RingChannel(max(1024, 32 * n)))
+        self.alive_sub = session.liveliness().declare_subscriber(
+            self.keys.alive_robot_all, history=True)
+        self.poses_pub = session.declare_publisher(
+            self.keys.poses, congestion_control=zenoh.CongestionControl.DROP, express=True)
+        # Start/end are rare and must arrive: reliable and blocking (a hung robot can hold
+        # it up at most one transport lease, 1 s, before its link is closed).
+        self.control_pub = session.declare_publisher(
+            self.keys.control, congestion_control=zenoh.CongestionControl.BLOCK,
+            reliability=zenoh.Reliability.RELIABLE)
+        # Declared last: a robot that sees it knows the world is ready to serve.
+        self.token = session.liveliness().declare_token(self.keys.alive_world)
+
+    # --- draining the channels -------------------------------------------------------------
+
+    def _event(self, kind: str, **fields: object) -> None:
+        self.recorder.event(kind, self.sim.t_s, **fields)
+
+    def poll_liveliness(self) -> None:
+        """Track which robot processes are alive; mark lost robots offline."""
+        while (sample := self.alive_sub.try_recv()) is not None:
+            key = str(sample.key_expr)
+            try:
+                rid = self.keys.robot_id_of_alive(key)
+            except ProtocolError:
+                rid = None
+            if rid is None or rid not in self.robot_ids:
+                if sample.kind == zenoh.SampleKind.PUT:
+                    self._event("unknown_robot", key=key)
+                continue
+            if sample.kind == zenoh.SampleKind.PUT:
+                if rid in self.alive:
+                    continue
+                self.alive.add(rid)
+                if rid in self.lost:
+                    self.lost.discard(rid)
+                    self.last_seq.pop(rid, None)  # a new process numbers from 0 again
+                    self.sim.set_offline(rid, False)
+                    self._event("robot_rejoined", robot=rid, wall=time.time())
+                    log.warning("robot %d rejoined", rid)
+                else:
+                    self._event("robot_joined", robot=rid, wall=time.time())
+            elif rid in self.alive:
+                self.alive.discard(rid)
+                if self.ended:
+                    self._event("robot_left", robot=rid, wall=time.time())
+                    continue
+                self.lost.add(rid)
+                self.sim.set_offline(rid, True)
+                self._event("robot_lost", robot=rid, wall=time.time())
+                log.warning("robot %d lost (liveliness token gone): braking it", rid)
+
+    def serve_queries(self) -> None:
+        """Answer configuration queries: ``config/<id>`` -> that robot's `RunConfigMsg`."""
+        while (query := self.queryable.try_recv()) is not None:
+            with query:
+                key = str(query.key_expr)
+                try:
+                    rid = self.keys.robot_id_of_config(key)
+                    payload = self.configs[rid]
+                except (ProtocolError, KeyError):
+                    self.counts["bad_queries"] += 1
+                    query.reply_err(f"no robot configuration at {key}".encode())
+                    continue
+                query.reply(self.keys.config(rid), payload)
+                self.counts["queries"] += 1
+
+    def _reject(self, reason: str, key: str) -> None:
+        self.counts["rejected"] += 1
+        if self.counts["rejected"] <= MAX_REJECT_EVENTS:
+            self._event("rejected", key=key[:200], reason=reason[:200])
+        if self.counts["rejected"] in (1, 10, 100) or self.counts["rejected"] % 1000 == 0:
+            log.warning("rejected command #%d on %.200s: %.200s", self.counts["rejected"], key,
+                        reason)
+
+    def apply_commands(self) -> None:
+        """Validate and hold the newest command of each robot (zero-order hold)."""
+        while (sample := self.cmd_sub.try_recv()) is not None:
+            key = str(sample.key_expr)
+            try:
+                rid = self.keys.robot_id_of_cmd(key)
+                msg = CommandMsg.decode(sample.payload.to_bytes(), known_ids=self.robot_ids,
+                                        expected_robot_id=rid)
+            except ProtocolError as exc:
+                self._reject(str(exc), key)
+                continue
+            if msg.seq <= self.last_seq.get(rid, -1):
+                self.counts["stale"] += 1
+                continue
+            self.last_seq[rid] = msg.seq
+            self.sim.set_command(rid, msg.v_mps, msg.omega_radps)
+            self.counts["commands"] += 1
+            self.recorder.record_command(
+                self.sim.t_s, rid, msg.seq, msg.pose_stamp_s, msg.v_mps, msg.omega_radps,
+                msg.plan_ms, msg.status, msg.side, msg.resolved_id)
+
+    # --- phases ------------------------------------------------------------------------------
+
+    def wait_for_robots(self) -> bool:
+        """Until every robot is alive (True) or the deadline / a signal (False)."""
+        deadline = time.monotonic() + self.options.wait_robots_s
+        while not self.stop:
+            self.poll_liveliness()
+            self.serve_queries()
+            self.apply_commands()
+            if self.alive >= self.robot_ids:
+                return True
+            if time.monotonic() > deadline:
+                missing = sorted(self.robot_ids - self.alive)
+                self._event("startup_timeout", missing=missing)
+                log.error("robots %s not alive after %.1f s", missing, self.options.wait_robots_s)
+                return False
+            time.sleep(IDLE_POLL_S)
+        return False
+
+    def publish_poses(self) -> None:
+        """One `PosesMsg` with the current ground truth (dropped, never blocking, if slow)."""
+        self.poses_pub.put(PosesMsg.from_snapshot(self.sim.snapshot()).encode())
+
+    def tick(self) -> None:
+        """Apply commands, step the world by dt, publish and record."""
+        self.poll_liveliness()
+        self.serve_queries()
+        self.apply_commands()
+        events = self.sim.step(self.dt_s)
+        self.publish_poses()
+        self.recorder.record_tick(self.sim.t_s, self.sim.robot_ids, self.sim.pose,
+                                  self.sim.applied)
+        for rid in events.arrivals:
+            self._event("arrived", robot=rid)
+        for a, b, overlap in events.new_contacts:
+            self._event("contact", a=a, b=b, overlap_m=round(overlap, 6))
+            log.warning("contact %d-%d, overlap %.3f m at t=%.2f", a, b, overlap, self.sim.t_s)
+        for rid in events.timeouts:
+            self._event("cmd_timeout", robot=rid)
+
+    def run_loop(self) -> str:
+        """The fixed-rate loop; returns the end reason."""
+        period_wall = self.dt_s / self.options.time_scale
+        self.publish_poses()  # tick 0: robots plan from the start poses at once
+        self.recorder.record_tick(self.sim.t_s, self.sim.robot_ids, self.sim.pose,
+                                  self.sim.applied)
+        next_wall = time.monotonic() + period_wall
+        while True:
+            delay = next_wall - time.monotonic()
+            if delay > 0.0:
+                time.sleep(delay)
+            elif delay < -period_wall:
+                self.counts["overruns"] += 1
+                next_wall = time.monotonic()  # resynchronise rather than burst to catch up
+            next_wall += period_wall
+            if self.stop:
+                return "signal"
+            self.tick()
+            if self.sim.all_arrived():
+                return "all_arrived"
+            if self.sim.t_s >= self.scenario.time_limit_s - 1e-9:
+                return "time_limit"
+
+    def finish(self, reason: str) -> int:
+        """Announce the end, record the summary, let robots leave; return the exit status."""
+        self.ended = True
+        self.control_pub.put(ControlMsg("end", self.sim.t_s, reason).encode())
+        success = self.sim.all_arrived() and self.sim.contact_count == 0
+        arrived = [int(r) for r in self.sim.robot_ids[self.sim.arrived]]
+        self._event(
+            "end", reason=reason, success=success, all_arrived=self.sim.all_arrived(),
+            arrived=arrived, contacts=self.sim.contact_count, ticks=self.sim.tick,
+            min_gap_m=round(self.sim.min_gap_m, 6) if math.isfinite(self.sim.min_gap_m)
+            else None,
+            lost=sorted(self.lost), cmd_timeouts=self.sim.timeout_count, **self.counts,
+        )
+        log.info("end: %s at t=%.2f s, %d/%d arrived, %d contacts, %d rejected, %d stale",
+                 reason, self.sim.t_s, len(arrived), len(self.robot_ids),
+                 self.sim.contact_count, self.counts["rejected"], self.counts["stale"])
+        # Robots leave on the end message; a further signal cuts the wait short.
+        deadline = time.monotonic() + self.options.linger_s
+        signals = self.stop.count
+        while self.alive and time.monotonic() < deadline and self.stop.count == signals:
+            self.poll_liveliness()
+            time.sleep(IDLE_POLL_S)
+        return EXIT_OK if success else EXIT_FAILED
+
+    def run(self) -> int:
+        """Wait for the robots, run, finish."""
+        self._event("world_ready", run=self.options.run_id, n_robots=len(self.robot_ids),
+                    endpoint=self.options.listen or self.options.connect, wall=time.time())
+        log.info("run %s: waiting for %d robots", self.options.run_id, len(self.robot_ids))
+        if not self.wait_for_robots():
+            self.finish("signal" if self.stop else "startup_timeout")
+            return EXIT_FAILED
+        self.control_pub.put(ControlMsg("start", self.sim.t_s).encode())
+        self._event("start", mode="distributed", n_robots=len(self.robot_ids),
+                    world_rate_hz=self.options.rate_hz,
+                    control_rate_hz=self.options.control_rate_hz,
+                    time_scale=self.options.time_scale, wall=time.time())
+        log.info("start")
+        return self.finish(self.run_loop())
+
+
+def close_session(session: zenoh.Session, timeout_s: float = CLOSE_TIMEOUT_S) -> bool:
+    """Close `session`, waiting at most `timeout_s`; False if the close is still stuck.
+
+    Closing waits for peers to acknowledge (up to 10 s inside zenoh); a hung client must not
+    keep the world from exiting once its files are complete.
+    """
+    done = threading.Event()
+
+    def _close() -> None:
+        try:
+            session.close()
+        except zenoh.ZError as exc:
+            log.warning("closing the session: %s", exc)
+        finally:
+            done.set()
+
+    threading.Thread(target=_close, name="zenoh-close", daemon=True).start()
+    return done.wait(timeout_s)
+
+
+def run_world(options: WorldOptions) -> int:
+    """Run the world process to the end; returns its exit status.
+
+    If the session cannot be closed in time, the process leaves with `os._exit` once the
+    run directory is closed.
+    """
+    try:
+        scenario = load_scenario(options.scenario_path)
+    except ScenarioError as exc:
+        log.error("%s", exc)
+        return EXIT_SETUP
+    stop = _StopFlag()
+    previous = {s: signal.signal(s, stop) for s in (signal.SIGTERM, signal.SIGINT)}
+    try:
+        recorder = RunRecorder(options.out_dir, scenario)
+        try:
+            conf = zenoh.Config()
+            if options.connect:
+                settings = session_settings(mode="client", connect=[options.connect],
+                                            connect_timeout_ms=int(options.wait_robots_s * 1e3))
+            else:
+                settings = session_settings(mode="router", listen=[options.listen])
+            for key, value in settings.items():
+                conf.insert_json5(key, value)
+            try:
+                session = zenoh.open(conf)
+            except zenoh.ZError as exc:
+                log.error("cannot open the Zenoh session (%s): %s",
+                          options.listen or options.connect, exc)
+                recorder.event("end", 0.0, reason="transport_error", success=False,
+                               error=str(exc))
+                return EXIT_SETUP
+            try:
+                code = WorldNode(session, scenario, options, recorder, stop).run()
+            except BaseException:
+                close_session(session)
+                raise
+            recorder.close()  # the run directory is complete before the transport closes
+            if not close_session(session):
+                log.error("session close timed out; leaving without it")
+                logging.shutdown()
+                os._exit(code)
+            return code
+        finally:
+            recorder.close()
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of ``python -m world``."""
+    logging.basicConfig(level=logging.INFO, stream=sys.stderr,
+                        format="%(asctime)s world %(levelname)s %(message)s")
+    return run_world(parse_args(argv))
