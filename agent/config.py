@@ -89,6 +89,12 @@ class PlannerConfig:
             None means the pair's inflated radius L.
         side_hysteresis: a via-point on the other side than last time for the same threat
             must beat the kept side's cost by this fraction.
+        right_hand_margin: on a first choice against another robot, LEFT must beat RIGHT by
+            this fraction of the cost (a right-hand traffic convention that every robot
+            shares, so mirrored encounters resolve consistently without communication).
+        threat_commitment: eIFP keeps resolving a threat it chose a side for until it has
+            passed it (TCPA <= 0), instead of dropping it when its own swerve makes the
+            threat's DCPA exceed D_thresh (which makes the robot weave).
         estimation_window_s: history length used to estimate others' velocity and linearity.
         lookahead_s: how far ahead on the reference the tracking law aims.
         heading_gain: proportional gain of the tracking law on heading error [1/s].
@@ -108,6 +114,8 @@ class PlannerConfig:
     ghost_horizon_s: float = 4.0
     ghost_clearance_m: float | None = None
     side_hysteresis: float = 0.15
+    right_hand_margin: float = 0.05
+    threat_commitment: bool = False
     estimation_window_s: float = 0.5
     lookahead_s: float = 0.6
     heading_gain: float = 2.5

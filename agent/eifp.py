@@ -40,7 +40,7 @@ Choices the paper leaves open:
   the line of approach) and so pick the same world side and dance. In closed-loop trials
   (unicycle + pure pursuit, 2-14 robots swapping on a circle) an exact-tie-only rule left
   two nearly head-on robots dancing for the whole run; requiring LEFT to beat RIGHT by
-  `RIGHT_HAND_MARGIN` (5 %) on a first choice against another robot let them pass
+  `PlannerConfig.right_hand_margin` (default 5 %) on a first choice against another robot let them pass
   directly. Static and scenario obstacles do not reciprocate, so against them only the
   exact-tie rule applies. The side memory and its hysteresis take over after the first
   choice.
@@ -67,10 +67,6 @@ LENGTH_EPS_M = 1.0e-6
 
 # Costs this close (relative) are a tie, broken to Side.RIGHT.
 TIE_REL_TOL = 1.0e-9
-
-# Against another robot, a first choice of LEFT must be cheaper than RIGHT by this
-# fraction; near-ties go RIGHT (the right-hand rule, see the module docstring).
-RIGHT_HAND_MARGIN = 0.05
 
 # Vectors shorter than this [m] have no direction (phi = 0).
 _NO_DIRECTION_M = 1.0e-9
@@ -274,7 +270,7 @@ def cost_selector(
             allowed,
             side_memory.get(int(ids[k])),
             config.side_hysteresis,
-            RIGHT_HAND_MARGIN if is_robot[k] else 0.0,
+            config.right_hand_margin if is_robot[k] else 0.0,
         )
 
     return select
@@ -297,8 +293,12 @@ def plan_eifp(
         ValueError: on non-finite inputs or configuration.
     """
     memory = side_memory or {}
+    committed = frozenset(memory) if config.threat_commitment else frozenset()
     return plan_via_points(
-        observation, config, lambda others: cost_selector(observation, config, others, memory)
+        observation,
+        config,
+        lambda others: cost_selector(observation, config, others, memory),
+        committed,
     )
 
 

@@ -61,6 +61,9 @@ from agent.threats import (
 from agent.types import Observation, Others, PlanStatus, Side, Threat
 from agent.viapoints import SIDES, candidate_pair, escape_point, inflated_radius
 
+# A committed threat is released when its TCPA exceeds this multiple of T_max.
+COMMIT_RELEASE_FACTOR = 2.0
+
 # Closest approaches this close to L still clear the disc [m] (tangent legs, rounding).
 LEG_GRAZE_TOL_M = 1.0e-6
 
@@ -184,6 +187,7 @@ def plan_via_points(
     observation: Observation,
     config: PlannerConfig,
     make_selector: Callable[[Others], CandidateSelector],
+    committed_ids: frozenset[int] = frozenset(),
 ) -> ViaPlan:
     """The IFP cycle (module docstring) with a pluggable candidate selector.
 
@@ -193,6 +197,9 @@ def plan_via_points(
         make_selector: given the neighbours the cycle plans against (after the sensing
             radius and neighbour cap), returns the rule that picks one candidate of a
             threat; IFP's is `select_earliest`, eIFP's cost rule is in `agent.eifp`.
+        committed_ids: others the robot is already resolving (eIFP's threat commitment):
+            they stay threats while still approaching (0 < TCPA < T_max), even when the
+            robot's own swerve has pushed their DCPA past D_thresh.
 
     Raises:
         ValueError: on non-finite inputs or configuration.
@@ -211,6 +218,8 @@ def plan_via_points(
     index, tcpa, dcpa = rank_threats(
         p, v_r, others, config.dcpa_threshold_m(observation.radius_m), config.t_max_s
     )
+    if committed_ids and len(others):
+        index = _with_committed(index, tcpa, others, committed_ids, config.t_max_s)
     threats = threat_records(index, tcpa, dcpa, others)
     if len(others) == 0:
         return ViaPlan(status=PlanStatus.OK, waypoints_m=np.stack((p, goal)), threats=threats)
@@ -294,6 +303,34 @@ def plan_via_points(
         threats=threats,
         resolved_sides=resolved,
     )
+
+
+def _with_committed(
+    index: np.ndarray,
+    tcpa: np.ndarray,
+    others: Others,
+    committed_ids: frozenset[int],
+    t_max_s: float,
+) -> np.ndarray:
+    """Eq. (5)'s threats plus the committed others still approaching, re-ranked by TCPA.
+
+    Without this, a threat assessed at the measured velocity vanishes as soon as the robot
+    swerves for it (its DCPA grows past D_thresh), the robot turns back to its goal, the
+    threat reappears, and the robot weaves. A committed threat is released once it has
+    been passed (TCPA <= 0) or is far from imminent (TCPA >= `COMMIT_RELEASE_FACTOR` T_max;
+    not T_max itself: the swerve lengthens TCPA, which would release it at once).
+    """
+    extra = [
+        k
+        for k in range(len(others))
+        if int(others.ids[k]) in committed_ids
+        and 0.0 < tcpa[k] < COMMIT_RELEASE_FACTOR * t_max_s
+        and k not in index
+    ]
+    if not extra:
+        return index
+    merged = np.concatenate([index, np.array(extra, dtype=index.dtype)])
+    return ranked(merged, tcpa, others.ids)
 
 
 class _World:

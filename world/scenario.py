@@ -299,6 +299,10 @@ def _field_value(ctx: _Ctx, path: str, field_name: str, typ: Any, value: object)
         (typ,) = (a for a in args if a is not type(None))
     lower = ("positive" if field_name in _POSITIVE_FIELDS
              else "none" if field_name in _SIGNED_FIELDS else "nonneg")
+    if typ is bool:
+        if not isinstance(value, bool):
+            raise ctx.error(path, f"expected true or false, {_got(value)}")
+        return value
     if typ is int:
         return _integer(ctx, path, value, minimum=1 if lower == "positive" else 0)
     if typ is float:

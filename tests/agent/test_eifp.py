@@ -319,3 +319,29 @@ def test_property_finite_inputs_give_finite_plans(rows, v, heading):
         assert 2 <= len(plan.waypoints_m) <= CFG.max_depth + 2
         np.testing.assert_array_equal(plan.waypoints_m[-1], [10, 0])
     assert set(selector.side_memory) <= set(o.ids.tolist())
+
+
+# --- threat commitment ------------------------------------------------------------------
+
+
+def test_committed_threat_stays_a_threat_until_passed():
+    # The robot has already swerved right (heading -0.5 rad) for robot 1, which comes
+    # head-on 2 m off the x axis. At the measured velocity its DCPA is 3.92 m > D_thresh
+    # (2.8 m), and the direct leg to the goal clears it (2 m > L = 1.3 m): without
+    # commitment the robot would turn back; with it, it keeps resolving robot 1.
+    o = others([[8.0, 2.0]], vel=[[-1.0, 0.0]])
+    obs = observe(o, heading=-0.5, goal=(20.0, 0.0))
+    free = plan_eifp(obs, PlannerConfig(threat_commitment=False), {1: Side.RIGHT})
+    assert free.resolved_id is None and free.threats == ()
+    kept = plan_eifp(obs, PlannerConfig(threat_commitment=True), {1: Side.RIGHT})
+    assert kept.resolved_id == 1
+    assert [t.other_id for t in kept.threats] == [1]
+    assert kept.threats[0].tcpa_s == pytest.approx(3.745, abs=1e-3)
+
+
+def test_committed_threat_is_released_once_passed():
+    # Robot 1 is behind and moving away: TCPA < 0, so the commitment ends.
+    o = others([[-3.0, 2.0]], vel=[[-1.0, 0.0]])
+    obs = observe(o, heading=-0.5, goal=(20.0, 0.0))
+    plan = plan_eifp(obs, PlannerConfig(threat_commitment=True), {1: Side.RIGHT})
+    assert plan.resolved_id is None and plan.threats == ()

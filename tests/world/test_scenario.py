@@ -119,8 +119,9 @@ def test_file_keys_strip_unit_suffixes():
 def test_every_planner_and_mpc_field_is_settable(tmp_path):
     planner = {file_key(f.name): f.name for f in dataclasses.fields(PlannerConfig)}
     mpc = {file_key(f.name): f.name for f in dataclasses.fields(MpcConfig)}
-    defaults = {k: 2 if k in ("max_neighbors", "max_depth") else 0.7
-                for k in planner if k != "mpc"}
+    bools = {f.name for f in dataclasses.fields(PlannerConfig) if f.type in (bool, "bool")}
+    defaults = {k: True if planner[k] in bools else 2 if k in ("max_neighbors", "max_depth")
+                else 0.7 for k in planner if k != "mpc"}
     defaults["mpc"] = {k: 3 if k in ("horizon_steps", "max_constraints", "max_iter") else 0.05
                        for k in mpc}
     s = scenario_from_dict({"name": "all", "time_limit": 5, "defaults": defaults,
@@ -130,6 +131,11 @@ def test_every_planner_and_mpc_field_is_settable(tmp_path):
             assert getattr(s.planner_config, name) == defaults[key]
     for key, name in mpc.items():
         assert getattr(s.planner_config.mpc, name) == defaults["mpc"][key]
+
+
+def test_bool_field_rejects_a_number(tmp_path):
+    with pytest.raises(ScenarioError, match=r"defaults\.threat_commitment: expected true or false"):
+        load_scenario(bad(tmp_path, "  t_max: 6\n", "  t_max: 6\n  threat_commitment: 1\n"))
 
 
 def test_nullable_fields_accept_null(tmp_path):
