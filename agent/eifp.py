@@ -40,8 +40,8 @@ Choices the paper leaves open:
   the line of approach) and so pick the same world side and dance. In closed-loop trials
   (unicycle + pure pursuit, 2-14 robots swapping on a circle) an exact-tie-only rule left
   two nearly head-on robots dancing for the whole run; requiring LEFT to beat RIGHT by
-  `PlannerConfig.right_hand_margin` (default 5 %) on a first choice against another robot let them pass
-  directly. Static and scenario obstacles do not reciprocate, so against them only the
+  `PlannerConfig.right_hand_margin` (default 5 %) on a first choice against another robot
+  let them pass directly. Static and scenario obstacles do not reciprocate, so against them only the
   exact-tie rule applies. The side memory and its hysteresis take over after the first
   choice.
 """
