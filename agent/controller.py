@@ -17,6 +17,7 @@ import numpy as np
 
 from agent.config import PlannerConfig
 from agent.estimation import NeighborTracker
+from agent.planners import CONTROL_PERIOD_S, make_planner
 from agent.types import EgoState, Observation, Others, PlanResult, PlanStatus, PoseSnapshot
 from world.scenario import RobotSpec
 
@@ -32,17 +33,21 @@ class RobotController:
         config: planner parameters.
         goal_tolerance_m: the robot stops when this close to its goal.
         compensate_latency: forward-predict by the snapshot's age before planning.
+        control_period_s: the robot's planning period; the planner's rate limits (and
+            ORCA's time step) use it.
     """
 
     def __init__(self, spec: RobotSpec, config: PlannerConfig, goal_tolerance_m: float,
-                 *, compensate_latency: bool = True) -> None:
-        from agent.planners import make_planner
-
+                 *, compensate_latency: bool = True,
+                 control_period_s: float = CONTROL_PERIOD_S) -> None:
+        if not (np.isfinite(control_period_s) and control_period_s > 0.0):
+            raise ValueError(f"control_period_s must be positive, got {control_period_s!r}")
         self.spec = spec
         self.config = config
         self.goal_tolerance_m = float(goal_tolerance_m)
         self.compensate_latency = compensate_latency
-        self.planner = make_planner(spec.planner, config)
+        self.control_period_s = float(control_period_s)
+        self.planner = make_planner(spec.planner, config, control_period_s=self.control_period_s)
         self.tracker = NeighborTracker(spec.id, config.estimation_window_s)
         self.snapshot: PoseSnapshot | None = None
         self.command = (0.0, 0.0)
@@ -128,7 +133,7 @@ def _advance(others: Others, age_s: float) -> Others:
     if len(others) == 0:
         return others
     shift = others.velocity_mps * age_s
-    return Others(
+    return Others.trusted(
         ids=others.ids,
         position_m=others.position_m + shift,
         velocity_mps=others.velocity_mps,

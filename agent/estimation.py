@@ -114,7 +114,8 @@ class NeighborTracker:
         chord = np.linalg.norm(latest - start, axis=1)
         linearity = np.where(path > _MIN_TRAVEL_M, chord / np.maximum(path, 1e-12), 0.0)
         ids = self._ids[self._latest]
-        return Others(
+        # Built from a validated snapshot (finite poses, radii) by finite arithmetic.
+        return Others.trusted(
             ids=ids,
             position_m=latest,
             velocity_mps=velocity,

@@ -245,13 +245,9 @@ class PlanSchedule:
 def make_controller(config: RunConfigMsg, period_s: float) -> RobotController:
     """The robot's `RobotController`, its planner set up for this control period."""
     from agent.controller import RobotController
-    from agent.planners import CONTROL_PERIOD_S, make_planner
 
-    controller = RobotController(config.robot, config.planner, config.goal_tolerance_m)
-    if abs(period_s - CONTROL_PERIOD_S) > 1e-12:  # as the lockstep runner does
-        controller.planner = make_planner(config.robot.planner, config.planner,
-                                          control_period_s=period_s)
-    return controller
+    return RobotController(config.robot, config.planner, config.goal_tolerance_m,
+                           control_period_s=period_s)
 
 
 def warm_up(config: RunConfigMsg, period_s: float) -> None:

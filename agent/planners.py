@@ -118,9 +118,17 @@ class ViaPointPlanner:
         done = _arrived(observation)
         if done is not None:
             return replace(done, times=StageTimes(total_ms=(clock() - t0) * 1e3))
+        from agent.threats import nearby_others
+
         cfg = self.config
         ego = observation.ego
         limits = observation.limits
+        # Bound the work: the others within the sensing radius, at most max_neighbors,
+        # selected once per cycle for the via-points and the MPC alike.
+        near = nearby_others(np.array([ego.x_m, ego.y_m]), observation.others,
+                             cfg.sensing_radius_m, cfg.max_neighbors)
+        if near is not observation.others:
+            observation = replace(observation, others=near)
         if self._selector is None:
             via = self._plan_ifp(observation, cfg)
         else:
@@ -167,13 +175,9 @@ class ViaPointPlanner:
 
     def _predictions(self, observation: Observation,
                      t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Constant-velocity predictions (K, N+1, 2) of the nearby others and clearances (K,)."""
-        from agent.threats import nearby_others
-
+        """Constant-velocity predictions (K, N+1, 2) of the sensed others and clearances (K,)."""
         cfg = self.config
-        ego = observation.ego
-        near = nearby_others(np.array([ego.x_m, ego.y_m]), observation.others,
-                             cfg.sensing_radius_m, cfg.max_neighbors)
+        near = observation.others
         preds = near.position_m[:, None, :] + near.velocity_mps[:, None, :] * t_s[None, :, None]
         clearance = observation.radius_m + near.radius_m + cfg.mpc.clearance_margin_m
         return preds, clearance

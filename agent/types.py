@@ -147,9 +147,26 @@ class Others:
             is_robot=np.zeros(0, dtype=bool),
         )
 
+    @classmethod
+    def trusted(cls, ids: np.ndarray, position_m: np.ndarray, velocity_mps: np.ndarray,
+                radius_m: np.ndarray, linearity: np.ndarray, track_start_m: np.ndarray,
+                is_robot: np.ndarray) -> Others:
+        """Build from arrays derived from already validated ones, skipping validation.
+
+        For the hot path only (subsets, time shifts, estimates from validated snapshots);
+        anything from outside goes through the validating constructor.
+        """
+        obj = object.__new__(cls)
+        for name, value in (("ids", ids), ("position_m", position_m),
+                            ("velocity_mps", velocity_mps), ("radius_m", radius_m),
+                            ("linearity", linearity), ("track_start_m", track_start_m),
+                            ("is_robot", is_robot)):
+            object.__setattr__(obj, name, value)
+        return obj
+
     def subset(self, index: np.ndarray) -> Others:
         """The others selected by an index or boolean mask, in that order."""
-        return Others(
+        return Others.trusted(
             ids=self.ids[index],
             position_m=self.position_m[index],
             velocity_mps=self.velocity_mps[index],

@@ -76,7 +76,6 @@ def run_lockstep(scenario: Scenario, out_dir: Path, *, world_rate_hz: float = 50
         on_progress: called about every sim second with a `LockstepProgress`.
     """
     from agent.controller import RobotController
-    from agent.planners import CONTROL_PERIOD_S, make_planner
     from world.dynamics import WorldSim
     from world.recorder import RunRecorder
 
@@ -93,13 +92,11 @@ def run_lockstep(scenario: Scenario, out_dir: Path, *, world_rate_hz: float = 50
     progress_ticks = max(1, round(PROGRESS_EVERY_S * world_rate_hz))
 
     world = WorldSim(scenario, cmd_timeout_s=CMD_TIMEOUT_S)
-    controllers = []
-    for spec in scenario.robots:
-        ctrl = RobotController(spec, scenario.planner_config, scenario.goal_tolerance_m)
-        if abs(period_s - CONTROL_PERIOD_S) > 1e-12:  # the planners' default period
-            ctrl.planner = make_planner(spec.planner, scenario.planner_config,
-                                        control_period_s=period_s)
-        controllers.append(ctrl)
+    controllers = [
+        RobotController(spec, scenario.planner_config, scenario.goal_tolerance_m,
+                        control_period_s=period_s)
+        for spec in scenario.robots
+    ]
     seq = [0] * len(controllers)
     n = len(controllers)
 

@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import pytest
 
-from agent.node import AgentOptions, PlanSchedule, parse_args
+from agent.config import PlannerConfig
+from agent.node import AgentOptions, PlanSchedule, make_controller, parse_args
+from protocol import RunConfigMsg
+from world.scenario import RobotSpec
 
 
 def test_schedule_plans_on_first_pose_then_every_period() -> None:
@@ -89,3 +92,15 @@ def test_parse_args() -> None:
 def test_parse_args_rejects(argv) -> None:
     with pytest.raises(SystemExit):
         parse_args(argv)
+
+
+@pytest.mark.parametrize("planner", ["eifp-mpc", "orca"])
+def test_make_controller_builds_the_planner_for_the_control_period(planner: str) -> None:
+    config = RunConfigMsg(
+        run_id="r-1", robot=RobotSpec(0, (0.0, 0.0, 0.0), (5.0, 0.0), planner=planner),
+        planner=PlannerConfig(), goal_tolerance_m=0.25, control_rate_hz=20.0,
+        world_rate_hz=50.0, time_scale=1.0, time_limit_s=60.0, cmd_timeout_s=0.5,
+        known_ids=(0,))
+    controller = make_controller(config, 0.05)
+    assert controller.control_period_s == 0.05
+    assert controller.planner.name == planner and controller.planner.control_period_s == 0.05
