@@ -49,7 +49,7 @@ Choices the paper leaves open:
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -280,6 +280,7 @@ def plan_eifp(
     observation: Observation,
     config: PlannerConfig,
     side_memory: Mapping[int, Side] | None = None,
+    timer: Callable[[], float] | None = None,
 ) -> ViaPlan:
     """One eIFP cycle: IFP's iteration with cost-based candidate selection (Eqs. 14-16).
 
@@ -299,6 +300,7 @@ def plan_eifp(
         config,
         lambda others: cost_selector(observation, config, others, memory),
         committed,
+        timer,
     )
 
 
@@ -336,9 +338,11 @@ class EifpSelector:
         """A copy of the memory {threat id -> side chosen last time}."""
         return dict(self._memory)
 
-    def select(self, observation: Observation) -> ViaPlan:
+    def select(
+        self, observation: Observation, timer: Callable[[], float] | None = None
+    ) -> ViaPlan:
         """Plan one cycle and remember the sides chosen (see `plan_eifp`)."""
-        plan = plan_eifp(observation, self.config, self._memory)
+        plan = plan_eifp(observation, self.config, self._memory, timer)
         self._memory = update_side_memory(self._memory, plan, observation.others.ids)
         return plan
 

@@ -94,6 +94,7 @@ class ViaPlan:
         resolved_id: id of the other `via_point_m` resolves, or None.
         threats: the threats of Eq. (5) at the measured velocity, ranked by TCPA.
         resolved_sides: (other id, side) for every via-point, in the order they were chosen.
+        threats_s: wall time of the threat assessment, when a timer was given (else 0).
     """
 
     status: PlanStatus
@@ -103,6 +104,7 @@ class ViaPlan:
     resolved_id: int | None = None
     threats: tuple[Threat, ...] = ()
     resolved_sides: tuple[tuple[int, Side], ...] = ()
+    threats_s: float = 0.0
 
 
 def select_earliest(
@@ -167,7 +169,9 @@ def validate_inputs(observation: Observation, config: PlannerConfig) -> None:
         raise ValueError("config.max_depth: must be at least 1")
 
 
-def plan_ifp(observation: Observation, config: PlannerConfig) -> ViaPlan:
+def plan_ifp(
+    observation: Observation, config: PlannerConfig, timer: Callable[[], float] | None = None
+) -> ViaPlan:
     """One IFP cycle: earliest-feasible via-points, iterated up to `max_depth`.
 
     Args:
@@ -180,7 +184,7 @@ def plan_ifp(observation: Observation, config: PlannerConfig) -> ViaPlan:
     Raises:
         ValueError: on non-finite inputs or configuration.
     """
-    return plan_via_points(observation, config, lambda _others: select_earliest)
+    return plan_via_points(observation, config, lambda _others: select_earliest, timer=timer)
 
 
 def plan_via_points(
@@ -188,6 +192,7 @@ def plan_via_points(
     config: PlannerConfig,
     make_selector: Callable[[Others], CandidateSelector],
     committed_ids: frozenset[int] = frozenset(),
+    timer: Callable[[], float] | None = None,
 ) -> ViaPlan:
     """The IFP cycle (module docstring) with a pluggable candidate selector.
 
@@ -200,6 +205,8 @@ def plan_via_points(
         committed_ids: others the robot is already resolving (eIFP's threat commitment):
             they stay threats while still approaching (0 < TCPA < T_max), even when the
             robot's own swerve has pushed their DCPA past D_thresh.
+        timer: a wall clock, only to time the threat assessment (`ViaPlan.threats_s`);
+            it never influences the plan.
 
     Raises:
         ValueError: on non-finite inputs or configuration.
@@ -214,6 +221,7 @@ def plan_via_points(
     radius = inflated_radius(observation.radius_m, others.radius_m, config.d_safety_m)
 
     # Eqs. (3)-(6) at the measured velocity.
+    t_start = timer() if timer is not None else 0.0
     v_r = ego.v_mps * np.array([math.cos(ego.heading_rad), math.sin(ego.heading_rad)])
     index, tcpa, dcpa = rank_threats(
         p, v_r, others, config.dcpa_threshold_m(observation.radius_m), config.t_max_s
@@ -221,8 +229,10 @@ def plan_via_points(
     if committed_ids and len(others):
         index = _with_committed(index, tcpa, others, committed_ids, config.t_max_s)
     threats = threat_records(index, tcpa, dcpa, others)
+    threats_s = timer() - t_start if timer is not None else 0.0
     if len(others) == 0:
-        return ViaPlan(status=PlanStatus.OK, waypoints_m=np.stack((p, goal)), threats=threats)
+        return ViaPlan(status=PlanStatus.OK, waypoints_m=np.stack((p, goal)), threats=threats,
+                       threats_s=threats_s)
 
     # Inside an inflated disc: no tangent exists, steer straight out of the deepest one.
     position = as_complex(others.position_m)
@@ -238,6 +248,7 @@ def plan_via_points(
             side=Side.NONE,
             resolved_id=int(others.ids[j]),
             threats=threats,
+            threats_s=threats_s,
         )
 
     # Waypoints as complex numbers x + iy while the list changes.
@@ -251,7 +262,8 @@ def plan_via_points(
         split = world.resolve(wps[0], 0.0, wps[1], k)
         if split is None:
             return ViaPlan(
-                status=PlanStatus.NO_FEASIBLE, waypoints_m=np.stack((p, goal)), threats=threats
+                status=PlanStatus.NO_FEASIBLE, waypoints_m=np.stack((p, goal)), threats=threats,
+                threats_s=threats_s,
             )
         wps.insert(1, split[0])
         excluded[0:1] = [k, -1]
@@ -302,6 +314,7 @@ def plan_via_points(
         resolved_id=None if head is None else int(others.ids[head[0]]),
         threats=threats,
         resolved_sides=resolved,
+        threats_s=threats_s,
     )
 
 

@@ -130,9 +130,9 @@ class ViaPointPlanner:
         if near is not observation.others:
             observation = replace(observation, others=near)
         if self._selector is None:
-            via = self._plan_ifp(observation, cfg)
+            via = self._plan_ifp(observation, cfg, clock)
         else:
-            via = self._selector.select(observation)
+            via = self._selector.select(observation, clock)
         t1 = clock()
         mpc_cfg = cfg.mpc
         ref = build_reference(
@@ -160,8 +160,8 @@ class ViaPointPlanner:
             )
         t3 = clock()
         times = StageTimes(
-            threats_ms=getattr(via, "threats_s", 0.0) * 1e3,
-            viapoints_ms=(t1 - t0) * 1e3 - getattr(via, "threats_s", 0.0) * 1e3,
+            threats_ms=via.threats_s * 1e3,
+            viapoints_ms=(t1 - t0 - via.threats_s) * 1e3,
             spline_ms=(t2 - t1) * 1e3,
             control_ms=(t3 - t2) * 1e3,
             total_ms=(t3 - t0) * 1e3,

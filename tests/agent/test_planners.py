@@ -147,3 +147,17 @@ def test_mpc_solver_failure_is_counted_and_brakes(monkeypatch):
     assert res.status == PlanStatus.SOLVER_FAILED
     assert tracker.failures == 1
     assert res.v_mps < 1.0 and res.v_mps >= 0.0
+
+
+def test_stage_times_come_from_the_injected_timer():
+    # A fake clock advancing 1 ms per reading: every stage gets a whole number of ms, the
+    # threat assessment is timed on its own, and the stages add up to the total.
+    ticks = iter(range(1000))
+    planner = make_planner("eifp-mpc", PlannerConfig(), timer=lambda: next(ticks) * 1e-3)
+    obs = observation(0.0, 0.0, 0.0, 1.0, [[6.0, 0.2]], [[-1.0, 0.0]])
+    t = planner.plan(obs, 0.0).times
+    assert t.threats_ms == pytest.approx(1.0)
+    assert t.viapoints_ms >= 1.0 and t.spline_ms == pytest.approx(1.0)
+    assert t.control_ms == pytest.approx(1.0)
+    assert t.total_ms == pytest.approx(t.threats_ms + t.viapoints_ms + t.spline_ms
+                                       + t.control_ms)
