@@ -268,6 +268,38 @@ def test_killed_robot_is_detected_and_avoided(tmp_path: Path, launch) -> None:
           f"min gap {end['min_gap_m']} m")
 
 
+def test_killed_robot_restarted_with_the_same_id_rejoins_and_finishes(tmp_path: Path,
+                                                                     launch) -> None:
+    # Robot 1 is SIGKILLed a few metres into its run, then a new process with the same id
+    # starts: the world logs robot_rejoined, accepts its commands (its seq starts over) and
+    # the run ends with both robots arrived and no contact.
+    scenario = write_scenario(tmp_path / "pair.yaml", [
+        {"id": 0, "start": [-8.0, 0.0, 0.0], "goal": [8.0, 0.0]},
+        {"id": 1, "start": [-8.0, 4.0, 0.0], "goal": [8.0, 4.0]},
+    ], time_limit_s=60.0)
+    run = launch("rejoin")
+    run.start(scenario, [0, 1], time_scale=1.0)
+    wait_for_event(run.out_dir, lambda e: e["kind"] == "start", STARTUP_S, run.world)
+    lines_before = len(read_events(run.out_dir))
+    run.robots[1].send_signal(signal.SIGKILL)
+    wait_for_event(run.out_dir, lambda e: e["kind"] == "robot_lost" and e["robot"] == 1, 5.0,
+                   run.world)
+    assert wait_exit(run.robots[1]) == -signal.SIGKILL
+    run.robots[1] = spawn_logged(
+        robot_command(run.run_id, 1, run.endpoint, startup_timeout_s=STARTUP_S),
+        run.out_dir / "robot_1_restarted.log")
+    back = wait_for_event(run.out_dir,
+                          lambda e: e["kind"] == "robot_rejoined" and e["robot"] == 1,
+                          STARTUP_S, run.world)
+    assert back["t"] >= 0.0
+    assert wait_exit(run.world, STARTUP_S + RUN_S) == 0  # all arrived, no contact
+    events = read_events(run.out_dir)
+    assert len(events) > lines_before
+    end = [e for e in events if e["kind"] == "end"][0]
+    assert end["reason"] == "all_arrived" and end["contacts"] == 0
+    assert sorted(end["arrived"]) == [0, 1]
+
+
 # --- (c) a rogue publisher --------------------------------------------------------------------
 
 
