@@ -397,9 +397,15 @@ def _finite(x: float) -> float | None:
 # --------------------------------------------------------------------------------------
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    from orchestrator import bench  # written by the lead
+    from orchestrator import bench
 
     return int(bench.main(list(args.bench_args)) or 0)
+
+
+def cmd_compose(args: argparse.Namespace) -> int:
+    from orchestrator import compose
+
+    return compose.main(list(args.compose_args))
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -450,16 +456,22 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("bench", help="planner benchmarks (orchestrator.bench)")
     p.add_argument("bench_args", nargs=argparse.REMAINDER)
     p.set_defaults(func=cmd_bench)
+
+    p = sub.add_parser("compose", help="steps of the docker-compose demo (orchestrator.compose)")
+    p.add_argument("compose_args", nargs=argparse.REMAINDER)
+    p.set_defaults(func=cmd_compose)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the `orchestrator` console script; returns the exit status."""
     argv = list(sys.argv[1:] if argv is None else argv)
-    if argv[:1] == ["bench"] and not {"-h", "--help"} & set(argv[1:2]):
-        # Everything after `bench` belongs to the benchmark (argparse's REMAINDER would
-        # reject leading options such as `bench --quick`).
+    if argv[:1] == ["bench"]:
+        # Everything after `bench` belongs to the benchmark, --help included (argparse's
+        # REMAINDER would reject leading options such as `bench --planner`).
         return _guarded(cmd_bench, argparse.Namespace(bench_args=argv[1:], argv=argv))
+    if argv[:1] == ["compose"]:  # its own parser, help included (orchestrator.compose)
+        return _guarded(cmd_compose, argparse.Namespace(compose_args=argv[1:], argv=argv))
     parser = build_parser()
     try:
         args = parser.parse_args(argv)

@@ -1,0 +1,76 @@
+#!/bin/sh
+# Entry point of the eifp-swarm image: the first argument is the container's role.
+#
+#   world         resolve the setup into <RUNS_DIR>/<RUN_ID>/scenario.input.yaml, then run
+#                 `python -m world`: a Zenoh router listening on LISTEN, recording the run
+#                 into <RUNS_DIR>/<RUN_ID>; it starts once every robot is alive
+#   robot         `python -m agent` for robot ROBOT_ID, a client of the router at CONNECT
+#   orchestrator  `orchestrator compose await`: waits for every robot, follows the run,
+#                 writes metrics.json, trajectory.png and report.txt into the run directory
+#                 and exits with the run's status (0 all arrived without contact, 1 not,
+#                 2 bad input, 3 nothing to report)
+#   anything else is run as a command (e.g. `bash`, `orchestrator list`)
+#
+# Environment (defaults in brackets): RUN_ID [demo], SETUP [setup_d], ROBOTS (robot services
+# in the compose file; the setup must have as many robots) [not checked], AGENTS, PLANNER,
+# SEED [0], ROBOT_ID (robot), CONNECT [tcp/world:7447], LISTEN [tcp/0.0.0.0:7447],
+# RUNS_DIR [/runs], TIME_SCALE [1], STARTUP_TIMEOUT_S [300]. Extra arguments go to the
+# role's command.
+set -eu
+
+role=${1:-help}
+[ "$#" -gt 0 ] && shift
+
+RUN_ID=${RUN_ID:-demo}
+SETUP=${SETUP:-setup_d}
+RUNS_DIR=${RUNS_DIR:-/runs}
+CONNECT=${CONNECT:-tcp/world:7447}
+LISTEN=${LISTEN:-tcp/0.0.0.0:7447}
+TIME_SCALE=${TIME_SCALE:-1}
+STARTUP_TIMEOUT_S=${STARTUP_TIMEOUT_S:-300}
+
+# Setup options, the same in the world's and the orchestrator's container.
+setup_args() {
+  printf '%s\n' --setup "$SETUP" --run "$RUN_ID" --runs-dir "$RUNS_DIR" --seed "${SEED:-0}"
+  [ -n "${ROBOTS:-}" ] && printf '%s\n' --robots "$ROBOTS"
+  [ -n "${AGENTS:-}" ] && printf '%s\n' --agents "$AGENTS"
+  [ -n "${PLANNER:-}" ] && printf '%s\n' --planner "$PLANNER"
+  return 0
+}
+
+case "$role" in
+  world)
+    # One argument per line (no value here contains a newline).
+    IFS='
+'
+    # shellcheck disable=SC2046
+    orchestrator compose scenario $(setup_args)
+    unset IFS
+    exec python -m world --run "$RUN_ID" \
+      --scenario "$RUNS_DIR/$RUN_ID/scenario.input.yaml" --out "$RUNS_DIR/$RUN_ID" \
+      --listen "$LISTEN" --time-scale "$TIME_SCALE" --wait-robots-s "$STARTUP_TIMEOUT_S" "$@"
+    ;;
+  robot)
+    if [ -z "${ROBOT_ID:-}" ]; then
+      echo "eifp-entrypoint: the robot role needs ROBOT_ID in the environment" >&2
+      exit 2
+    fi
+    exec python -m agent --run "$RUN_ID" --id "$ROBOT_ID" --connect "$CONNECT" \
+      --startup-timeout-s "$STARTUP_TIMEOUT_S" "$@"
+    ;;
+  orchestrator)
+    IFS='
+'
+    # shellcheck disable=SC2046
+    set -- $(setup_args) --connect "$CONNECT" --time-scale "$TIME_SCALE" \
+      --startup-timeout-s "$STARTUP_TIMEOUT_S" "$@"
+    unset IFS
+    exec orchestrator compose await "$@"
+    ;;
+  help|-h|--help)
+    awk 'NR > 1 && /^#/ { sub(/^# ?/, ""); print; next } NR > 1 { exit }' "$0"
+    ;;
+  *)
+    exec "$role" "$@"
+    ;;
+esac

@@ -1,0 +1,392 @@
+"""The two orchestration steps of the docker-compose demo (compose.yaml, docker/entrypoint.sh).
+
+``orchestrator compose scenario``: in the world's container, before the world starts. Resolves
+the setup as ``orchestrator run`` does, checks that it has as many robots as the compose file
+has robot services, sets aside an earlier run directory of the same run id (a second
+``docker compose up`` on the same volume) and writes the scenario file the world is started
+with: ``<runs-dir>/<run>/scenario.input.yaml``.
+
+``orchestrator compose await``: the orchestrator's container, a Zenoh client of the world's
+router (explicit endpoint, no multicast: Docker bridges carry none). It waits until every
+robot's liveliness token is present (the world then starts the run), follows the run, and
+once the world's token is gone (the world closes its run directory before its session) writes
+``metrics.json``, ``trajectory.png``, ``report.txt`` and ``run.json`` into the run directory.
+
+Exit status of ``await``, as ``orchestrator run``: 0 every robot arrived with no contact,
+1 not (a contact, a lost robot, the time limit), 2 bad input, 3 nothing to report (the world
+never came up, never left, or left no trajectory), 128 + N when stopped by signal N.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import logging
+import math
+import signal
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from types import FrameType
+from typing import TYPE_CHECKING
+
+from world.scenario import Scenario, ScenarioError, dump_scenario
+
+EXIT_OK = 0
+EXIT_FAILED = 1
+EXIT_BAD_INPUT = 2
+EXIT_ERROR = 3
+
+DEFAULT_CONNECT = "tcp/world:7447"
+DEFAULT_RUNS_DIR = Path("/runs")
+SCENARIO_FILE = "scenario.input.yaml"
+CONNECT_ATTEMPT_MS = 1000
+"""Each attempt to open the session waits this long for the router (then retries)."""
+POLL_S = 0.2
+"""Wall period of the watch loop."""
+RUN_MARGIN_S = 60.0
+"""Slack on the run's expected wall duration before the orchestrator gives up on the world."""
+
+if TYPE_CHECKING:
+    import zenoh
+
+    from protocol import RunKeys
+
+log = logging.getLogger("orchestrator")
+
+
+@dataclass(frozen=True)
+class SetupOptions:
+    """What both steps resolve the same way (they run in different containers).
+
+    Args:
+        setup: setup name, family or scenario file (as ``orchestrator run``).
+        agents: robot count for scalable setups and families (None: the setup's own).
+        planner: every robot uses this planner (None: the scenario's).
+        seed: seeds the random family.
+        robots: robot services in the compose file; the scenario must have that many robots
+            (None: not checked).
+        run_id: run id (the key-expression prefix and the run directory's name).
+        runs_dir: the shared volume's mount point.
+    """
+
+    setup: str
+    agents: int | None
+    planner: str | None
+    seed: int
+    robots: int | None
+    run_id: str
+    runs_dir: Path
+
+    @property
+    def run_dir(self) -> Path:
+        return self.runs_dir / self.run_id
+
+    def resolve(self) -> Scenario:
+        """The scenario; raises `ScenarioError` if it does not match the robot services."""
+        from orchestrator.families import resolve
+
+        scenario = resolve(self.setup, agents=self.agents, seed=self.seed, planner=self.planner)
+        if self.robots is not None and len(scenario.robots) != self.robots:
+            raise ScenarioError(
+                f"{self.setup}: has {len(scenario.robots)} robots but the compose file runs "
+                f"{self.robots} robot services (ROBOTS); use the matching compose file, e.g. "
+                "compose.setup-g.yaml for setup_g")
+        ids = sorted(r.id for r in scenario.robots)
+        if self.robots is not None and ids != list(range(self.robots)):
+            raise ScenarioError(f"{self.setup}: robot ids {ids} are not 0..{self.robots - 1}, "
+                                "the ROBOT_ID values of the robot services")
+        return scenario
+
+
+def set_aside(run_dir: Path) -> Path | None:
+    """Rename a non-empty `run_dir` to the first free ``<run_dir>.<n>``; the new name or None."""
+    if not run_dir.is_dir() or not any(run_dir.iterdir()):
+        return None
+    n = 1
+    while (target := run_dir.with_name(f"{run_dir.name}.{n}")).exists():
+        n += 1
+    run_dir.rename(target)
+    return target
+
+
+def prepare_scenario(options: SetupOptions) -> Path:
+    """Resolve the setup and write the world's scenario file into a fresh run directory."""
+    scenario = options.resolve()
+    previous = set_aside(options.run_dir)
+    if previous is not None:
+        log.warning("%s held an earlier run: moved to %s", options.run_dir, previous)
+    path = options.run_dir / SCENARIO_FILE
+    dump_scenario(scenario, path)
+    log.info("run %s: %s, %d robots -> %s", options.run_id, scenario.name,
+             len(scenario.robots), path)
+    return path
+
+
+# --------------------------------------------------------------------------------------
+# await
+# --------------------------------------------------------------------------------------
+
+class _StopFlag:
+    """Set by SIGTERM/SIGINT (this is PID 1 in its container: without a handler, SIGTERM
+    would be ignored); the watch loop polls it and leaves, so the session is closed."""
+
+    def __init__(self) -> None:
+        self.signum: int | None = None
+
+    def __call__(self, signum: int, frame: FrameType | None) -> None:
+        self.signum = signum
+
+    def __bool__(self) -> bool:
+        return self.signum is not None
+
+
+def _open_session(connect: str, deadline: float, stop: _StopFlag) -> zenoh.Session | None:
+    """A client session to `connect`, retrying until `deadline` (monotonic); None if not."""
+    import zenoh
+
+    from protocol import session_settings
+
+    conf = zenoh.Config()
+    for key, value in session_settings(mode="client", connect=[connect],
+                                       connect_timeout_ms=CONNECT_ATTEMPT_MS).items():
+        conf.insert_json5(key, value)
+    error = "no attempt"
+    while not stop and time.monotonic() < deadline:
+        try:
+            return zenoh.open(conf)
+        except zenoh.ZError as exc:  # the router is not up yet (or `world` does not resolve)
+            error = str(exc)
+        time.sleep(POLL_S)
+    log.error("cannot connect to %s: %s", connect, error)
+    return None
+
+
+@dataclass
+class RunWatch:
+    """What the orchestrator has seen of the run over Zenoh (liveliness only)."""
+
+    robot_ids: frozenset[int]
+    alive: set[int]
+    world_seen: bool = False
+    world_gone: bool = False
+    all_alive_once: bool = False
+
+
+def _drain(watch: RunWatch, robot_sub: zenoh.Subscriber, world_sub: zenoh.Subscriber,
+           keys: RunKeys) -> None:
+    """Apply the liveliness changes waiting in the two channels; log what changed."""
+    import zenoh
+
+    from protocol import ProtocolError
+
+    n = len(watch.robot_ids)
+    while (sample := robot_sub.try_recv()) is not None:
+        try:
+            rid = keys.robot_id_of_alive(sample.key_expr)
+        except ProtocolError:
+            continue
+        if rid not in watch.robot_ids:
+            log.warning("robot %d is alive but not in the scenario", rid)
+        elif sample.kind == zenoh.SampleKind.PUT and rid not in watch.alive:
+            watch.alive.add(rid)
+            log.info("robot %d alive (%d/%d)", rid, len(watch.alive), n)
+            if len(watch.alive) == n and not watch.all_alive_once:
+                watch.all_alive_once = True
+                log.info("every robot is alive: the world starts the run")
+        elif sample.kind == zenoh.SampleKind.DELETE and rid in watch.alive:
+            watch.alive.discard(rid)
+            log.info("robot %d left (%d/%d alive)", rid, len(watch.alive), n)
+    while (sample := world_sub.try_recv()) is not None:
+        if sample.kind == zenoh.SampleKind.PUT and not watch.world_seen:
+            watch.world_seen = True
+            log.info("world is up")
+        elif sample.kind == zenoh.SampleKind.DELETE and watch.world_seen:
+            watch.world_gone = True
+            log.info("world left: its run directory is complete")
+
+
+def watch_run(options: SetupOptions, scenario: Scenario, connect: str, startup_timeout_s: float,
+              time_scale: float, stop: _StopFlag) -> str:
+    """Follow the run over Zenoh until the world leaves; returns why the watch ended.
+
+    Returns:
+        ``"done"`` (the world left), ``"no_world"`` (no session or no world token before the
+        startup deadline), ``"world_stuck"`` (the world outlived the run's wall budget) or
+        ``"signal"``.
+    """
+    from orchestrator.cli import ProgressLine
+    from orchestrator.distributed import _EventTail, _progress
+    from protocol import RunKeys
+    from world.node import close_session
+
+    keys = RunKeys(options.run_id)
+    t0 = time.monotonic()
+    session = _open_session(connect, t0 + startup_timeout_s, stop)
+    if session is None:
+        return "signal" if stop else "no_world"
+    watch = RunWatch(frozenset(r.id for r in scenario.robots), set())
+    progress = ProgressLine(f"{scenario.name} docker")
+    tail = _EventTail(options.run_dir / "events.jsonl")
+    try:
+        robot_sub = session.liveliness().declare_subscriber(keys.alive_robot_all, history=True)
+        world_sub = session.liveliness().declare_subscriber(keys.alive_world, history=True)
+        log.info("connected to %s; waiting for the world and %d robots", connect,
+                 len(watch.robot_ids))
+        # A world that cannot keep pace runs slower than time_scale: be generous.
+        budget_s = 2.0 * startup_timeout_s + 3.0 * scenario.time_limit_s / time_scale + RUN_MARGIN_S
+        while not watch.world_gone:
+            if stop:
+                return "signal"
+            _drain(watch, robot_sub, world_sub, keys)
+            now = time.monotonic()
+            if not watch.world_seen and now - t0 > startup_timeout_s:
+                log.error("no world on %s for run %s after %.0f s", connect, options.run_id,
+                          startup_timeout_s)
+                return "no_world"
+            if now - t0 > budget_s:
+                log.error("the world is still running after %.0f s; giving up", budget_s)
+                return "world_stuck"
+            if watch.all_alive_once:
+                tail.poll()
+                progress(_progress(tail.events, options.run_dir, t0, len(watch.robot_ids), ()))
+            time.sleep(POLL_S)
+        return "done"
+    finally:
+        progress.done()
+        if not close_session(session):
+            log.warning("closing the session timed out")
+
+
+def write_report(options: SetupOptions, scenario: Scenario, time_scale: float,
+                 started: str) -> int:
+    """metrics.json, trajectory.png, report.txt and run.json of the finished run; the status."""
+    from orchestrator.cli import _plots, run_summary
+    from orchestrator.rundir import (
+        RunDirError,
+        metrics_from_run_dir,
+        read_events,
+        write_json,
+        write_metrics,
+    )
+
+    run_dir = options.run_dir
+    planners = sorted({r.planner for r in scenario.robots})
+    planner = planners[0] if len(planners) == 1 else "mixed"
+    write_json(run_dir / "run.json", {
+        "setup": options.setup, "scenario": scenario.name, "planner": planner,
+        "seed": options.seed, "mode": "docker-compose", "agents": len(scenario.robots),
+        "run_id": options.run_id, "time_scale": time_scale, "started": started,
+    })
+    try:
+        metrics = metrics_from_run_dir(run_dir)
+    except (RunDirError, OSError, ValueError) as exc:
+        log.error("no metrics for %s: %s", run_dir, exc)
+        return EXIT_ERROR
+    write_metrics(run_dir, metrics)
+    _plots(run_dir, gif=False)
+    content = metrics.to_json_dict()
+    events = read_events(run_dir / "events.jsonl")
+    end = next((e for e in reversed(events) if e.get("kind") == "end"), {})
+    lines = [run_summary(content, f"{scenario.name} {planner} docker-compose"), "",
+             f"run {options.run_id}: end reason {end.get('reason', 'unknown (no end event)')}"]
+    for e in events:
+        if e.get("kind") == "startup_timeout":
+            lines.append(f"robots never alive before the world's deadline: {e.get('missing')}")
+    if end.get("lost"):
+        lines.append(f"robots lost during the run: {end['lost']}")
+    lines.append(f"files: {run_dir}")
+    text = "\n".join(lines) + "\n"
+    (run_dir / "report.txt").write_text(text, encoding="utf-8")
+    print(text, flush=True)
+    return EXIT_OK if metrics.success else EXIT_FAILED
+
+
+def await_and_report(options: SetupOptions, connect: str, startup_timeout_s: float,
+                     time_scale: float) -> int:
+    """The orchestrator container: watch the run, then write the report; the exit status."""
+    scenario = options.resolve()
+    started = dt.datetime.now().isoformat(timespec="seconds")
+    stop = _StopFlag()
+    previous = {s: signal.signal(s, stop) for s in (signal.SIGTERM, signal.SIGINT)}
+    try:
+        outcome = watch_run(options, scenario, connect, startup_timeout_s, time_scale, stop)
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+    if outcome == "signal":
+        log.warning("stopped by signal %s before the run ended", stop.signum)
+        return 128 + int(stop.signum or signal.SIGTERM)
+    if outcome != "done":
+        return EXIT_ERROR
+    return write_report(options, scenario, time_scale, started)
+
+
+# --------------------------------------------------------------------------------------
+# command line
+# --------------------------------------------------------------------------------------
+
+def _positive(text: str) -> float:
+    value = float(text)
+    if not (math.isfinite(value) and value > 0.0):
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}")
+    return value
+
+
+def _run_id(text: str) -> str:
+    from protocol import ProtocolError, validate_run_id
+
+    try:
+        return validate_run_id(text)
+    except ProtocolError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from exc
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="orchestrator compose",
+        description="Steps of the docker-compose demo (compose.yaml): the world's scenario "
+                    "and the orchestrator's watch and report.")
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument("--setup", required=True,
+                        help="setup_a..setup_g, a family or a scenario .yaml file")
+    common.add_argument("--agents", type=int, help="robot count (scalable setups, families)")
+    common.add_argument("--planner", help="every robot uses this planner")
+    common.add_argument("--seed", type=int, default=0, help="seeds the random family")
+    common.add_argument("--robots", type=int,
+                        help="robot services in the compose file; the scenario must match")
+    common.add_argument("--run", required=True, type=_run_id, help="run id")
+    common.add_argument("--runs-dir", type=Path, default=DEFAULT_RUNS_DIR,
+                        help=f"the shared volume (default {DEFAULT_RUNS_DIR})")
+    sub = parser.add_subparsers(dest="step", required=True)
+    sub.add_parser("scenario", parents=[common],
+                   help="write <runs-dir>/<run>/scenario.input.yaml for the world")
+    p = sub.add_parser("await", parents=[common],
+                       help="wait for the robots and the run's end, then write the report")
+    p.add_argument("--connect", default=DEFAULT_CONNECT,
+                   help=f"the world's router (default {DEFAULT_CONNECT})")
+    p.add_argument("--startup-timeout-s", type=_positive, default=300.0,
+                   help="wall deadline for the world to come up")
+    p.add_argument("--time-scale", type=_positive, default=1.0,
+                   help="the world's sim seconds per wall second (sizes the wait)")
+    return parser
+
+
+def main(argv: list[str]) -> int:
+    """``orchestrator compose STEP ...``; returns the exit status."""
+    if not logging.getLogger().handlers:
+        logging.basicConfig(level=logging.INFO, stream=sys.stderr,
+                            format="%(asctime)s orchestrator %(levelname)s %(message)s")
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help (0) or a usage error (2)
+        return int(exc.code or 0)
+    options = SetupOptions(setup=args.setup, agents=args.agents, planner=args.planner,
+                           seed=args.seed, robots=args.robots, run_id=args.run,
+                           runs_dir=args.runs_dir)
+    if args.step == "scenario":
+        prepare_scenario(options)
+        return EXIT_OK
+    return await_and_report(options, args.connect, args.startup_timeout_s, args.time_scale)

@@ -1,0 +1,371 @@
+"""System test of the docker-compose demo (Dockerfile, compose.yaml, compose.setup-g.yaml).
+
+Builds the image and runs the demo for real: the world, every robot and the orchestrator in
+containers of their own on a Compose network, talking only through Zenoh. Skipped, with the
+reason, where there is no Docker Engine or no Compose tool (or EIFP_SKIP_DOCKER is set).
+
+The base image: EIFP_BASE_IMAGE if set; else the local base eifp-swarm-base:bookworm if it
+exists (with the wheels from docker/fetch-wheels.sh), built first with
+docker/build-base-image.sh where root and debootstrap (or apt-get to install it) are at hand (about a minute; then kept
+for later runs); else python:3.11-slim from a registry. Every step has a deadline, every
+Compose project has a unique name, and `down -v` runs in ``finally``.
+
+Wall time measured on the 2-core development machine (Docker 20.10 on fuse-overlayfs,
+docker-compose 1.29.2), base image present: 2 min 16 s for the three tests with the build
+cache warm (build 2 s, setup D 50 s, the stopped-robot case 78 s); 3 min 32 s after a
+source change (78 s of rebuild). A change of the dependencies in pyproject.toml adds
+4-6 min, a build with no cache at all takes 3.5-6.5 min.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import time
+import uuid
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pytest
+import yaml
+
+pytestmark = [pytest.mark.system, pytest.mark.docker, pytest.mark.timeout(2400)]
+
+REPO = Path(__file__).resolve().parents[2]
+LOCAL_BASE_IMAGE = "eifp-swarm-base:bookworm"
+REGISTRY_BASE_IMAGE = "python:3.11-slim"
+TEST_IMAGE = "eifp-swarm:test"
+"""A tag of its own (kept between runs, so the build cache keeps serving it)."""
+
+DOCKER_INFO_S = 30.0
+BASE_IMAGE_S = 900.0
+WHEELS_S = 600.0
+BUILD_S = 1200.0
+UP_S = 180.0
+"""Creating and starting the containers (detached)."""
+RUN_S = 600.0
+"""A whole setup-D run: start-up, 140 s of sim time at most, the report."""
+EXEC_S = 30.0
+DOWN_S = 120.0
+ROBOTS_D = 4
+
+
+def _run(cmd: list[str], timeout_s: float, env: dict[str, str] | None = None,
+         check: bool = True) -> subprocess.CompletedProcess[str]:
+    try:
+        proc = subprocess.run(cmd, cwd=REPO, env=env, capture_output=True, text=True,
+                              timeout=timeout_s, check=False)
+    except subprocess.TimeoutExpired as exc:
+        pytest.fail(f"{' '.join(cmd)} did not finish within {timeout_s:.0f} s; output:\n"
+                    f"{(exc.stdout or b'')[-3000:]!r}\n{(exc.stderr or b'')[-3000:]!r}")
+    if check and proc.returncode != 0:
+        pytest.fail(f"{' '.join(cmd)} exited {proc.returncode}:\n{proc.stdout[-3000:]}\n"
+                    f"{proc.stderr[-3000:]}")
+    return proc
+
+
+def _compose_command() -> list[str] | None:
+    for cmd in (["docker", "compose"], ["docker-compose"]):
+        if shutil.which(cmd[0]) is None:
+            continue
+        try:
+            ok = subprocess.run([*cmd, "version"], capture_output=True, timeout=30,
+                                check=False).returncode == 0
+        except (OSError, subprocess.TimeoutExpired):
+            ok = False
+        if ok:
+            return cmd
+    return None
+
+
+def _image_exists(image: str) -> bool:
+    return subprocess.run(["docker", "image", "inspect", image], capture_output=True,
+                          timeout=30, check=False).returncode == 0
+
+
+@dataclass
+class DockerSetup:
+    """How this machine runs the demo: the Compose command, the environment, timings."""
+
+    compose: list[str]
+    env: dict[str, str]
+    timings: dict[str, float] = field(default_factory=dict)
+
+
+@pytest.fixture(scope="module")
+def compose_command() -> list[str]:
+    """`docker compose` or `docker-compose` (else skip)."""
+    if os.environ.get("EIFP_SKIP_DOCKER"):
+        pytest.skip("EIFP_SKIP_DOCKER is set")
+    compose = _compose_command()
+    if compose is None:
+        pytest.skip("neither `docker compose` nor `docker-compose` works on this machine")
+    return compose
+
+
+@pytest.fixture(scope="module")
+def docker_setup(compose_command: list[str]) -> DockerSetup:
+    """Check for a Docker Engine (else skip), get a base image, build the demo's image."""
+    if shutil.which("docker") is None:
+        pytest.skip("no docker command on PATH: the demo needs a Docker Engine")
+    try:
+        info = subprocess.run(["docker", "info", "--format", "{{.ServerVersion}}"],
+                              capture_output=True, text=True, timeout=DOCKER_INFO_S, check=False)
+    except subprocess.TimeoutExpired:
+        pytest.skip(f"`docker info` did not answer within {DOCKER_INFO_S:.0f} s: "
+                    "no usable Docker Engine")
+    if info.returncode != 0:
+        reason = (info.stderr.strip().splitlines() or ["no output"])[-1]
+        pytest.skip(f"no usable Docker Engine (`docker info` failed: {reason})")
+    compose = compose_command
+
+    timings: dict[str, float] = {}
+    base = os.environ.get("EIFP_BASE_IMAGE")
+    if base is None:
+        # build-base-image.sh installs debootstrap with apt-get when it is missing.
+        can_debootstrap = bool(shutil.which("debootstrap") or Path("/usr/sbin/debootstrap").exists()
+                               or shutil.which("apt-get")) and os.geteuid() == 0
+        if _image_exists(LOCAL_BASE_IMAGE) or can_debootstrap:
+            base = LOCAL_BASE_IMAGE
+        else:
+            base = REGISTRY_BASE_IMAGE
+    if base == LOCAL_BASE_IMAGE:
+        t0 = time.monotonic()
+        _run([str(REPO / "docker/build-base-image.sh")], BASE_IMAGE_S)
+        timings["base_image_s"] = time.monotonic() - t0
+        t0 = time.monotonic()
+        _run([str(REPO / "docker/fetch-wheels.sh")], WHEELS_S)
+        timings["wheels_s"] = time.monotonic() - t0
+    env = {**os.environ, "BASE_IMAGE": base, "EIFP_IMAGE": TEST_IMAGE}
+    env.pop("COMPOSE_PROJECT_NAME", None)
+    env.pop("COMPOSE_FILE", None)
+    t0 = time.monotonic()
+    _run([*compose, "-p", f"eifpbuild{uuid.uuid4().hex[:8]}", "build", "world"], BUILD_S, env)
+    timings["build_s"] = time.monotonic() - t0
+    return DockerSetup(compose, env, timings)
+
+
+class Demo:
+    """One Compose project of the demo (a unique project name and run id)."""
+
+    def __init__(self, setup: DockerSetup, tag: str, time_scale: float = 1.0,
+                 files: tuple[str, ...] = ("compose.yaml",)) -> None:
+        suffix = uuid.uuid4().hex[:8]
+        self.project = f"eifptest{tag}{suffix}"
+        self.run_id = f"test-{tag}-{suffix}"
+        self.env = {**setup.env, "RUN_ID": self.run_id, "TIME_SCALE": repr(time_scale)}
+        self.base = [*setup.compose, "-p", self.project]
+        for f in files:
+            self.base += ["-f", f]
+
+    def compose(self, *args: str, timeout_s: float, check: bool = True
+                ) -> subprocess.CompletedProcess[str]:
+        return _run([*self.base, *args], timeout_s, self.env, check=check)
+
+    def containers(self) -> dict[str, dict]:
+        """service -> `docker inspect` of its container (by Compose's labels)."""
+        ids = _run(["docker", "ps", "-a", "-q", "--filter",
+                    f"label=com.docker.compose.project={self.project}"], EXEC_S).stdout.split()
+        if not ids:
+            return {}
+        found = json.loads(_run(["docker", "inspect", *ids], EXEC_S).stdout)
+        out: dict[str, dict] = {}
+        for c in found:
+            service = c["Config"]["Labels"]["com.docker.compose.service"]
+            assert service not in out, f"service {service} has more than one container"
+            out[service] = c
+        return out
+
+    def container_id(self, service: str) -> str:
+        containers = self.containers()
+        assert service in containers, f"no container for {service}: {sorted(containers)}"
+        return containers[service]["Id"]
+
+    def logs(self, service: str) -> str:
+        proc = _run(["docker", "logs", self.container_id(service)], EXEC_S)
+        return proc.stdout + proc.stderr
+
+    def read_run_file(self, name: str) -> str:
+        """A file of the running run, read inside the orchestrator's container."""
+        proc = _run(["docker", "exec", self.container_id("orchestrator"), "cat",
+                     f"/runs/{self.run_id}/{name}"], EXEC_S, check=False)
+        return proc.stdout if proc.returncode == 0 else ""
+
+    def events(self) -> list[dict]:
+        return [json.loads(line) for line in self.read_run_file("events.jsonl").splitlines()
+                if line.endswith("}")]
+
+    def wait_event(self, kind: str, deadline_s: float) -> dict:
+        deadline = time.monotonic() + deadline_s
+        while time.monotonic() < deadline:
+            for event in self.events():
+                if event.get("kind") == kind:
+                    return event
+            state = self.containers().get("orchestrator", {}).get("State", {})
+            if state and not state.get("Running"):
+                pytest.fail(f"the orchestrator exited ({state.get('ExitCode')}) before a "
+                            f"{kind!r} event:\n{self.logs('orchestrator')[-3000:]}")
+            time.sleep(0.5)
+        pytest.fail(f"no {kind!r} event within {deadline_s:.0f} s; events: {self.events()}")
+
+    def wait_exit(self, service: str, deadline_s: float) -> int:
+        proc = _run(["docker", "wait", self.container_id(service)], deadline_s)
+        return int(proc.stdout.strip())
+
+    def copy_run(self, dest: Path) -> Path:
+        """The run directory, copied out of the volume (through the stopped orchestrator)."""
+        target = dest / self.run_id
+        _run(["docker", "cp", f"{self.container_id('orchestrator')}:/runs/{self.run_id}",
+              str(target)], EXEC_S)
+        return target
+
+    def down(self) -> None:
+        self.compose("down", "--volumes", "--remove-orphans", "--timeout", "10",
+                     timeout_s=DOWN_S, check=False)
+
+
+@pytest.fixture
+def demo_factory(docker_setup: DockerSetup) -> Iterator:
+    demos: list[Demo] = []
+
+    def make(tag: str, **kwargs: object) -> Demo:
+        demo = Demo(docker_setup, tag, **kwargs)
+        demos.append(demo)
+        return demo
+
+    try:
+        yield make
+    finally:
+        for demo in demos:
+            demo.down()
+        leftovers = [d.project for d in demos if d.containers()]
+        assert not leftovers, f"containers left behind by {leftovers}"
+
+
+def robot_services(n: int) -> list[str]:
+    return [f"robot-{k}" for k in range(n)]
+
+
+def assert_run_files(run_dir: Path) -> None:
+    for name in ("scenario.yaml", "trajectory.csv", "commands.csv", "events.jsonl",
+                 "metrics.json", "report.txt", "run.json", "trajectory.png"):
+        path = run_dir / name
+        assert path.is_file() and path.stat().st_size > 0, f"{path} missing or empty"
+
+
+def test_setup_d_runs_end_to_end(docker_setup: DockerSetup, demo_factory, tmp_path: Path
+                                 ) -> None:
+    """`compose up` (attached, as a user runs it): every robot arrives, no contact."""
+    demo = demo_factory("d")
+    t0 = time.monotonic()
+    up = demo.compose("up", "--no-build", timeout_s=RUN_S, check=False)
+    docker_setup.timings["setup_d_up_s"] = time.monotonic() - t0
+    containers = demo.containers()
+    assert sorted(containers) == sorted(["world", "orchestrator", *robot_services(ROBOTS_D)])
+    states = {s: c["State"] for s, c in containers.items()}
+    assert all(not st["Running"] for st in states.values()), states
+    assert states["orchestrator"]["ExitCode"] == 0, (
+        f"orchestrator exit {states['orchestrator']['ExitCode']}:\n{up.stdout[-5000:]}")
+    assert states["world"]["ExitCode"] == 0
+
+    # Each robot ran in a container of its own, as its own process, and left on the end.
+    robots = [containers[s] for s in robot_services(ROBOTS_D)]
+    assert len({c["Id"] for c in robots}) == ROBOTS_D
+    assert len({c["Config"]["Hostname"] for c in robots}) == ROBOTS_D
+    for k, c in enumerate(robots):
+        assert c["State"]["ExitCode"] == 0
+        assert c["Config"]["Env"].count(f"ROBOT_ID={k}") == 1
+        log = demo.logs(f"robot-{k}")
+        assert f"robot {k} exit: reason='end (all_arrived)' code=0" in log, log[-2000:]
+        for other in set(range(ROBOTS_D)) - {k}:
+            assert f"robot {other}:" not in log  # no other robot's process in this container
+
+    run_dir = demo.copy_run(tmp_path)
+    assert_run_files(run_dir)
+    metrics = json.loads((run_dir / "metrics.json").read_text())
+    assert metrics["success"] is True
+    assert metrics["contacts"] == 0
+    assert metrics["robots"] == ROBOTS_D and metrics["arrived"] == ROBOTS_D
+    events = [json.loads(line) for line in (run_dir / "events.jsonl").read_text().splitlines()]
+    joined = {e["robot"] for e in events if e["kind"] == "robot_joined"}
+    assert joined == set(range(ROBOTS_D))
+    end = [e for e in events if e["kind"] == "end"]
+    assert len(end) == 1 and end[0]["reason"] == "all_arrived" and end[0]["contacts"] == 0
+    assert not [e for e in events if e["kind"] in ("contact", "robot_lost")]
+    rows = (run_dir / "trajectory.csv").read_text().splitlines()[1:]
+    assert {int(r.split(",")[1]) for r in rows} == set(range(ROBOTS_D))
+    run = json.loads((run_dir / "run.json").read_text())
+    assert run["mode"] == "docker-compose" and run["run_id"] == demo.run_id
+    assert "success                          yes" in (run_dir / "report.txt").read_text()
+    print(f"\ndocker demo timings: {docker_setup.timings}")
+
+
+STOPPED_ROBOT = 2
+"""Robot 2 drives from (-18, 0) to (18, 0); stopped early it sits in robot 0's lane."""
+STOP_AT_SIM_S = 5.0
+TIME_SCALE_STOP_CASE = 2.0
+"""The stopped robot never arrives, so the run lasts its whole time limit (140 s of sim
+time): run at twice real time to keep the test short."""
+
+
+def test_stopped_robot_container_leaves_no_contact(docker_setup: DockerSetup, demo_factory,
+                                                   tmp_path: Path) -> None:
+    """One robot's container is stopped mid-run: it is lost and braked, the others go around
+    it, the run ends at the time limit with no contact; the status says "not all arrived"."""
+    demo = demo_factory("stop", time_scale=TIME_SCALE_STOP_CASE)
+    t0 = time.monotonic()
+    demo.compose("up", "--no-build", "--detach", timeout_s=UP_S)
+    start = demo.wait_event("start", UP_S + 300.0)
+    # Stop the robot STOP_AT_SIM_S of sim time after the start (the start event's wall stamp).
+    stop_at_wall = start["wall"] + STOP_AT_SIM_S / TIME_SCALE_STOP_CASE
+    time.sleep(max(0.0, stop_at_wall - time.time()))
+    _run(["docker", "stop", "--time", "10", demo.container_id(f"robot-{STOPPED_ROBOT}")], 60.0)
+    status = demo.wait_exit("orchestrator", RUN_S)
+    docker_setup.timings["stopped_robot_case_s"] = time.monotonic() - t0
+
+    containers = demo.containers()
+    assert all(not c["State"]["Running"] for c in containers.values())
+    logs = demo.logs("orchestrator")
+    assert status == 1, f"orchestrator exit {status} (expected 1: not all arrived):\n{logs[-4000:]}"
+    stopped_log = demo.logs(f"robot-{STOPPED_ROBOT}")
+    assert f"robot {STOPPED_ROBOT} exit: reason='signal' code=0" in stopped_log, stopped_log[-2000:]
+
+    run_dir = demo.copy_run(tmp_path)
+    assert_run_files(run_dir)
+    events = [json.loads(line) for line in (run_dir / "events.jsonl").read_text().splitlines()]
+    lost = [e for e in events if e["kind"] == "robot_lost"]
+    assert [e["robot"] for e in lost] == [STOPPED_ROBOT]
+    assert lost[0]["t"] > 0.0  # mid-run, not before the start
+    assert not [e for e in events if e["kind"] == "contact"]
+    end = [e for e in events if e["kind"] == "end"]
+    assert len(end) == 1 and end[0]["contacts"] == 0
+    assert end[0]["reason"] == "time_limit" and end[0]["lost"] == [STOPPED_ROBOT]
+    others = set(range(ROBOTS_D)) - {STOPPED_ROBOT}
+    assert set(end[0]["arrived"]) == others
+    metrics = json.loads((run_dir / "metrics.json").read_text())
+    assert metrics["contacts"] == 0 and metrics["success"] is False
+    assert metrics["arrived"] == len(others)
+    assert f"robots lost during the run: [{STOPPED_ROBOT}]" in (run_dir / "report.txt").read_text()
+    print(f"\ndocker demo timings: {docker_setup.timings}")
+
+
+def test_setup_g_override_runs_16_robot_containers(compose_command: list[str]) -> None:
+    """compose.setup-g.yaml turns the demo into setup G: 16 robot services, ids 0..15 (the
+    configuration only, no engine needed; the 16-container run is too heavy for every CI
+    run)."""
+    setup = DockerSetup(compose_command, {**os.environ, "EIFP_IMAGE": TEST_IMAGE})
+    demo = Demo(setup, "g", files=("compose.yaml", "compose.setup-g.yaml"))
+    config = yaml.safe_load(demo.compose("config", timeout_s=EXEC_S).stdout)
+    services = config["services"]
+    robots = {name: s for name, s in services.items() if name.startswith("robot-")}
+    assert sorted(robots) == sorted(robot_services(16))
+    ids = sorted(int(s["environment"]["ROBOT_ID"]) for s in robots.values())
+    assert ids == list(range(16))
+    for name in ("world", "orchestrator"):
+        env = services[name]["environment"]
+        assert env["SETUP"] == "setup_g" and str(env["ROBOTS"]) == "16"
+        assert env["RUN_ID"] == demo.run_id
+    assert all(s["environment"]["RUN_ID"] == demo.run_id for s in robots.values())
