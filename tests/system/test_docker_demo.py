@@ -6,7 +6,8 @@ reason, where there is no Docker Engine or no Compose tool (or EIFP_SKIP_DOCKER 
 
 The base image: EIFP_BASE_IMAGE if set; else the local base eifp-swarm-base:bookworm if it
 exists (with the wheels from docker/fetch-wheels.sh), built first with
-docker/build-base-image.sh where root and debootstrap (or apt-get to install it) are at hand (about a minute; then kept
+docker/build-base-image.sh where root and debootstrap (or apt-get to install it) are at
+hand (about a minute; then kept
 for later runs); else python:3.11-slim from a registry. Every step has a deadline, every
 Compose project has a unique name, and `down -v` runs in ``finally``.
 
