@@ -95,6 +95,13 @@ class PlannerConfig:
         threat_commitment: eIFP keeps resolving a threat it chose a side for until it has
             passed it (TCPA <= 0), instead of dropping it when its own swerve makes the
             threat's DCPA exceed D_thresh (which makes the robot weave).
+        encounter_rules: eIFP follows the shared give-way/stand-on convention of
+            `agent.encounters` against other robots (not in the paper; False: the paper's
+            eIFP, cost-based sides only).
+        stand_on_emergency_s: a robot standing on resolves the other after all once TCPA
+            is below this with DCPA inside the inflated radius (`agent.encounters`).
+        spline_clamp_heading: the reference spline leaves the robot along its heading
+            (clamped start) instead of the paper's natural end conditions.
         estimation_window_s: history length used to estimate others' velocity and linearity.
         lookahead_s: how far ahead on the reference the tracking law aims.
         heading_gain: proportional gain of the tracking law on heading error [1/s].
@@ -116,6 +123,9 @@ class PlannerConfig:
     side_hysteresis: float = 0.15
     right_hand_margin: float = 0.05
     threat_commitment: bool = False
+    encounter_rules: bool = True
+    spline_clamp_heading: bool = False
+    stand_on_emergency_s: float = 2.0
     estimation_window_s: float = 0.5
     lookahead_s: float = 0.6
     heading_gain: float = 2.5

@@ -50,12 +50,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
 from agent.config import PlannerConfig
+from agent.encounters import Role, encounter_roles, update_role_memory
 from agent.ifp import CandidateSelector, ViaPlan, plan_via_points
-from agent.threats import as_complex
+from agent.threats import as_complex, nearby_others, rank_threats
 from agent.types import Observation, Others, Side
 from agent.viapoints import SIDES, inflated_radius
 
@@ -229,6 +231,7 @@ def cost_selector(
     config: PlannerConfig,
     others: Others,
     side_memory: Mapping[int, Side],
+    give_way_ids: frozenset[int] = frozenset(),
 ) -> CandidateSelector:
     """The eIFP candidate selector for one cycle (plugs into `ifp.plan_via_points`).
 
@@ -237,6 +240,9 @@ def cost_selector(
         config: weights, ghost horizon, ghost clearance, hysteresis.
         others: the neighbours the cycle plans against.
         side_memory: threat id -> side chosen last time.
+        give_way_ids: others given way to (`agent.encounters`): their RIGHT candidate is
+            taken whenever it is feasible, whatever the cost (both robots of an encounter
+            must follow the same convention for it to work).
     """
     ids, is_robot = others.ids, others.is_robot
     paths: list[GhostPaths] = []  # built on first use: most cycles have no threat
@@ -251,6 +257,8 @@ def cost_selector(
         feasible = (times[0] < math.inf, times[1] < math.inf)
         if not (feasible[0] or feasible[1]):
             return None
+        if int(ids[k]) in give_way_ids:
+            return _RIGHT if feasible[_RIGHT] else 1 - _RIGHT
         if not paths:
             if config.ghost_clearance_m is None:
                 clearance = inflated_radius(
@@ -281,6 +289,7 @@ def plan_eifp(
     config: PlannerConfig,
     side_memory: Mapping[int, Side] | None = None,
     timer: Callable[[], float] | None = None,
+    encounters: Encounters | None = None,
 ) -> ViaPlan:
     """One eIFP cycle: IFP's iteration with cost-based candidate selection (Eqs. 14-16).
 
@@ -289,18 +298,74 @@ def plan_eifp(
         config: planner parameters.
         side_memory: threat id -> side chosen last time (None: no memory). Use
             `update_side_memory` to carry it to the next cycle, or `EifpSelector`.
+        timer: a wall clock for the stage timings only.
+        encounters: this cycle's encounter rules (`assess_encounters`); None: none (the
+            paper's eIFP).
 
     Raises:
         ValueError: on non-finite inputs or configuration.
     """
     memory = side_memory or {}
     committed = frozenset(memory) if config.threat_commitment else frozenset()
+    ignored: frozenset[int] = frozenset()
+    give_way: frozenset[int] = frozenset()
+    if encounters is not None:
+        ignored, give_way = encounters.stand_on_ids, encounters.give_way_ids
+        # A give-way manoeuvre is kept until the other is passed, or it would be undone as
+        # soon as it works (the swerve pushes DCPA past D_thresh).
+        committed |= give_way & frozenset(memory)
     return plan_via_points(
         observation,
         config,
-        lambda others: cost_selector(observation, config, others, memory),
+        lambda others: cost_selector(observation, config, others, memory, give_way),
         committed,
         timer,
+        ignored,
+    )
+
+
+@dataclass(frozen=True)
+class Encounters:
+    """One cycle's encounter roles (`agent.encounters`), by id.
+
+    Args:
+        give_way_ids: others resolved on their RIGHT tangent.
+        stand_on_ids: others left to give way themselves.
+        memory: the role memory to carry to the next cycle.
+    """
+
+    give_way_ids: frozenset[int]
+    stand_on_ids: frozenset[int]
+    memory: dict[int, Role]
+
+
+def assess_encounters(
+    observation: Observation, config: PlannerConfig, memory: Mapping[int, Role]
+) -> Encounters:
+    """Classify the encounters of this cycle (see `agent.encounters`).
+
+    Uses the same neighbours (sensing radius, cap) and the same Eq. (5) quantities as the
+    via-point cycle.
+    """
+    ego = observation.ego
+    p = np.array([ego.x_m, ego.y_m])
+    others = nearby_others(p, observation.others, config.sensing_radius_m, config.max_neighbors)
+    if len(others) == 0:
+        return Encounters(frozenset(), frozenset(), {})
+    v_r = ego.v_mps * np.array([math.cos(ego.heading_rad), math.sin(ego.heading_rad)])
+    index, tcpa, dcpa = rank_threats(
+        p, v_r, others, config.dcpa_threshold_m(observation.radius_m), config.t_max_s
+    )
+    radius = inflated_radius(observation.radius_m, others.radius_m, config.d_safety_m)
+    roles = encounter_roles(ego.heading_rad, ego.v_mps, p, others, tcpa, dcpa, radius,
+                            config.stand_on_emergency_s, memory)
+    threat = np.zeros(len(others), dtype=bool)
+    threat[index] = True
+    ids = others.ids
+    return Encounters(
+        give_way_ids=frozenset(ids[roles == int(Role.GIVE_WAY)].tolist()),
+        stand_on_ids=frozenset(ids[roles == int(Role.STAND_ON)].tolist()),
+        memory=update_role_memory(others, roles, tcpa, threat, memory),
     )
 
 
@@ -332,6 +397,7 @@ class EifpSelector:
     def __init__(self, config: PlannerConfig) -> None:
         self.config = config
         self._memory: dict[int, Side] = {}
+        self._roles: dict[int, Role] = {}
 
     @property
     def side_memory(self) -> dict[int, Side]:
@@ -342,10 +408,15 @@ class EifpSelector:
         self, observation: Observation, timer: Callable[[], float] | None = None
     ) -> ViaPlan:
         """Plan one cycle and remember the sides chosen (see `plan_eifp`)."""
-        plan = plan_eifp(observation, self.config, self._memory, timer)
+        encounters = None
+        if self.config.encounter_rules:
+            encounters = assess_encounters(observation, self.config, self._roles)
+            self._roles = encounters.memory
+        plan = plan_eifp(observation, self.config, self._memory, timer, encounters)
         self._memory = update_side_memory(self._memory, plan, observation.others.ids)
         return plan
 
     def reset(self) -> None:
-        """Forget every remembered side."""
+        """Forget every remembered side and encounter role."""
         self._memory.clear()
+        self._roles.clear()

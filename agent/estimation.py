@@ -26,7 +26,10 @@ class NeighborTracker:
     Args:
         own_id: this robot's id (excluded from the estimates).
         window_s: history length used for the estimates.
-        max_samples: ring size H; older samples fall out even inside the window.
+        max_samples: ring size H. Samples are kept at least window_s / (H - 2) apart (a
+            newer snapshot closer than that to the one before the newest replaces the
+            newest), so the window holds the same history whether poses arrive at the
+            world's rate (50 Hz in a distributed run) or once per control period (lockstep).
     """
 
     def __init__(self, own_id: int, window_s: float = 0.5, max_samples: int = 8) -> None:
@@ -37,6 +40,7 @@ class NeighborTracker:
         self.own_id = int(own_id)
         self.window_s = float(window_s)
         self.max_samples = int(max_samples)
+        self.spacing_s = self.window_s / max(self.max_samples - 2, 1) - 1e-9
         self._col: dict[int, int] = {}
         self._ids = np.zeros(0, dtype=np.int64)
         self._radius = np.zeros(0)
@@ -71,7 +75,9 @@ class NeighborTracker:
             self._grow(new)
         cols = np.fromiter((self._col[int(i)] for i in ids.tolist()), dtype=np.int64,
                            count=ids.shape[0])
-        self._row = (self._row + 1) % self.max_samples
+        before = self._t[(self._row - 1) % self.max_samples] if self._row >= 0 else -np.inf
+        if self._row < 0 or snapshot.stamp_s - before >= self.spacing_s:
+            self._row = (self._row + 1) % self.max_samples  # else: replace the newest
         r = self._row
         self._t[r] = snapshot.stamp_s
         self._seen[r] = False

@@ -35,6 +35,10 @@ Choices the paper leaves open (documented here, tested in tests/agent/test_ifp.p
   into a pushed via-point still clears the disc (it runs outside the tangent line).
 - A candidate is only built from a leg start outside the disc by more than
   `ON_DISC_REL_TOL` of L.
+- Step 3 drops threats whose TCPA is more than `GOAL_TCPA_MARGIN_S` past the time the
+  robot needs to reach its goal at top speed: near the goal the measured velocity of an
+  overshoot points at whoever stands beyond it, and resolving that sends the robot round
+  its goal. Such others still count on the legs of step 4.
 - `ViaPlan.via_point_m` is the first via-point after P (where the robot heads now), with
   the side and the id of the threat that via-point resolves.
 """
@@ -66,6 +70,10 @@ COMMIT_RELEASE_FACTOR = 2.0
 
 # Closest approaches this close to L still clear the disc [m] (tangent legs, rounding).
 LEG_GRAZE_TOL_M = 1.0e-6
+
+# Eq. (5) threats whose TCPA exceeds the time to the goal at top speed by more than this
+# are not resolved [s].
+GOAL_TCPA_MARGIN_S = 0.5
 
 # How far outside its inflated disc a via-point is placed [m].
 VIA_MARGIN_M = 0.05
@@ -193,6 +201,7 @@ def plan_via_points(
     make_selector: Callable[[Others], CandidateSelector],
     committed_ids: frozenset[int] = frozenset(),
     timer: Callable[[], float] | None = None,
+    ignored_ids: frozenset[int] = frozenset(),
 ) -> ViaPlan:
     """The IFP cycle (module docstring) with a pluggable candidate selector.
 
@@ -207,6 +216,9 @@ def plan_via_points(
             robot's own swerve has pushed their DCPA past D_thresh.
         timer: a wall clock, only to time the threat assessment (`ViaPlan.threats_s`);
             it never influences the plan.
+        ignored_ids: others the robot leaves to themselves (eIFP's stand-on encounters,
+            `agent.encounters`): never resolved, on no leg; still escaped from if the robot
+            is inside their inflated disc, and still listed in `ViaPlan.threats`.
 
     Raises:
         ValueError: on non-finite inputs or configuration.
@@ -229,6 +241,15 @@ def plan_via_points(
     if committed_ids and len(others):
         index = _with_committed(index, tcpa, others, committed_ids, config.t_max_s)
     threats = threat_records(index, tcpa, dcpa, others)
+    # Closest approaches after the robot can be at its goal are not its business: near the
+    # goal, an overshoot would otherwise point the measured velocity at someone beyond it
+    # and send the robot round the goal. The leg to the goal is still checked below.
+    to_goal_s = math.hypot(goal[0] - p[0], goal[1] - p[1]) / float(observation.limits.v_max_mps)
+    index = index[tcpa[index] <= to_goal_s + GOAL_TCPA_MARGIN_S]
+    ignored = np.zeros(len(others), dtype=bool)
+    if ignored_ids and len(others):
+        ignored = np.isin(others.ids, np.fromiter(ignored_ids, dtype=np.int64))
+        index = index[~ignored[index]]
     threats_s = timer() - t_start if timer is not None else 0.0
     if len(others) == 0:
         return ViaPlan(status=PlanStatus.OK, waypoints_m=np.stack((p, goal)), threats=threats,
@@ -271,7 +292,7 @@ def plan_via_points(
 
     # Iteration: re-check every leg from `first` on; split the first resolvable one.
     velocity = as_complex(others.velocity_mps)
-    clearance = radius - LEG_GRAZE_TOL_M
+    clearance = np.where(ignored, -math.inf, radius - LEG_GRAZE_TOL_M)
     first = 0
     while len(wps) - 2 < config.max_depth:
         arrival = [0.0, *itertools.accumulate(abs(b - a) / speed for a, b in zip(wps, wps[1:]))]

@@ -37,6 +37,10 @@ Timer = Callable[[], float]
 ARRIVAL_FRACTION = 0.5
 """A planner stops when closer to its goal than this fraction of the goal tolerance."""
 
+CLAMP_MIN_SPEED_MPS = 0.2
+"""Below this speed the reference spline starts natural: a robot that (nearly) stands can
+turn on the spot, and a reference forced along its heading would send it the wrong way."""
+
 CONTROL_PERIOD_S = 0.1
 """Default command period: the rate limits of the tracking laws use it."""
 
@@ -138,6 +142,7 @@ class ViaPointPlanner:
         ref = build_reference(
             via.waypoints_m, ego.heading_rad, limits.v_max_mps, limits.accel_max_mps2,
             mpc_cfg.dt_s, mpc_cfg.horizon_steps, v_start_mps=ego.v_mps,
+            clamp_heading=cfg.spline_clamp_heading and ego.v_mps >= CLAMP_MIN_SPEED_MPS,
         )
         t2 = clock()
         last = np.array([ego.v_mps, ego.omega_radps])

@@ -114,6 +114,10 @@ def dedup_waypoints(
 class NaturalCubicSpline:
     """Natural cubic spline p(u) through M points, u = cumulative chord length.
 
+    With `start_tangent` the start is clamped instead (p'(0) given, the end stays natural):
+    the reference then leaves the robot along its heading, so a via-point that moves
+    between cycles bends the path ahead rather than turning the reference under the robot.
+
     Points are complex numbers x + iy, so one polynomial carries both coordinates. On
     segment i, with tau = u - u_i: p = a_i + b_i tau + c_i tau^2 + d_i tau^3. The interior
     second derivatives m solve the tridiagonal system
@@ -122,26 +126,35 @@ class NaturalCubicSpline:
 
     Args:
         points: M >= 2 complex points with distinct consecutive entries [m].
+        start_tangent: p'(0) as a complex number (a unit vector: |p'| ~ 1 in u), or None
+            for a natural start.
     """
 
-    def __init__(self, points: list[complex]) -> None:
+    def __init__(self, points: list[complex], start_tangent: complex | None = None) -> None:
         n = len(points) - 1  # segments
         h = [abs(q - p) for p, q in zip(points, points[1:])]
         slope = [(q - p) / hi for p, q, hi in zip(points, points[1:], h)]
         m = [0j] * (n + 1)
-        if n > 1:
+        # Rows of the tridiagonal system: sub, diagonal, super, right-hand side. A clamped
+        # start (p'(0) = start_tangent) adds row 0: 2 h_0 m_0 + h_0 m_1 = 6 (slope_0 - p'(0)).
+        rows = []
+        if start_tangent is not None:
+            rows.append((0.0, 2.0 * h[0], h[0], 6.0 * (slope[0] - start_tangent)))
+        rows += [(h[i - 1], 2.0 * (h[i - 1] + h[i]), h[i], 6.0 * (slope[i] - slope[i - 1]))
+                 for i in range(1, n)]
+        first = 0 if start_tangent is not None else 1
+        if rows:
             diag, rhs = [], []
-            for i in range(1, n):  # forward sweep over rows 1 .. n-1
-                d_i = 2.0 * (h[i - 1] + h[i])
-                r_i = 6.0 * (slope[i] - slope[i - 1])
+            for sub, d_i, _sup, r_i in rows:  # forward sweep
                 if diag:
-                    f = h[i - 1] / diag[-1]
-                    d_i -= f * h[i - 1]
+                    f = sub / diag[-1]
+                    d_i -= f * rows[len(diag) - 1][2]
                     r_i -= f * rhs[-1]
                 diag.append(d_i)
                 rhs.append(r_i)
-            for i in range(n - 1, 0, -1):  # back substitution
-                m[i] = (rhs[i - 1] - h[i] * m[i + 1]) / diag[i - 1]
+            for j in range(len(rows) - 1, -1, -1):  # back substitution; m_n = 0
+                i = first + j
+                m[i] = (rhs[j] - rows[j][2] * m[i + 1]) / diag[j]
         self.coef = np.array(
             [
                 (
@@ -257,6 +270,7 @@ def build_reference(
     horizon_steps: int,
     v_start_mps: float | None = None,
     min_spacing_m: float = MIN_WAYPOINT_SPACING_M,
+    clamp_heading: bool = False,
 ) -> Reference:
     """Spline the waypoints and sample it every dt_s at the speed profile.
 
@@ -272,6 +286,9 @@ def build_reference(
         horizon_steps: N; the reference has N + 1 samples (>= 1).
         v_start_mps: current speed for the ramp-up, or None (profile as the paper's spec).
         min_spacing_m: merge distance for near-duplicate waypoints [m].
+        clamp_heading: start the spline along `heading_rad` (clamped start) when there are
+            via-points (M >= 3) and the first one is less than 90 degrees off the heading;
+            otherwise (and for a two-point plan, a straight line) the start is natural.
 
     Returns:
         The sampled reference.
@@ -301,7 +318,13 @@ def build_reference(
             s_m=zeros.copy(),
             length_m=0.0,
         )
-    spline = NaturalCubicSpline([complex(x, y) for x, y in wp.tolist()])
+    tangent = None
+    if clamp_heading and wp.shape[0] >= 3:
+        tangent = complex(math.cos(heading_rad), math.sin(heading_rad))
+        chord = complex(wp[1, 0] - wp[0, 0], wp[1, 1] - wp[0, 1])
+        if (chord * tangent.conjugate()).real <= 0.0:
+            tangent = None  # the first via-point is behind: a clamped start would loop
+    spline = NaturalCubicSpline([complex(x, y) for x, y in wp.tolist()], tangent)
     if wp.shape[0] == 2:
         u_table = s_table = spline.knots  # a straight line: chord length is arc length
     else:

@@ -61,3 +61,19 @@ def test_rejects_bad_parameters():
         NeighborTracker(0, window_s=0.0)
     with pytest.raises(ValueError):
         NeighborTracker(0, max_samples=1)
+
+
+def test_fifty_hz_poses_keep_the_whole_window():
+    # A distributed robot observes every world tick (50 Hz); the ring keeps samples about
+    # window / (H - 2) apart, so the estimate still spans the 0.5 s window, not 8 ticks.
+    tr = NeighborTracker(own_id=0, window_s=0.5, max_samples=8)
+    for k in range(101):
+        t = 0.02 * k
+        tr.update(snap(t, k, [(1, 1.0 * t, 0.0)]))
+    o = tr.others()
+    age = 2.0 - o.track_start_m[0, 0]  # distance back at 1 m/s = age of the oldest sample
+    assert 0.4 <= age <= 0.5 + 1e-9
+    np.testing.assert_allclose(o.velocity_mps[0], [1.0, 0.0], atol=1e-9)
+    # The newest sample is always the newest snapshot.
+    tr.update(snap(2.01, 101, [(1, 5.0, 0.0)]))
+    np.testing.assert_allclose(tr.others().position_m[0], [5.0, 0.0])

@@ -240,3 +240,21 @@ def test_property_finite_inputs_give_a_finite_well_formed_plan(rows, v, heading,
     assert plan.status in (PlanStatus.OK, PlanStatus.ESCAPE, PlanStatus.NO_FEASIBLE)
     if plan.via_point_m is not None:
         np.testing.assert_array_equal(plan.via_point_m, wps[1])
+
+
+def test_ignored_others_are_neither_resolved_nor_on_any_leg_but_still_escaped():
+    from agent.ifp import plan_via_points
+
+    # Two discs on the way: ignoring 1 (a stand-on encounter) resolves only 2.
+    o = others([[4, 0], [8, -0.6]])
+    obs = observe(o, v=1.0, goal=(14.0, 0.0))
+    plan = plan_via_points(obs, CFG, lambda _o: select_earliest, ignored_ids=frozenset({1}))
+    assert {i for i, _ in plan.resolved_sides} == {2}
+    assert 1 in [t.other_id for t in plan.threats]  # still reported
+    # Ignoring both: the direct line.
+    both = plan_via_points(obs, CFG, lambda _o: select_earliest, ignored_ids=frozenset({1, 2}))
+    assert both.waypoints_m.shape == (2, 2) and both.resolved_sides == ()
+    # Inside an ignored disc: still the escape.
+    inside = plan_via_points(observe(others([[0.5, 0]]), v=1.0), CFG,
+                             lambda _o: select_earliest, ignored_ids=frozenset({1}))
+    assert inside.status is PlanStatus.ESCAPE

@@ -211,3 +211,32 @@ def test_property_finite_waypoints_give_a_finite_reference(wps, heading, v_max, 
     assert np.all(ref.v_mps >= 0.0) and np.all(ref.v_mps <= v_max + 1e-12)
     assert np.all(np.diff(ref.s_m) >= -1e-12) and ref.s_m[-1] <= ref.length_m + 1e-9
     assert abs(ref.heading_rad[0] - heading) <= math.pi + 1e-9
+
+
+def test_clamped_start_matches_scipy_and_leaves_along_the_heading():
+    from scipy.interpolate import CubicSpline
+
+    from agent.spline import NaturalCubicSpline
+
+    pts = [0j, 3 + 1j, 5 - 2j, 9 + 0.5j]
+    tangent = complex(math.cos(0.3), math.sin(0.3))
+    ours = NaturalCubicSpline(pts, tangent)
+    ref = CubicSpline(ours.knots, np.array(pts), bc_type=((1, tangent), (2, 0.0)))
+    u = np.linspace(0.0, ours.knots[-1], 57)
+    p, dp, _ = ours.evaluate(u)
+    np.testing.assert_allclose(p, ref(u), atol=1e-10)
+    np.testing.assert_allclose(dp, ref(u, 1), atol=1e-10)
+    assert dp[0] == pytest.approx(tangent)
+
+
+def test_clamp_heading_only_with_a_via_point_ahead():
+    from agent.spline import build_reference
+
+    wp = np.array([[0.0, 0.0], [4.0, 2.0], [10.0, 0.0]])
+    natural = build_reference(wp, 0.0, 1.0, 1.0, 0.1, 20)
+    clamped = build_reference(wp, 0.0, 1.0, 1.0, 0.1, 20, clamp_heading=True)
+    assert abs(clamped.heading_rad[0]) < 1e-9 < abs(natural.heading_rad[0])
+    # A via-point behind the robot: a clamped start would loop, so the start stays natural.
+    behind = build_reference(wp, math.pi, 1.0, 1.0, 0.1, 20, clamp_heading=True)
+    np.testing.assert_allclose(behind.heading_rad[0] - 2 * math.pi * round(
+        behind.heading_rad[0] / (2 * math.pi)), natural.heading_rad[0], atol=1e-12)
