@@ -101,7 +101,8 @@ class PlannerConfig:
         stand_on_emergency_s: a robot standing on resolves the other after all once TCPA
             is below this with DCPA inside the inflated radius (`agent.encounters`).
         spline_clamp_heading: the reference spline leaves the robot along its heading
-            (clamped start) instead of the paper's natural end conditions.
+            (clamped start) when the first via-point is within 30 degrees of it, instead of
+            the paper's natural end conditions (`agent.spline.build_reference`).
         estimation_window_s: history length used to estimate others' velocity and linearity.
         lookahead_s: how far ahead on the reference the tracking law aims.
         heading_gain: proportional gain of the tracking law on heading error [1/s].
@@ -124,7 +125,7 @@ class PlannerConfig:
     right_hand_margin: float = 0.05
     threat_commitment: bool = False
     encounter_rules: bool = True
-    spline_clamp_heading: bool = False
+    spline_clamp_heading: bool = True
     stand_on_emergency_s: float = 2.0
     estimation_window_s: float = 0.5
     lookahead_s: float = 0.6

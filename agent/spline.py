@@ -31,6 +31,13 @@ import numpy as np
 
 from agent.threats import require_finite
 
+# A clamped start is used only when the first via-point lies within this angle of the
+# heading: then the clamp smooths the small cycle-to-cycle moves of the via-point (which
+# otherwise couple two robots' weaving through their velocity estimates); a sharper turn
+# (an emergency, or a new threat) starts natural so the robot turns at once.
+CLAMP_MAX_OFF_HEADING_RAD = math.radians(30.0)
+CLAMP_MAX_COS = math.cos(CLAMP_MAX_OFF_HEADING_RAD)
+
 # Consecutive waypoints closer than this are merged [m].
 MIN_WAYPOINT_SPACING_M = 1.0e-3
 
@@ -287,8 +294,8 @@ def build_reference(
         v_start_mps: current speed for the ramp-up, or None (profile as the paper's spec).
         min_spacing_m: merge distance for near-duplicate waypoints [m].
         clamp_heading: start the spline along `heading_rad` (clamped start) when there are
-            via-points (M >= 3) and the first one is less than 90 degrees off the heading;
-            otherwise (and for a two-point plan, a straight line) the start is natural.
+            via-points (M >= 3) and the first one is within `CLAMP_MAX_OFF_HEADING_RAD` of
+            the heading; otherwise (and for a two-point plan, a straight line) natural.
 
     Returns:
         The sampled reference.
@@ -322,8 +329,8 @@ def build_reference(
     if clamp_heading and wp.shape[0] >= 3:
         tangent = complex(math.cos(heading_rad), math.sin(heading_rad))
         chord = complex(wp[1, 0] - wp[0, 0], wp[1, 1] - wp[0, 1])
-        if (chord * tangent.conjugate()).real <= 0.0:
-            tangent = None  # the first via-point is behind: a clamped start would loop
+        if (chord * tangent.conjugate()).real <= CLAMP_MAX_COS * abs(chord):
+            tangent = None  # a sharp turn: the robot must turn now, not swing out first
     spline = NaturalCubicSpline([complex(x, y) for x, y in wp.tolist()], tangent)
     if wp.shape[0] == 2:
         u_table = s_table = spline.knots  # a straight line: chord length is arc length

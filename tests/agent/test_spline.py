@@ -232,11 +232,12 @@ def test_clamped_start_matches_scipy_and_leaves_along_the_heading():
 def test_clamp_heading_only_with_a_via_point_ahead():
     from agent.spline import build_reference
 
-    wp = np.array([[0.0, 0.0], [4.0, 2.0], [10.0, 0.0]])
+    wp = np.array([[0.0, 0.0], [4.0, 1.0], [10.0, 0.0]])  # 14 degrees off the heading
     natural = build_reference(wp, 0.0, 1.0, 1.0, 0.1, 20)
     clamped = build_reference(wp, 0.0, 1.0, 1.0, 0.1, 20, clamp_heading=True)
     assert abs(clamped.heading_rad[0]) < 1e-9 < abs(natural.heading_rad[0])
-    # A via-point behind the robot: a clamped start would loop, so the start stays natural.
-    behind = build_reference(wp, math.pi, 1.0, 1.0, 0.1, 20, clamp_heading=True)
-    np.testing.assert_allclose(behind.heading_rad[0] - 2 * math.pi * round(
-        behind.heading_rad[0] / (2 * math.pi)), natural.heading_rad[0], atol=1e-12)
+    # A via-point 45 degrees off the heading, or behind: a sharp turn starts natural.
+    for heading in (-0.25 * math.pi + math.atan2(1.0, 4.0), math.pi):
+        sharp = build_reference(wp, heading, 1.0, 1.0, 0.1, 20, clamp_heading=True)
+        np.testing.assert_allclose(sharp.heading_rad[0] - 2 * math.pi * round(
+            sharp.heading_rad[0] / (2 * math.pi)), natural.heading_rad[0], atol=1e-12)
