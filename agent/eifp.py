@@ -290,6 +290,7 @@ def plan_eifp(
     side_memory: Mapping[int, Side] | None = None,
     timer: Callable[[], float] | None = None,
     encounters: Encounters | None = None,
+    primary_id: int | None = None,
 ) -> ViaPlan:
     """One eIFP cycle: IFP's iteration with cost-based candidate selection (Eqs. 14-16).
 
@@ -301,6 +302,8 @@ def plan_eifp(
         timer: a wall clock for the stage timings only.
         encounters: this cycle's encounter rules (`assess_encounters`); None: none (the
             paper's eIFP).
+        primary_id: the threat the previous cycle resolved first (kept first while it is
+            nearly as imminent as the most imminent one; `ifp.plan_via_points`).
 
     Raises:
         ValueError: on non-finite inputs or configuration.
@@ -321,6 +324,7 @@ def plan_eifp(
         committed,
         timer,
         ignored,
+        primary_id,
     )
 
 
@@ -398,6 +402,7 @@ class EifpSelector:
         self.config = config
         self._memory: dict[int, Side] = {}
         self._roles: dict[int, Role] = {}
+        self._primary: int | None = None
 
     @property
     def side_memory(self) -> dict[int, Side]:
@@ -412,11 +417,14 @@ class EifpSelector:
         if self.config.encounter_rules:
             encounters = assess_encounters(observation, self.config, self._roles)
             self._roles = encounters.memory
-        plan = plan_eifp(observation, self.config, self._memory, timer, encounters)
+        primary = self._primary if self.config.primary_hysteresis else None
+        plan = plan_eifp(observation, self.config, self._memory, timer, encounters, primary)
         self._memory = update_side_memory(self._memory, plan, observation.others.ids)
+        self._primary = plan.resolved_id
         return plan
 
     def reset(self) -> None:
         """Forget every remembered side and encounter role."""
         self._memory.clear()
         self._roles.clear()
+        self._primary = None

@@ -75,6 +75,10 @@ LEG_GRAZE_TOL_M = 1.0e-6
 # are not resolved [s].
 GOAL_TCPA_MARGIN_S = 0.5
 
+# The previous cycle's primary threat stays first unless another's TCPA is this much
+# smaller [s] (eIFP).
+PRIMARY_TCPA_MARGIN_S = 1.0
+
 # How far outside its inflated disc a via-point is placed [m].
 VIA_MARGIN_M = 0.05
 
@@ -202,6 +206,7 @@ def plan_via_points(
     committed_ids: frozenset[int] = frozenset(),
     timer: Callable[[], float] | None = None,
     ignored_ids: frozenset[int] = frozenset(),
+    primary_id: int | None = None,
 ) -> ViaPlan:
     """The IFP cycle (module docstring) with a pluggable candidate selector.
 
@@ -219,6 +224,9 @@ def plan_via_points(
         ignored_ids: others the robot leaves to themselves (eIFP's stand-on encounters,
             `agent.encounters`): never resolved, on no leg; still escaped from if the robot
             is inside their inflated disc, and still listed in `ViaPlan.threats`.
+        primary_id: the other the previous cycle's first via-point resolved (eIFP): if it
+            is still a threat it is resolved first again unless another one's TCPA is
+            more than `PRIMARY_TCPA_MARGIN_S` smaller (hysteresis on the ranking).
 
     Raises:
         ValueError: on non-finite inputs or configuration.
@@ -250,6 +258,10 @@ def plan_via_points(
     if ignored_ids and len(others):
         ignored = np.isin(others.ids, np.fromiter(ignored_ids, dtype=np.int64))
         index = index[~ignored[index]]
+    if primary_id is not None and index.size > 1:
+        hit = (others.ids[index] == primary_id).nonzero()[0]
+        if hit.size and tcpa[index[hit[0]]] <= tcpa[index[0]] + PRIMARY_TCPA_MARGIN_S:
+            index = np.concatenate((index[hit[:1]], np.delete(index, hit[0])))
     threats_s = timer() - t_start if timer is not None else 0.0
     if len(others) == 0:
         return ViaPlan(status=PlanStatus.OK, waypoints_m=np.stack((p, goal)), threats=threats,

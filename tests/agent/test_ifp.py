@@ -258,3 +258,23 @@ def test_ignored_others_are_neither_resolved_nor_on_any_leg_but_still_escaped():
     inside = plan_via_points(observe(others([[0.5, 0]]), v=1.0), CFG,
                              lambda _o: select_earliest, ignored_ids=frozenset({1}))
     assert inside.status is PlanStatus.ESCAPE
+
+
+def test_primary_threat_keeps_its_rank_within_the_margin():
+    from agent.ifp import PRIMARY_TCPA_MARGIN_S, plan_via_points
+
+    def plan(o, goal, primary):
+        return plan_via_points(observe(o, v=1.0, goal=goal), CFG, lambda _o: select_earliest,
+                               primary_id=primary)
+
+    # Two head-on threats, TCPA 3.0 s (id 1) and 3.5 s (id 2): 1 is resolved first ...
+    o = others([[6, 0.3], [7, -0.3]], [[-1, 0], [-1, 0]])
+    plain = plan(o, (20.0, 0.0), None)
+    assert plan(o, (20.0, 0.0), 1).waypoints_m.tolist() == plain.waypoints_m.tolist()
+    # ... unless 2 was the primary last cycle: within the margin it is resolved first.
+    assert PRIMARY_TCPA_MARGIN_S > 0.5
+    assert plan(o, (20.0, 0.0), 2).waypoints_m.tolist() != plain.waypoints_m.tolist()
+    # Far beyond the margin the most imminent one is first again.
+    far = others([[3, 0.3], [12, -0.3]], [[-1, 0], [-1, 0]])
+    assert (plan(far, (30.0, 0.0), 2).waypoints_m.tolist()
+            == plan(far, (30.0, 0.0), None).waypoints_m.tolist())
