@@ -155,6 +155,11 @@ class FaultyLink(Generic[T]):
         return out
 
     @property
+    def next_due_s(self) -> float | None:
+        """Due time of the next message in flight, or None."""
+        return self._queue[0][0] if self._queue else None
+
+    @property
     def in_flight(self) -> int:
         """Messages (copies) not yet released."""
         return len(self._queue)
