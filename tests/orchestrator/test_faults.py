@@ -59,3 +59,25 @@ def test_bad_link_values_and_unknown_robots_are_rejected() -> None:
     with pytest.raises(FaultSpecError, match="robot 5"):
         build_plan(slow=["5:10"]).check([0, 1])
     build_plan(kill=["1@1"]).check([0, 1])
+
+
+def test_envelope_is_the_largest_level_with_all_smaller_ones_contact_free() -> None:
+    from orchestrator.stress import aggregate, envelope, level_faults, levels, parse_sweep
+
+    sweep = parse_sweep(["latency_ms=200,0,100", "drop=0,0.2"])
+    assert sweep == {"latency_ms": [0.0, 100.0, 200.0], "drop": [0.0, 0.2]}
+    assert len(levels(sweep)) == 6
+    assert level_faults({"latency_ms": 100.0}, LinkFaults(), 0.3).jitter_ms == pytest.approx(30)
+    assert level_faults({"latency_ms": 100.0, "jitter_ms": 5.0}, LinkFaults(), 0.3
+                        ).jitter_ms == 5.0
+    contacts = {(0.0, 0.0): 0, (100.0, 0.0): 0, (200.0, 0.0): 1, (0.0, 0.2): 2,
+                (100.0, 0.2): 0, (200.0, 0.2): 0}
+    rows = [{"setup": "s", "planner": "p", "seed": seed, "latency_ms": lat, "drop": drop,
+             "error": None, "success": not c, "contacts": c if seed == 0 else 0,
+             "min_gap_m": 0.1, "time_ratio_mean": 1.2}
+            for (lat, drop), c in contacts.items() for seed in range(2)]
+    table = aggregate(rows, ["latency_ms", "drop"])
+    assert len(table) == 6 and all(t["runs"] == 2 for t in table)
+    (env,) = envelope(table, ["latency_ms", "drop"])
+    assert env["max_latency_ms"] == 100.0  # 200 had a contact (drop at its smallest, 0)
+    assert env["max_drop"] == 0.0          # drop 0.2 at latency 0 had contacts
