@@ -17,11 +17,29 @@ explicit endpoint). It knows nothing but what arrives on the wire (see `protocol
 Faults: a malformed pose or control message raises `ProtocolError`; it is counted, logged
 to stderr (the first few, then every 100th) and the robot keeps running. The robot stops
 commanding and exits with `EXIT_WORLD_LOST` if the world's liveliness token disappears
-before the end message, or no pose arrives for ``--pose-timeout-s`` while running. It
+before the end message, or no pose arrives for ``--pose-timeout-s`` while running. If the
+process itself was suspended (SIGSTOP: a loop iteration more than `SUSPEND_GAP_S` late),
+its link has been closed by the lease and the world's token vanishes from its view; it then
+sends nothing and waits up to `REJOIN_GRACE_S` for the token to return (the client
+reconnects by itself) before giving up.
+
+Injected faults (``--latency-ms``, ``--jitter-ms``, ``--drop``, ``--dup``, ``--reorder``,
+``--fault-seed``): every valid pose passes through a seeded `agent.link.FaultyLink` in sim
+time before the controller sees it; the controller drops what is stale or out of order.
+The robot's sim clock is the newest pose's stamp *as it arrived from the world*, before the
+injected fault, advanced by wall time x time_scale: it stands for the synchronised clock
+of a real fleet, so the planner measures the true age of the poses it plans on and
+forward-predicts by it (``--no-latency-compensation`` turns that off). A pose older than
+`STALE_PLAN_S` when its slot comes gives a brake command instead of a plan.
+``--plan-delay-ms`` holds every command back that long (a CPU-starved robot),
+``--control-phase-s`` shifts the planning slots. It
 exits 0 on the ``end`` `ControlMsg` and on SIGTERM/SIGINT. On exit it logs one line
 ``robot <id> exit: reason='...' code=N rejected=N stale=N plans=N overruns=N
-plan_errors=N seq=N`` to stderr (``rejected``: malformed messages; ``stale``: poses the
-controller dropped as old or out of order; ``overruns``: plan slots skipped).
+plan_errors=N stale_plans=N link_dropped=N suspended=N seq=N`` to stderr (``rejected``:
+malformed messages; ``stale``: poses the controller dropped as old or out of order;
+``overruns``: plan slots skipped; ``stale_plans``: brakes on too-old poses;
+``link_dropped``: poses the injected link lost; ``suspended``: times it found itself
+resumed after a stop). The launcher collects these lines into ``robots.json``.
 
 Exit status: 0 (end of run, or a signal), 2 (setup: cannot connect or get the
 configuration before the startup deadline), 3 (the world is gone).
