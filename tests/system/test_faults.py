@@ -30,9 +30,11 @@ from tests.system.test_distributed import (
     client_session,
     garbage_commands,
     garbage_poses,
+    launch,  # noqa: F401 - the fixture
     processes_of_run,
     read_events,
     unique_run_id,
+    wait_exit,
     wait_for_event,
     wait_matching,
     write_scenario,
@@ -125,7 +127,7 @@ def test_killed_robot_is_avoided_by_the_launchers_schedule(tmp_path: Path) -> No
     scenario = write_scenario(tmp_path / "crossing.yaml", [
         {"id": 0, "start": [-6.0, 0.0, 0.0], "goal": [5.0, 0.0]},
         {"id": 1, "start": [0.0, -3.0, math.pi / 2], "goal": [0.0, 4.0]},
-    ], time_limit_s=30.0)
+    ], time_limit_s=20.0)
     out = tmp_path / "run"
     code = run_distributed(scenario, out, unique_run_id("skill"), time_scale=1.0,
                            startup_timeout_s=STARTUP_S, faults=build_plan(kill=["1@3"]))
@@ -251,3 +253,21 @@ def test_orchestrator_reports_a_killed_world_as_failed_not_hung(tmp_path: Path) 
         assert p["code"] == 3 and p["reason"].startswith("world lost"), p
     assert took_s < 10.0
     print(f"orchestrator exited {took_s:.2f} s after the world was SIGKILLed")
+
+
+def test_robots_stop_and_fail_when_the_world_hangs(tmp_path: Path, launch) -> None:  # noqa: F811
+    # A SIGSTOPped world: no token change at first; the transport lease (1 s) closes the
+    # robots' link, the world's token vanishes, and they leave with status 3.
+    run = launch("worldstop")
+    run.start(lanes(tmp_path / "lanes.yaml", 2), [0, 1], time_scale=1.0)
+    wait_for_event(run.out_dir, lambda e: e["kind"] == "start", STARTUP_S, run.world)
+    run.world.send_signal(signal.SIGSTOP)
+    t0 = time.monotonic()
+    try:
+        codes = [wait_exit(run.robots[rid], 10.0) for rid in (0, 1)]
+        exit_s = time.monotonic() - t0
+    finally:
+        run.world.send_signal(signal.SIGCONT)
+    assert codes == [3, 3]
+    assert exit_s < 5.0, f"robots took {exit_s:.2f} s to leave (README states < 5 s)"
+    print(f"robots exited {exit_s:.2f} s after the world was SIGSTOPped")
