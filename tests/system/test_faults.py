@@ -271,3 +271,19 @@ def test_robots_stop_and_fail_when_the_world_hangs(tmp_path: Path, launch) -> No
     assert codes == [3, 3]
     assert exit_s < 5.0, f"robots took {exit_s:.2f} s to leave (README states < 5 s)"
     print(f"robots exited {exit_s:.2f} s after the world was SIGSTOPped")
+
+
+def test_stress_in_distributed_mode_runs_real_processes_with_the_links(tmp_path: Path) -> None:
+    from orchestrator.cli import main
+
+    out = tmp_path / "stress"
+    assert main(["stress", str(lanes(tmp_path / "lanes.yaml", 2, length_m=6.0)),
+                 "--mode", "distributed", "--sweep", "latency_ms=60", "--planners", "ifp",
+                 "--seeds", "1", "--out", str(out)]) == 0
+    (row,) = json.loads((out / "stress.json").read_text())["rows"]
+    assert row["error"] is None and row["success"] and row["contacts"] == 0
+    assert 115.0 <= row["latency_ms_p50"] <= 200.0  # 60 ± 18 ms on each of the two links
+    run = out / row["dir"]
+    assert (run / "robots.json").exists() and (run / "world.log").exists()
+    start = next(e for e in read_events(run) if e["kind"] == "start")
+    assert start["cmd_link"]["jitter_ms"] == pytest.approx(18.0)
