@@ -383,6 +383,10 @@ def _fault_plan(args: argparse.Namespace, scenario: Scenario) -> Any:
         plan.check([r.id for r in scenario.robots])
     except FaultSpecError as exc:
         raise BadInput(str(exc)) from None
+    for rid, timing in plan.timing.items():
+        hz = timing.control_rate_hz
+        if args.mode == "lockstep" and hz is not None and abs(50.0 / hz - round(50.0 / hz)) > 1e-9:
+            raise BadInput(f"--robot-rate {rid}:{hz:g}: in lockstep the rate must divide 50 Hz")
     return plan if plan.active else None
 
 

@@ -220,6 +220,7 @@ def test_run_with_fault_flags_in_lockstep_records_the_plan(tmp_path, capsys):
     (["--stop-robot", "0@3"], "expected I@T:DUR"),
     (["--slow-robot", "0"], "expected I:MS"),
     (["--latency-ms", "-5"], "latency_ms"),
+    (["--robot-rate", "0:15"], "must divide 50 Hz"),
 ])
 def test_bad_fault_flags_exit_2_with_the_flag_named(tmp_path, capsys, flags, message):
     rc = main(["run", "setup_a", "--mode", "lockstep", "--out", str(tmp_path / "x"), *flags])
