@@ -8,7 +8,11 @@ process and the lockstep runner feed it snapshots and the current sim time.
 Latency compensation (on by default): a snapshot stamped `stamp_s` is `age = now_s -
 stamp_s` old when the robot plans at `now_s`. Before planning, the robot forward-predicts
 its own pose with the command it has been applying (the unicycle arc of Eq. 1) and the
-others' positions with their estimated velocities, both over `age`.
+others' positions with their estimated velocities, both over `age` (capped at
+`MAX_COMPENSATED_AGE_S`). With ``compensate_latency=False`` the robot plans on the poses as
+they were when stamped. The clock behind `now_s` is the world's sim time: in lockstep the
+true sim time, in the robot process a sim clock kept in step with the world (see
+`agent.node`), so the age includes any injected delay.
 """
 
 from __future__ import annotations
@@ -52,6 +56,7 @@ class RobotController:
         self.snapshot: PoseSnapshot | None = None
         self.command = (0.0, 0.0)
         self.rejected_stale = 0
+        self.last_observation: Observation | None = None
         self._goal = np.asarray(spec.goal, dtype=float)
 
     def observe(self, snapshot: PoseSnapshot) -> bool:
@@ -99,7 +104,8 @@ class RobotController:
         """Plan on the newest snapshot; without any snapshot, brake (status STALE)."""
         if self.snapshot is None:
             return self.brake()
-        result = self.planner.plan(self.observation(now_s), now_s)
+        self.last_observation = self.observation(now_s)
+        result = self.planner.plan(self.last_observation, now_s)
         self.command = (result.v_mps, result.omega_radps)
         return result
 

@@ -17,11 +17,29 @@ explicit endpoint). It knows nothing but what arrives on the wire (see `protocol
 Faults: a malformed pose or control message raises `ProtocolError`; it is counted, logged
 to stderr (the first few, then every 100th) and the robot keeps running. The robot stops
 commanding and exits with `EXIT_WORLD_LOST` if the world's liveliness token disappears
-before the end message, or no pose arrives for ``--pose-timeout-s`` while running. It
+before the end message, or no pose arrives for ``--pose-timeout-s`` while running. If the
+process itself was suspended (SIGSTOP: a loop iteration more than `SUSPEND_GAP_S` late),
+its link has been closed by the lease and the world's token vanishes from its view; it then
+sends nothing and waits up to `REJOIN_GRACE_S` for the token to return (the client
+reconnects by itself) before giving up.
+
+Injected faults (``--latency-ms``, ``--jitter-ms``, ``--drop``, ``--dup``, ``--reorder``,
+``--fault-seed``): every valid pose passes through a seeded `agent.link.FaultyLink` in sim
+time before the controller sees it; the controller drops what is stale or out of order.
+The robot's sim clock is the newest pose's stamp *as it arrived from the world*, before the
+injected fault, advanced by wall time x time_scale: it stands for the synchronised clock
+of a real fleet, so the planner measures the true age of the poses it plans on and
+forward-predicts by it (``--no-latency-compensation`` turns that off). A pose older than
+`STALE_PLAN_S` when its slot comes gives a brake command instead of a plan.
+``--plan-delay-ms`` holds every command back that long (a CPU-starved robot),
+``--control-phase-s`` shifts the planning slots. It
 exits 0 on the ``end`` `ControlMsg` and on SIGTERM/SIGINT. On exit it logs one line
 ``robot <id> exit: reason='...' code=N rejected=N stale=N plans=N overruns=N
-plan_errors=N seq=N`` to stderr (``rejected``: malformed messages; ``stale``: poses the
-controller dropped as old or out of order; ``overruns``: plan slots skipped).
+plan_errors=N stale_plans=N link_dropped=N suspended=N seq=N`` to stderr (``rejected``:
+malformed messages; ``stale``: poses the controller dropped as old or out of order;
+``overruns``: plan slots skipped; ``stale_plans``: brakes on too-old poses;
+``link_dropped``: poses the injected link lost; ``suspended``: times it found itself
+resumed after a stop). The launcher collects these lines into ``robots.json``.
 
 Exit status: 0 (end of run, or a signal), 2 (setup: cannot connect or get the
 configuration before the startup deadline), 3 (the world is gone).
@@ -40,13 +58,14 @@ import signal
 import sys
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from types import FrameType
 from typing import TYPE_CHECKING
 
 import numpy as np
 import zenoh
 
+from agent.link import LINK_POSES, FaultyLink, LinkFaults, link_rng
 from protocol import (
     CommandMsg,
     ControlMsg,
@@ -75,6 +94,12 @@ CLOSE_TIMEOUT_S = 2.0
 """Wall time allowed for closing the session before the process leaves without it."""
 IDLE_SLEEP_S = 0.01
 MIN_SLEEP_S = 0.0005
+SUSPEND_GAP_S = 0.5
+"""A loop iteration this much later than the previous one means the process was suspended."""
+REJOIN_GRACE_S = 5.0
+"""After a suspension, how long the robot waits for the world's token to come back."""
+STALE_PLAN_S = 1.0
+"""Poses older than this [sim s] when planning: brake instead (compensation is capped there)."""
 
 log = logging.getLogger("agent")
 
@@ -91,6 +116,11 @@ class AgentOptions:
         startup_timeout_s: wall deadline to connect and fetch the configuration.
         pose_timeout_s: wall time without poses, once running, after which the world
             is considered gone.
+        link: faults injected on this robot's pose link (sim-time delays).
+        fault_seed: seeds the pose link (with the link kind and the robot id).
+        control_phase_s: offset of the planning slots [sim s].
+        plan_delay_ms: added planning delay [sim ms] before each command is published.
+        compensate_latency: forward-predict by the poses' age before planning.
     """
 
     run_id: str
@@ -99,6 +129,11 @@ class AgentOptions:
     control_rate_hz: float | None = None
     startup_timeout_s: float = 30.0
     pose_timeout_s: float = 5.0
+    link: LinkFaults = field(default_factory=LinkFaults)
+    fault_seed: int = 0
+    control_phase_s: float = 0.0
+    plan_delay_ms: float = 0.0
+    compensate_latency: bool = True
 
 
 def _positive(text: str) -> float:
@@ -113,6 +148,20 @@ def _run_id(text: str) -> str:
         return validate_run_id(text)
     except ProtocolError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from exc
+
+
+def _non_negative(text: str) -> float:
+    value = float(text)
+    if not (math.isfinite(value) and value >= 0.0):
+        raise argparse.ArgumentTypeError(f"must be a number >= 0, got {text!r}")
+    return value
+
+
+def _probability(text: str) -> float:
+    value = _non_negative(text)
+    if value > 1.0:
+        raise argparse.ArgumentTypeError(f"must be a probability in [0, 1], got {text!r}")
+    return value
 
 
 def _robot_id(text: str) -> int:
@@ -134,11 +183,33 @@ def parse_args(argv: list[str] | None = None) -> AgentOptions:
                         help="wall deadline to connect and get the configuration")
     parser.add_argument("--pose-timeout-s", type=_positive, default=5.0,
                         help="wall time without poses after which the world is gone")
+    faults = parser.add_argument_group("fault injection (sim time; see agent.link)")
+    faults.add_argument("--latency-ms", type=_non_negative, default=0.0,
+                        help="pose link: fixed delay [ms]")
+    faults.add_argument("--jitter-ms", type=_non_negative, default=0.0,
+                        help="pose link: uniform jitter half-width [ms]")
+    faults.add_argument("--drop", type=_probability, default=0.0, help="pose loss probability")
+    faults.add_argument("--dup", type=_probability, default=0.0,
+                        help="pose duplication probability")
+    faults.add_argument("--reorder", type=_probability, default=0.0,
+                        help="probability a pose is held back (overtaken by later ones)")
+    faults.add_argument("--fault-seed", type=int, default=0, help="seeds the pose link")
+    faults.add_argument("--control-phase-s", type=_non_negative, default=0.0,
+                        help="offset of the planning slots [sim s]")
+    faults.add_argument("--plan-delay-ms", type=_non_negative, default=0.0,
+                        help="added planning delay [sim ms] (a CPU-starved robot)")
+    faults.add_argument("--no-latency-compensation", action="store_true",
+                        help="plan on the poses as stamped (no forward prediction by age)")
     args = parser.parse_args(argv)
     return AgentOptions(run_id=args.run, robot_id=args.id, connect=args.connect,
                         control_rate_hz=args.control_rate_hz,
                         startup_timeout_s=args.startup_timeout_s,
-                        pose_timeout_s=args.pose_timeout_s)
+                        pose_timeout_s=args.pose_timeout_s,
+                        link=LinkFaults(latency_ms=args.latency_ms, jitter_ms=args.jitter_ms,
+                                        drop=args.drop, dup=args.dup, reorder=args.reorder),
+                        fault_seed=args.fault_seed, control_phase_s=args.control_phase_s,
+                        plan_delay_ms=args.plan_delay_ms,
+                        compensate_latency=not args.no_latency_compensation)
 
 
 class _StopFlag:
@@ -214,25 +285,34 @@ class PlanSchedule:
 
     Args:
         period_s: planning period in sim time (> 0).
+        phase_s: if given, slots are at ``phase_s + k * period_s`` of sim time (the first
+            at or after the first pose); if None, they start at the first pose's stamp.
     """
 
-    def __init__(self, period_s: float) -> None:
+    def __init__(self, period_s: float, phase_s: float | None = None) -> None:
         if not period_s > 0.0:
             raise ValueError("period_s must be positive")
         self.period_s = float(period_s)
+        self.phase_s = phase_s
         self.next_s: float | None = None
         self.skipped = 0
+
+    def _first(self, stamp_s: float) -> float:
+        if self.phase_s is None or stamp_s <= self.phase_s:
+            return stamp_s if self.phase_s is None else self.phase_s
+        k = math.ceil((stamp_s - self.phase_s) / self.period_s - STAMP_EPS_S)
+        return self.phase_s + k * self.period_s
 
     def due(self, stamp_s: float) -> bool:
         """True if a pose stamped `stamp_s` should be planned on now."""
         if self.next_s is None:
-            self.next_s = stamp_s
+            self.next_s = self._first(stamp_s)
         return stamp_s + STAMP_EPS_S >= self.next_s
 
     def planned(self, stamp_s: float) -> int:
         """Record a plan made on the pose stamped `stamp_s`; returns the slots skipped."""
         if self.next_s is None:
-            self.next_s = stamp_s
+            self.next_s = self._first(stamp_s)
         self.next_s += self.period_s
         missed = 0
         if self.next_s + STAMP_EPS_S <= stamp_s:
@@ -242,12 +322,13 @@ class PlanSchedule:
         return missed
 
 
-def make_controller(config: RunConfigMsg, period_s: float) -> RobotController:
+def make_controller(config: RunConfigMsg, period_s: float, *,
+                    compensate_latency: bool = True) -> RobotController:
     """The robot's `RobotController`, its planner set up for this control period."""
     from agent.controller import RobotController
 
     return RobotController(config.robot, config.planner, config.goal_tolerance_m,
-                           control_period_s=period_s)
+                           control_period_s=period_s, compensate_latency=compensate_latency)
 
 
 def warm_up(config: RunConfigMsg, period_s: float) -> None:
@@ -293,16 +374,30 @@ class RobotNode:
         self.robot_id = config.robot.id
         self.stop = stop
         period_s = 1.0 / (options.control_rate_hz or config.control_rate_hz)
-        self.controller = make_controller(config, period_s)
+        self.controller = make_controller(config, period_s,
+                                          compensate_latency=options.compensate_latency)
         warm_up(config, period_s)
-        self.schedule = PlanSchedule(period_s)
+        self.schedule = PlanSchedule(period_s, options.control_phase_s or None)
         self.tick_wall_s = 1.0 / (config.world_rate_hz * config.time_scale)
         self.known_ids = frozenset(config.known_ids)
-        self.counts = {"rejected": 0, "stale": 0, "plans": 0, "overruns": 0, "plan_errors": 0}
+        self.counts = {"rejected": 0, "stale": 0, "plans": 0, "overruns": 0, "plan_errors": 0,
+                       "stale_plans": 0, "link_dropped": 0, "suspended": 0}
         self.seq = 0
         self.last_rx_wall: float | None = None
         self.newest: PosesMsg | None = None
         self.world_alive = False
+        self.world_seen = False
+        self.world_gone_wall: float | None = None
+        self.loop_wall: float | None = None
+        self.resumed_wall = -math.inf
+        # The sim clock: the newest pose's stamp as it arrived from the world (before any
+        # injected fault), advanced by wall time x time_scale. It stands for the clock
+        # synchronisation a real fleet has (PTP/NTP): the injected delay is measured by it.
+        self.clock_tick = -1
+        self.clock_stamp_s = 0.0
+        self.clock_wall = 0.0
+        self.pose_link: FaultyLink[PosesMsg] = FaultyLink(
+            options.link, link_rng(options.fault_seed, LINK_POSES, self.robot_id))
 
         self.pose_sub = session.declare_subscriber(self.keys.poses,
                                                    zenoh.handlers.RingChannel(POSE_RING))
@@ -333,46 +428,87 @@ class RobotNode:
                 raise _Exit(f"end ({msg.reason})", EXIT_OK)
 
     def poll_world(self) -> None:
-        """World liveliness; raises `_Exit` if the world is gone before the end."""
+        """World liveliness; raises `_Exit` if the world is gone before the end.
+
+        Right after this process was suspended (SIGSTOP), its own link was closed by the
+        lease and the world's token vanishes from its view too; it then waits up to
+        `REJOIN_GRACE_S` for the token to come back (the client reconnects by itself),
+        sending nothing meanwhile.
+        """
+        now = time.monotonic()
         while (sample := self.world_sub.try_recv()) is not None:
             if sample.kind == zenoh.SampleKind.PUT:
-                self.world_alive = True
+                if self.world_gone_wall is not None:
+                    log.warning("robot %d: world back after %.2f s", self.robot_id,
+                                now - self.world_gone_wall)
+                self.world_alive = self.world_seen = True
+                self.world_gone_wall = None
             elif self.world_alive:
                 self.world_alive = False
                 self.poll_control()  # the end message may have been queued just before
-                raise _Exit("world lost (liveliness token gone)", EXIT_WORLD_LOST)
+                if now - self.resumed_wall > REJOIN_GRACE_S:
+                    raise _Exit("world lost (liveliness token gone)", EXIT_WORLD_LOST)
+                self.world_gone_wall = now
+                log.warning("robot %d: world token gone right after a suspension; waiting "
+                            "%.1f s for it", self.robot_id, REJOIN_GRACE_S)
+        if self.world_gone_wall is not None and now - self.world_gone_wall > REJOIN_GRACE_S:
+            raise _Exit(f"world lost (token not back within {REJOIN_GRACE_S:.0f} s)",
+                        EXIT_WORLD_LOST)
+
+    def sim_now(self) -> float:
+        """The robot's sim clock (see `__init__`)."""
+        return self.clock_stamp_s + (time.monotonic() - self.clock_wall) * self.config.time_scale
 
     def poll_poses(self) -> bool:
-        """Observe every valid pose waiting in the ring; True if a newer one arrived."""
-        fresh = False
+        """Pass every valid pose through the pose link; observe what it releases.
+
+        Returns:
+            True if a pose newer than any observed before was released.
+        """
         while (sample := self.pose_sub.try_recv()) is not None:
             try:
                 msg = PosesMsg.decode(sample.payload.to_bytes(), known_ids=self.known_ids)
             except ProtocolError as exc:
                 self._reject("pose message", exc)
                 continue
+            now = time.monotonic()
+            self.last_rx_wall = now
+            if msg.tick > self.clock_tick:
+                self.clock_tick, self.clock_stamp_s, self.clock_wall = msg.tick, msg.t_s, now
+            self.pose_link.send(self.sim_now(), msg)
+        fresh = False
+        for msg in self.pose_link.receive(self.sim_now()):
             if not self.controller.observe(msg.to_snapshot()):
                 self.counts["stale"] += 1
                 continue
             self.newest = msg
-            self.last_rx_wall = time.monotonic()
             fresh = True
+        self.counts["link_dropped"] = self.pose_link.counts.dropped
         return fresh
 
     def plan_and_send(self) -> None:
-        """Plan on the newest pose if its stamp reached the schedule; publish the command."""
+        """Plan on the newest pose if its stamp reached the schedule; publish the command.
+
+        The planner gets the sim clock's time, so it forward-predicts by the pose's real
+        age (injected delay included); a pose older than `STALE_PLAN_S` gives a brake.
+        """
         msg = self.newest
         if msg is None or not self.schedule.due(msg.t_s):
             return
-        # Sim time now: the stamp plus the wall time since the pose arrived, scaled.
-        now_s = msg.t_s + (time.monotonic() - self.last_rx_wall) * self.config.time_scale
+        now_s = self.sim_now()
         try:
-            result = self.controller.plan(now_s)
+            if now_s - msg.t_s > STALE_PLAN_S:
+                self.counts["stale_plans"] += 1
+                result = self.controller.brake()
+            else:
+                result = self.controller.plan(now_s)
         except Exception:  # a planner bug must not leave the robot driving blind
             self.counts["plan_errors"] += 1
             if self.counts["plan_errors"] <= 3:
                 log.exception("robot %d: planner raised; braking", self.robot_id)
             result = self.controller.brake()
+        if self.options.plan_delay_ms > 0.0:  # a CPU-starved robot: the command leaves late
+            time.sleep(self.options.plan_delay_ms * 1e-3 / self.config.time_scale)
         self.cmd_pub.put(CommandMsg(
             robot_id=self.robot_id, seq=self.seq, pose_stamp_s=msg.t_s, v_mps=result.v_mps,
             omega_radps=result.omega_radps, plan_ms=max(0.0, result.times.total_ms),
@@ -383,12 +519,16 @@ class RobotNode:
         self.counts["overruns"] += self.schedule.planned(msg.t_s)
 
     def _sleep(self) -> None:
-        """Sleep until just before the next pose is due (the world's tick in wall time)."""
+        """Sleep until just before the next pose is due (the world's tick in wall time),
+        or until the pose link releases its next pose, whichever is first."""
         now = time.monotonic()
         if self.last_rx_wall is None:
             time.sleep(IDLE_SLEEP_S)
             return
         due = self.last_rx_wall + self.tick_wall_s - 0.001
+        link_due_s = self.pose_link.next_due_s
+        if link_due_s is not None:
+            due = min(due, now + (link_due_s - self.sim_now()) / self.config.time_scale)
         if now < due:
             time.sleep(min(due - now, IDLE_SLEEP_S * 5))
         elif now - self.last_rx_wall > 3.0 * self.tick_wall_s:
@@ -405,14 +545,23 @@ class RobotNode:
         """
         try:
             while not self.stop:
+                now = time.monotonic()
+                if self.loop_wall is not None and now - self.loop_wall > SUSPEND_GAP_S:
+                    self.resumed_wall = now
+                    self.counts["suspended"] += 1
+                    log.warning("robot %d: resumed after %.2f s without running (suspended?)",
+                                self.robot_id, now - self.loop_wall)
+                self.loop_wall = now
                 self.poll_control()
                 self.poll_world()
-                if not self.world_alive and time.monotonic() > startup_deadline:
+                if not self.world_seen and time.monotonic() > startup_deadline:
                     raise _Exit("world not seen before the startup deadline", EXIT_WORLD_LOST)
                 if self.poll_poses():
-                    self.plan_and_send()
+                    if self.world_alive:  # never command a world we cannot see
+                        self.plan_and_send()
                 elif (self.last_rx_wall is not None
-                      and time.monotonic() - self.last_rx_wall > self.options.pose_timeout_s):
+                      and time.monotonic() - max(self.last_rx_wall, self.resumed_wall)
+                      > self.options.pose_timeout_s):
                     raise _Exit(f"no poses for {self.options.pose_timeout_s:.1f} s",
                                 EXIT_WORLD_LOST)
                 self._sleep()

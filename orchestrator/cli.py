@@ -174,6 +174,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         raise BadInput(f"--time-scale: must be > 0, got {args.time_scale}")
     scenario = resolve(args.setup, agents=args.agents, seed=args.seed,
                        start_jitter_m=args.start_jitter_m, planner=args.planner)
+    faults = _fault_plan(args, scenario)
     planner = _planner_label(scenario)
     out_dir = Path(args.out) if args.out else default_out_dir(scenario, planner, args.seed)
     if (out_dir / "trajectory.csv").exists() or (out_dir / "metrics.json").exists():
@@ -184,6 +185,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         "setup": args.setup, "scenario": scenario.name, "planner": planner,
         "seed": args.seed, "mode": args.mode, "agents": len(scenario.robots),
         "start_jitter_m": args.start_jitter_m, "time_scale": args.time_scale,
+        "faults": faults.to_json() if faults is not None else None,
         "started": dt.datetime.now().isoformat(timespec="seconds"),
         "argv": list(args.argv),
     })
@@ -193,11 +195,11 @@ def cmd_run(args: argparse.Namespace) -> int:
         if args.mode == "lockstep":
             from orchestrator.lockstep import run_lockstep
 
-            outcome = run_lockstep(scenario, out_dir, on_progress=progress)
+            outcome = run_lockstep(scenario, out_dir, on_progress=progress, faults=faults)
             metrics = outcome.metrics
             world_status = None
         else:
-            metrics, world_status = _run_distributed(scenario, out_dir, args, progress)
+            metrics, world_status = _run_distributed(scenario, out_dir, args, progress, faults)
     finally:
         progress.done()
     wall_s = time.monotonic() - wall0
@@ -220,7 +222,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def _run_distributed(scenario: Scenario, out_dir: Path, args: argparse.Namespace,
-                     progress: ProgressLine) -> tuple[Any, int]:
+                     progress: ProgressLine, faults: Any = None) -> tuple[Any, int]:
     """Run the real processes; (metrics or None, the world's exit status)."""
     from orchestrator.distributed import run_distributed
     from orchestrator.rundir import RunDirError, metrics_from_run_dir, write_metrics
@@ -229,7 +231,8 @@ def _run_distributed(scenario: Scenario, out_dir: Path, args: argparse.Namespace
     dump_scenario(scenario, scenario_path)
     run_id = f"{_safe(scenario.name)[:24]}-{args.seed}-{secrets.token_hex(4)}"
     status = run_distributed(scenario_path, out_dir, run_id, rate_hz=50.0,
-                             time_scale=args.time_scale or 1.0, on_progress=progress)
+                             time_scale=args.time_scale or 1.0, on_progress=progress,
+                             faults=faults)
     if not (out_dir / "trajectory.csv").exists():
         return None, status
     try:
@@ -336,6 +339,124 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
 
 # --------------------------------------------------------------------------------------
+# fault injection (run flags) and stress
+# --------------------------------------------------------------------------------------
+
+def _add_link_args(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("link faults (every pose and command link; sim time)")
+    g.add_argument("--latency-ms", type=float, default=0.0, help="fixed delay per link [ms]")
+    g.add_argument("--jitter-ms", type=float, default=0.0,
+                   help="uniform jitter half-width [ms] (100 ± 30: --jitter-ms 30)")
+    g.add_argument("--drop", type=float, default=0.0, help="loss probability")
+    g.add_argument("--dup", type=float, default=0.0, help="duplication probability")
+    g.add_argument("--reorder", type=float, default=0.0,
+                   help="probability a message is held back 50 ms (overtaken)")
+    g.add_argument("--no-latency-compensation", action="store_true",
+                   help="robots plan on poses as stamped (no forward prediction by age)")
+
+
+def _add_fault_args(p: argparse.ArgumentParser) -> None:
+    _add_link_args(p)
+    g = p.add_argument_group("robot faults (T, DUR in sim seconds)")
+    g.add_argument("--slow-robot", action="append", default=[], metavar="I:MS",
+                   help="robot I's commands leave MS ms late (a CPU-starved robot)")
+    g.add_argument("--robot-rate", action="append", default=[], metavar="I:HZ[:PHASE_S]",
+                   help="robot I plans at HZ, its slots offset by PHASE_S")
+    g.add_argument("--kill-robot", action="append", default=[], metavar="I@T",
+                   help="SIGKILL robot I at T")
+    g.add_argument("--stop-robot", action="append", default=[], metavar="I@T:DUR",
+                   help="SIGSTOP robot I at T, SIGCONT at T + DUR")
+    g.add_argument("--restart-robot", action="append", default=[], metavar="I@T",
+                   help="SIGKILL robot I at T and start it again with the same id")
+
+
+def _fault_plan(args: argparse.Namespace, scenario: Scenario) -> Any:
+    """The run's `FaultPlan`, or None when no fault flag is given."""
+    from orchestrator.faults import FaultSpecError, build_plan
+
+    try:
+        plan = build_plan(
+            latency_ms=args.latency_ms, jitter_ms=args.jitter_ms, drop=args.drop, dup=args.dup,
+            reorder=args.reorder, seed=args.seed, slow=args.slow_robot, rates=args.robot_rate,
+            kill=args.kill_robot, stop=args.stop_robot, restart=args.restart_robot,
+            compensate_latency=not args.no_latency_compensation)
+        plan.check([r.id for r in scenario.robots])
+    except FaultSpecError as exc:
+        raise BadInput(str(exc)) from None
+    for rid, timing in plan.timing.items():
+        hz = timing.control_rate_hz
+        if args.mode == "lockstep" and hz is not None and abs(50.0 / hz - round(50.0 / hz)) > 1e-9:
+            raise BadInput(f"--robot-rate {rid}:{hz:g}: in lockstep the rate must divide 50 Hz")
+    return plan if plan.active else None
+
+
+def cmd_stress(args: argparse.Namespace) -> int:
+    from agent.link import LinkFaults
+    from orchestrator import stress
+    from orchestrator.families import resolve
+    from orchestrator.report import format_table
+    from orchestrator.rundir import write_json
+
+    planners = list(PLANNER_NAMES) if args.planners == "all" else _split(args.planners)
+    bad = [p for p in planners if p not in PLANNER_NAMES]
+    if not planners or bad:
+        raise BadInput(f"--planners: unknown {bad} (known: {', '.join(PLANNER_NAMES)})")
+    if args.seeds < 1 or args.jobs < 1:
+        raise BadInput("--seeds and --jobs must be >= 1")
+    try:
+        sweep = stress.parse_sweep(args.sweep or ["latency_ms=0"])
+        base = LinkFaults(latency_ms=args.latency_ms, jitter_ms=args.jitter_ms, drop=args.drop,
+                          dup=args.dup, reorder=args.reorder)
+    except ValueError as exc:
+        raise BadInput(str(exc)) from None
+    for planner in planners:  # fail before starting
+        resolve(args.setup, agents=args.agents, seed=0, start_jitter_m=args.start_jitter_m,
+                planner=planner)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    keys = list(sweep)
+    jobs = []
+    for level, planner, seed in itertools.product(stress.levels(sweep), planners,
+                                                  range(args.seeds)):
+        links = stress.level_faults(level, base, args.jitter_frac)
+        name = _safe(f"{args.setup}-{planner}-{stress.level_name(level)}-s{seed}")
+        jobs.append(stress.StressJob(
+            setup=args.setup, planner=planner, seed=seed, level=tuple(level.items()),
+            links=links, mode=args.mode, out_dir=str(out / name), agents=args.agents,
+            start_jitter_m=args.start_jitter_m, time_scale=args.time_scale or 1.0,
+            compensate_latency=not args.no_latency_compensation))
+    print(f"stress: {len(jobs)} runs ({args.mode}), {args.jobs} at a time, into {out}",
+          file=sys.stderr)
+    t0 = time.monotonic()
+    done = [0]
+
+    def on_done(row: dict) -> None:
+        done[0] += 1
+        print(f"  [{done[0]}/{len(jobs)}] {row['dir']}: contacts {row.get('contacts')} "
+              f"success {row.get('success')} ({row['wall_s']:.1f} s)"
+              + (f" ERROR {row['error']}" if row.get("error") else ""), file=sys.stderr)
+
+    rows = stress.run_jobs(jobs, args.jobs, on_done)
+    table = stress.aggregate(rows, keys)
+    env = stress.envelope(table, keys)
+    header = ["setup", "planner", *keys, "runs", "success_rate", "contacts",
+              "runs_with_contact", "min_gap_m", "time_ratio_mean"]
+    print(f"\n{args.setup}, {args.mode}, jitter = {args.jitter_frac:g} x latency unless set, "
+          f"seeds 0..{args.seeds - 1}")
+    print(format_table(header, [[t[h] for h in header] for t in table]))
+    env_header = ["setup", "planner", *[f"max_{k}" for k in keys]]
+    print("\nlargest contact-free level (every seed, every smaller level too):")
+    print(format_table(env_header, [[e[h] for h in env_header] for e in env]))
+    stress.write_csv(out / "stress.csv", rows)
+    write_json(out / "stress.json", {
+        "args": {k: v for k, v in vars(args).items() if k not in ("func",)},
+        "wall_s": round(time.monotonic() - t0, 1), "rows": rows, "table": table,
+        "envelope": env})
+    print(f"\n{out / 'stress.csv'}, {out / 'stress.json'}")
+    return EXIT_ERROR if any(r.get("error") for r in rows) else EXIT_OK
+
+
+# --------------------------------------------------------------------------------------
 # report
 # --------------------------------------------------------------------------------------
 
@@ -433,7 +554,26 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", help="run directory (default runs/<setup>-<planner>-<seed>-<time>)")
     p.add_argument("--gif", action="store_true", help="also write trajectory.gif")
     p.add_argument("--quiet", action="store_true", help="no progress line and no summary")
+    _add_fault_args(p)
     p.set_defaults(func=cmd_run)
+
+    p = sub.add_parser("stress", help="fault levels x planners x seeds: table and envelope")
+    p.add_argument("setup", help="a setup, family or scenario file (as for run)")
+    p.add_argument("--sweep", action="append", metavar="KEY=V1,V2,...",
+                   help="latency_ms, jitter_ms, drop, dup or reorder; repeat for a grid")
+    p.add_argument("--planners", default="all", help="comma-separated names, or 'all'")
+    p.add_argument("--seeds", type=int, default=3, help="seeds 0..N-1 per level (default 3)")
+    p.add_argument("--mode", choices=MODES, default="lockstep",
+                   help="lockstep (default: deterministic, fast) or distributed")
+    p.add_argument("--jobs", type=int, default=1, help="runs at a time (default 1)")
+    p.add_argument("--jitter-frac", type=float, default=0.3,
+                   help="jitter = this x latency unless jitter_ms is set (default 0.3)")
+    p.add_argument("--agents", type=int)
+    p.add_argument("--start-jitter-m", type=float, default=0.0)
+    p.add_argument("--time-scale", type=float, default=None)
+    p.add_argument("--out", required=True)
+    _add_link_args(p)
+    p.set_defaults(func=cmd_stress)
 
     p = sub.add_parser("sweep", help="many runs: setups x planners x seeds")
     p.add_argument("--setups", required=True, help="comma-separated names, or 'all' (A-G)")

@@ -9,7 +9,18 @@ Ctrl-C or SIGTERM to the launcher.
 
 Files written in `out_dir` besides the world's (scenario.yaml, trajectory.csv,
 commands.csv, events.jsonl): ``world.log`` and ``robot_<id>.log`` (each process's stderr
-and stdout; a robot's last line is ``robot <id> exit: reason=... code=... rejected=N ...``).
+and stdout; a robot's last line is ``robot <id> exit: reason=... code=... rejected=N ...``),
+``robots.json`` (those exit lines parsed: every robot process's reason, code and counters,
+and the total of poses the robots rejected as malformed) and, with process faults,
+``faults.jsonl`` (one line per signal sent: sim time, wall time, robot, action).
+
+Faults (`orchestrator.faults.FaultPlan`): link faults and per-robot timing reach the
+processes as command-line options (``--latency-ms`` ... of ``python -m world`` for the
+command links and of ``python -m agent`` for each robot's pose link, seeded with the plan's
+seed). Process faults are the launcher's: it follows the sim time in trajectory.csv and
+sends SIGKILL (kill), SIGSTOP then SIGCONT (stop) or SIGKILL then a new process with the
+same id (restart, its log ``robot_<id>.restart<N>.log``) at the planned sim time, within
+`FAULT_POLL_S` of wall time.
 """
 
 from __future__ import annotations
@@ -18,6 +29,7 @@ import contextlib
 import json
 import math
 import os
+import re
 import signal
 import socket
 import subprocess
@@ -30,6 +42,7 @@ from pathlib import Path
 from types import FrameType
 from typing import IO
 
+from orchestrator.faults import FaultPlan, ProcessFault
 from protocol import validate_run_id
 from world.scenario import load_scenario
 
@@ -42,6 +55,9 @@ ROBOT_TERM_GRACE_S = 3.0
 EXIT_MARGIN_S = 60.0
 """Slack on the world's expected wall duration before the launcher gives up on it."""
 POLL_S = 0.2
+FAULT_POLL_S = 0.02
+"""Wall period of the launcher's loop while process faults are pending."""
+EXIT_LINE = re.compile(r"robot (\d+) exit: reason='([^']*)' code=(\d+)(.*)$", re.MULTILINE)
 
 
 @dataclass(frozen=True)
@@ -139,12 +155,118 @@ def world_command(run_id: str, scenario_path: Path, out_dir: Path, endpoint: str
 
 
 def robot_command(run_id: str, robot_id: int, endpoint: str, *,
-                  startup_timeout_s: float = 30.0) -> list[str]:
+                  startup_timeout_s: float = 30.0, extra_args: Sequence[str] = ()) -> list[str]:
     """Command line of one robot process (a client of the router at `endpoint`)."""
     return [
         sys.executable, "-m", "agent", "--run", run_id, "--id", str(int(robot_id)),
         "--connect", endpoint, "--startup-timeout-s", repr(float(startup_timeout_s)),
+        *extra_args,
     ]
+
+
+def _link_args(plan: FaultPlan) -> list[str]:
+    links = plan.links
+    if not links.active:
+        return []
+    return ["--latency-ms", repr(links.latency_ms), "--jitter-ms", repr(links.jitter_ms),
+            "--drop", repr(links.drop), "--dup", repr(links.dup),
+            "--reorder", repr(links.reorder), "--fault-seed", str(plan.seed)]
+
+
+def world_fault_args(plan: FaultPlan | None) -> list[str]:
+    """Options of ``python -m world`` for the plan's command-link faults."""
+    return [] if plan is None else _link_args(plan)
+
+
+def robot_fault_args(plan: FaultPlan | None, robot_id: int) -> list[str]:
+    """Options of ``python -m agent`` for the plan's pose-link and timing faults."""
+    if plan is None:
+        return []
+    args = _link_args(plan)
+    timing = plan.timing_of(robot_id)
+    if timing.control_rate_hz is not None:
+        args += ["--control-rate-hz", repr(timing.control_rate_hz)]
+    if timing.phase_s:
+        args += ["--control-phase-s", repr(timing.phase_s)]
+    if timing.plan_delay_ms:
+        args += ["--plan-delay-ms", repr(timing.plan_delay_ms)]
+    if not plan.compensate_latency:
+        args.append("--no-latency-compensation")
+    return args
+
+
+class ProcessFaultScheduler:
+    """Sends the plan's process faults to the robot processes at their sim time.
+
+    Args:
+        faults: the process faults.
+        robots: robot id -> its current process (replaced on restart).
+        respawn: starts a new process for a robot id, given the restart count.
+        log_path: ``faults.jsonl``.
+    """
+
+    def __init__(self, faults: Sequence[ProcessFault], robots: dict[int, subprocess.Popen],
+                 respawn: Callable[[int, int], subprocess.Popen], log_path: Path) -> None:
+        self.todo = sorted(faults, key=lambda f: f.at_s)
+        self.resume: list[tuple[float, int]] = []  # (sim time, robot) of pending SIGCONTs
+        self.robots = robots
+        self.respawn = respawn
+        self.log_path = log_path
+        self.restarts: dict[int, int] = {}
+        self.stopped: set[int] = set()
+
+    @property
+    def pending(self) -> bool:
+        return bool(self.todo or self.resume)
+
+    def _log(self, sim_t_s: float, robot_id: int, action: str) -> None:
+        with open(self.log_path, "a") as f:
+            f.write(json.dumps({"t": round(sim_t_s, 4), "wall": time.time(),
+                                "robot": robot_id, "action": action}) + "\n")
+
+    def poll(self, sim_t_s: float) -> None:
+        """Send every fault due by sim time `sim_t_s`."""
+        while self.resume and self.resume[0][0] <= sim_t_s:
+            _, rid = self.resume.pop(0)
+            _signal_group(self.robots[rid], signal.SIGCONT)
+            self.stopped.discard(rid)
+            self._log(sim_t_s, rid, "SIGCONT")
+        while self.todo and self.todo[0].at_s <= sim_t_s:
+            f = self.todo.pop(0)
+            proc = self.robots[f.robot_id]
+            if f.kind == "stop":
+                _signal_group(proc, signal.SIGSTOP)
+                self.stopped.add(f.robot_id)
+                self.resume.append((f.at_s + f.duration_s, f.robot_id))
+                self.resume.sort()
+                self._log(sim_t_s, f.robot_id, "SIGSTOP")
+                continue
+            _signal_group(proc, signal.SIGKILL)
+            proc.wait()
+            self._log(sim_t_s, f.robot_id, "SIGKILL")
+            if f.kind == "restart":
+                n = self.restarts[f.robot_id] = self.restarts.get(f.robot_id, 0) + 1
+                self.robots[f.robot_id] = self.respawn(f.robot_id, n)
+                self._log(sim_t_s, f.robot_id, "restarted")
+
+    def release(self) -> None:
+        """SIGCONT every robot still stopped (before teardown signals it)."""
+        for rid in sorted(self.stopped):
+            _signal_group(self.robots[rid], signal.SIGCONT)
+        self.stopped.clear()
+
+
+def collect_robot_exits(out_dir: Path) -> dict:
+    """Every robot process's exit line, parsed (written as robots.json by the launcher)."""
+    processes = []
+    for log in sorted(Path(out_dir).glob("robot_*.log")):
+        for m in EXIT_LINE.finditer(log.read_text(errors="replace")):
+            counters = {k: int(v) for k, v in re.findall(r"(\w+)=(\d+)", m.group(4))}
+            processes.append({"robot": int(m.group(1)), "log": log.name,
+                              "reason": m.group(2), "code": int(m.group(3)), **counters})
+    return {"processes": processes,
+            "rejected_poses": sum(p.get("rejected", 0) for p in processes),
+            "stale_poses": sum(p.get("stale", 0) for p in processes)}
 
 
 def spawn_logged(args: list[str], log_path: Path) -> subprocess.Popen:
@@ -196,6 +318,7 @@ def run_distributed(
     startup_timeout_s: float = 30.0,
     extra_world_args: Sequence[str] = (),
     on_progress: Callable[[DistributedProgress], None] | None = None,
+    faults: FaultPlan | None = None,
 ) -> int:
     """Run one scenario as real processes; return the world's exit status.
 
@@ -210,6 +333,7 @@ def run_distributed(
         startup_timeout_s: deadline for robots to connect and for all of them to be alive.
         extra_world_args: appended to the world's command line.
         on_progress: called with a `DistributedProgress` about every `POLL_S`.
+        faults: link, timing and process faults to inject (see the module docstring).
 
     Returns:
         The world's exit status: 0 if every robot arrived with no contact, 1 if not,
@@ -222,8 +346,10 @@ def run_distributed(
     endpoint = endpoint or free_tcp_endpoint()
     world_cmd = world_command(run_id, scenario_path, out_dir, endpoint, rate_hz=rate_hz,
                               time_scale=time_scale, wait_robots_s=startup_timeout_s,
-                              extra_args=extra_world_args)
+                              extra_args=[*world_fault_args(faults), *extra_world_args])
     robot_ids = [spec.id for spec in scenario.robots]
+    if faults is not None:
+        faults.check(robot_ids)
     # A world that cannot keep pace runs slower than time_scale: be generous before giving up.
     world_limit_s = (2.0 * startup_timeout_s + 3.0 * scenario.time_limit_s / time_scale
                      + EXIT_MARGIN_S)
@@ -237,20 +363,32 @@ def run_distributed(
 
     world: subprocess.Popen | None = None
     robots: list[subprocess.Popen] = []
+    scheduler: ProcessFaultScheduler | None = None
     try:
         t0 = time.monotonic()
         world = spawn_logged(world_cmd, out_dir / "world.log")
-        for rid in robot_ids:
-            robots.append(spawn_logged(
-                robot_command(run_id, rid, endpoint, startup_timeout_s=startup_timeout_s),
-                out_dir / f"robot_{rid}.log"))
+
+        def spawn_robot(rid: int, restart: int = 0) -> subprocess.Popen:
+            name = f"robot_{rid}.log" if not restart else f"robot_{rid}.restart{restart}.log"
+            proc = spawn_logged(robot_command(run_id, rid, endpoint,
+                                              startup_timeout_s=startup_timeout_s,
+                                              extra_args=robot_fault_args(faults, rid)),
+                                out_dir / name)
+            robots.append(proc)
+            return proc
+
+        current = {rid: spawn_robot(rid) for rid in robot_ids}
+        scheduler = ProcessFaultScheduler(faults.process if faults else (), current,
+                                          spawn_robot, out_dir / "faults.jsonl")
         tail = _EventTail(out_dir / "events.jsonl")
         while True:
             try:
-                world.wait(timeout=POLL_S)
+                world.wait(timeout=FAULT_POLL_S if scheduler.pending else POLL_S)
                 break
             except subprocess.TimeoutExpired:
                 pass
+            if scheduler.pending:
+                scheduler.poll(_last_trajectory_time(out_dir / "trajectory.csv"))
             if time.monotonic() - t0 > world_limit_s:
                 stop_processes([world], 0.0, WORLD_TERM_GRACE_S)
                 break
@@ -272,7 +410,12 @@ def run_distributed(
         try:
             if world is not None:
                 stop_processes([world], 0.0, WORLD_TERM_GRACE_S)
+            if scheduler is not None:
+                scheduler.release()
             stop_processes(robots, ROBOT_EXIT_GRACE_S, ROBOT_TERM_GRACE_S)
+            with contextlib.suppress(OSError):
+                (out_dir / "robots.json").write_text(
+                    json.dumps(collect_robot_exits(out_dir), indent=1) + "\n")
         finally:
             if in_main:
                 signal.signal(signal.SIGINT, previous_int or signal.SIG_DFL)

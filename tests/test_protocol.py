@@ -584,3 +584,67 @@ def test_fuzz_pose_columns(n: int, columns: list[bytes]) -> None:
     for (group, key), col in zip(keys, columns):
         body[group][key] = col
     decode_or_protocol_error(PosesMsg.decode, pack(body))
+
+
+# --- Fuzzing with the receivers' options: unknown ids, hostile values, huge arrays ---------
+
+KNOWN = frozenset({0, 1, 2, -1, -2})
+
+
+@FUZZ
+@given(robot_ids=st.lists(st.integers(-(2**31), 2**31 - 1), max_size=6),
+       obstacle_ids=st.lists(st.integers(-(2**31), 2**31 - 1), max_size=4))
+def test_fuzz_pose_ids_against_known_ids(robot_ids: list[int], obstacle_ids: list[int]) -> None:
+    n, m = len(robot_ids), len(obstacle_ids)
+    body = raw(make_poses())
+    body["robots"] = {"id": np.array(robot_ids, "<i4").tobytes(),
+                      **{k: np.zeros(n).tobytes() for k in ("x", "y", "theta")},
+                      "radius": np.ones(n).tobytes()}
+    body["obstacles"] = {"id": np.array(obstacle_ids, "<i4").tobytes(),
+                         "x": np.zeros(m).tobytes(), "y": np.zeros(m).tobytes(),
+                         "radius": np.ones(m).tobytes()}
+    try:
+        msg = PosesMsg.decode(pack(body), known_ids=KNOWN)
+    except ProtocolError:
+        return
+    ids = set(msg.robot_ids.tolist()) | set(msg.obstacle_ids.tolist())
+    assert ids <= KNOWN and len(ids) == n + m
+    assert (msg.robot_ids >= 0).all() and (msg.obstacle_ids < 0).all()
+
+
+hostile = (st.floats(allow_nan=True, allow_infinity=True) | st.integers(-(2**63), 2**64 - 1)
+           | st.text(max_size=40) | st.none() | st.booleans() | st.binary(max_size=16)
+           | st.lists(st.integers(-(2**63), 2**64 - 1), max_size=3))
+
+
+@FUZZ
+@given(field=st.sampled_from(["robot", "seq", "pose_stamp", "v", "omega", "plan_ms", "status",
+                              "side", "resolved"]), value=hostile,
+       key_id=st.integers(0, 5))
+def test_fuzz_command_fields_with_hostile_values(field: str, value: object,
+                                                 key_id: int) -> None:
+    body = raw(make_command())
+    body[field] = value
+    try:
+        msg = CommandMsg.decode(pack(body), known_ids={0, 1, 2}, expected_robot_id=key_id)
+    except ProtocolError:
+        return
+    assert msg.robot_id == key_id and msg.robot_id in {0, 1, 2}
+    assert all(math.isfinite(x) for x in (msg.pose_stamp_s, msg.v_mps, msg.omega_radps,
+                                          msg.plan_ms))
+    assert msg.seq >= 0 and msg.status in {s.value for s in PlanStatus}
+
+
+@settings(max_examples=25, deadline=None, database=None)
+@given(n=st.integers(MAX_ROBOTS - 2, MAX_ROBOTS + 40), short=st.integers(0, 2))
+def test_fuzz_huge_pose_arrays(n: int, short: int) -> None:
+    body = raw(make_poses())
+    body["robots"] = {"id": np.arange(n, dtype="<i4").tobytes(),
+                      "x": np.zeros(n - short).tobytes(), "y": np.zeros(n).tobytes(),
+                      "theta": np.zeros(n).tobytes(), "radius": np.ones(n).tobytes()}
+    try:
+        msg = PosesMsg.decode(pack(body))
+    except ProtocolError:
+        assert n > MAX_ROBOTS or short
+        return
+    assert msg.n_robots == n <= MAX_ROBOTS and not short

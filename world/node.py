@@ -20,8 +20,12 @@ Lifecycle:
    the ``end`` event, give robots a moment (``--linger-s``) to leave, close everything.
 
 Faults: a malformed command is rejected (`ProtocolError`), counted and logged as a
-``rejected`` event (the first `MAX_REJECT_EVENTS`; the count is always in ``end``); a command
-whose ``seq`` does not increase is dropped as stale and counted. A robot whose liveliness
+``rejected`` event (the first `MAX_REJECT_EVENTS`); the ``end`` event always has the exact
+total (``rejected``) and tallies per key (``rejected_by_key``) and per reason
+(``rejected_by_reason``: the field or kind of error, e.g. ``cmd.v``). Valid commands pass
+through their robot's command link (`agent.link.FaultyLink`, ``--latency-ms`` ...: injected
+delay, loss, duplication, reordering, in sim time); a command whose ``seq`` does not
+increase is dropped as stale and counted. A robot whose liveliness
 token disappears (crash, or hang past the 1 s transport lease) is logged as ``robot_lost``
 and set offline (it brakes and stays as an obstacle); a returning token logs
 ``robot_rejoined`` and brings it back (its sequence numbering restarts).
@@ -44,12 +48,13 @@ import signal
 import sys
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from types import FrameType
 
 import zenoh
 
+from agent.link import LINK_COMMANDS, FaultyLink, LinkFaults, link_rng
 from protocol import (
     CommandMsg,
     ControlMsg,
@@ -71,6 +76,10 @@ EXIT_SETUP = 2
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 MAX_REJECT_EVENTS = 100
 """Only this many ``rejected`` events are written (a flood must not fill the disk)."""
+FLUSH_TICKS = 5
+"""trajectory.csv and commands.csv are flushed every this many ticks (0.1 s at 50 Hz)."""
+MAX_TALLY_KEYS = 64
+"""Distinct keys (and reasons) tallied in the ``end`` event; the rest count as ``other``."""
 CLOSE_TIMEOUT_S = 3.0
 """Wall time allowed for closing the session before the process leaves without it."""
 IDLE_POLL_S = 0.01
@@ -95,6 +104,8 @@ class WorldOptions:
         wait_robots_s: wall deadline for every robot to be alive before the start.
         control_rate_hz: planning rate served to the robots in their configuration.
         linger_s: wall time the world waits after the end for robots to leave.
+        link: faults injected on every robot's command link (sim-time delays).
+        fault_seed: seeds the command links (with the link kind and the robot id).
     """
 
     run_id: str
@@ -108,12 +119,28 @@ class WorldOptions:
     wait_robots_s: float = 30.0
     control_rate_hz: float = 10.0
     linger_s: float = 3.0
+    link: LinkFaults = field(default_factory=LinkFaults)
+    fault_seed: int = 0
 
 
 def _positive(text: str) -> float:
     value = float(text)
     if not (math.isfinite(value) and value > 0.0):
         raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}")
+    return value
+
+
+def _non_negative(text: str) -> float:
+    value = float(text)
+    if not (math.isfinite(value) and value >= 0.0):
+        raise argparse.ArgumentTypeError(f"must be a number >= 0, got {text!r}")
+    return value
+
+
+def _probability(text: str) -> float:
+    value = _non_negative(text)
+    if value > 1.0:
+        raise argparse.ArgumentTypeError(f"must be a probability in [0, 1], got {text!r}")
     return value
 
 
@@ -145,6 +172,16 @@ def parse_args(argv: list[str] | None = None) -> WorldOptions:
                         help="planning rate served to the robots [1/sim s]")
     parser.add_argument("--linger-s", type=float, default=3.0,
                         help="wall time to wait for robots to leave after the end")
+    faults = parser.add_argument_group("fault injection on the command links (sim time)")
+    faults.add_argument("--latency-ms", type=_non_negative, default=0.0, help="fixed delay [ms]")
+    faults.add_argument("--jitter-ms", type=_non_negative, default=0.0,
+                        help="uniform jitter half-width [ms]")
+    faults.add_argument("--drop", type=_probability, default=0.0, help="loss probability")
+    faults.add_argument("--dup", type=_probability, default=0.0,
+                        help="duplication probability")
+    faults.add_argument("--reorder", type=_probability, default=0.0,
+                        help="probability a command is held back (overtaken)")
+    faults.add_argument("--fault-seed", type=int, default=0, help="seeds the command links")
     args = parser.parse_args(argv)
     listen = None if args.connect else (args.listen or DEFAULT_ENDPOINT)
     return WorldOptions(
@@ -159,6 +196,9 @@ def parse_args(argv: list[str] | None = None) -> WorldOptions:
         wait_robots_s=args.wait_robots_s,
         control_rate_hz=args.control_rate_hz,
         linger_s=max(0.0, args.linger_s),
+        link=LinkFaults(latency_ms=args.latency_ms, jitter_ms=args.jitter_ms, drop=args.drop,
+                        dup=args.dup, reorder=args.reorder),
+        fault_seed=args.fault_seed,
     )
 
 
@@ -225,6 +265,11 @@ class WorldNode:
         self.ended = False
         self.counts = {"commands": 0, "rejected": 0, "stale": 0, "queries": 0,
                        "bad_queries": 0, "overruns": 0}
+        self.rejected_by_key: dict[str, int] = {}
+        self.rejected_by_reason: dict[str, int] = {}
+        self.cmd_links: dict[int, FaultyLink[CommandMsg]] = {
+            rid: FaultyLink(options.link, link_rng(options.fault_seed, LINK_COMMANDS, rid))
+            for rid in sorted(self.robot_ids)}
 
         n = len(scenario.robots)
         # Handler channels, read from the loop: callbacks never run project code.
@@ -267,6 +312,7 @@ class WorldNode:
                 if rid in self.lost:
                     self.lost.discard(rid)
                     self.last_seq.pop(rid, None)  # a new process numbers from 0 again
+                    self.cmd_links[rid].clear()
                     self.sim.set_offline(rid, False)
                     self._event("robot_rejoined", robot=rid, wall=time.time())
                     log.warning("robot %d rejoined", rid)
@@ -299,6 +345,9 @@ class WorldNode:
 
     def _reject(self, reason: str, key: str) -> None:
         self.counts["rejected"] += 1
+        _tally(self.rejected_by_key, key[:200])
+        # The reason's field or kind ("cmd.v", "not valid msgpack", ...), not its value.
+        _tally(self.rejected_by_reason, reason.split(":", 1)[0][:80])
         if self.counts["rejected"] <= MAX_REJECT_EVENTS:
             self._event("rejected", key=key[:200], reason=reason[:200])
         if self.counts["rejected"] in (1, 10, 100) or self.counts["rejected"] % 1000 == 0:
@@ -306,25 +355,37 @@ class WorldNode:
                         reason)
 
     def apply_commands(self) -> None:
-        """Validate and hold the newest command of each robot (zero-order hold)."""
+        """Validate each command, pass it through its robot's command link, and hold the
+        newest one the link releases (zero-order hold; older ``seq`` are dropped)."""
         while (sample := self.cmd_sub.try_recv()) is not None:
             key = str(sample.key_expr)
             try:
                 rid = self.keys.robot_id_of_cmd(key)
+            except ProtocolError as exc:
+                self._reject(f"key: {exc}", key)
+                continue
+            try:
                 msg = CommandMsg.decode(sample.payload.to_bytes(), known_ids=self.robot_ids,
                                         expected_robot_id=rid)
             except ProtocolError as exc:
                 self._reject(str(exc), key)
                 continue
-            if msg.seq <= self.last_seq.get(rid, -1):
-                self.counts["stale"] += 1
-                continue
-            self.last_seq[rid] = msg.seq
-            self.sim.set_command(rid, msg.v_mps, msg.omega_radps)
-            self.counts["commands"] += 1
-            self.recorder.record_command(
-                self.sim.t_s, rid, msg.seq, msg.pose_stamp_s, msg.v_mps, msg.omega_radps,
-                msg.plan_ms, msg.status, msg.side, msg.resolved_id)
+            self.cmd_links[rid].send(self.sim.t_s, msg)
+        for rid, link in self.cmd_links.items():
+            for msg in link.receive(self.sim.t_s):
+                self._hold(rid, msg)
+
+    def _hold(self, rid: int, msg: CommandMsg) -> None:
+        """Apply one released command unless its ``seq`` is not newer."""
+        if msg.seq <= self.last_seq.get(rid, -1):
+            self.counts["stale"] += 1
+            return
+        self.last_seq[rid] = msg.seq
+        self.sim.set_command(rid, msg.v_mps, msg.omega_radps)
+        self.counts["commands"] += 1
+        self.recorder.record_command(
+            self.sim.t_s, rid, msg.seq, msg.pose_stamp_s, msg.v_mps, msg.omega_radps,
+            msg.plan_ms, msg.status, msg.side, msg.resolved_id)
 
     # --- phases ------------------------------------------------------------------------------
 
@@ -358,6 +419,8 @@ class WorldNode:
         self.publish_poses()
         self.recorder.record_tick(self.sim.t_s, self.sim.robot_ids, self.sim.pose,
                                   self.sim.applied)
+        if self.sim.tick % FLUSH_TICKS == 0:  # watchers (the launcher's fault schedule)
+            self.recorder.flush()             # follow sim time in trajectory.csv
         for rid in events.arrivals:
             self._event("arrived", robot=rid)
         for a, b, overlap in events.new_contacts:
@@ -401,6 +464,9 @@ class WorldNode:
             min_gap_m=round(self.sim.min_gap_m, 6) if math.isfinite(self.sim.min_gap_m)
             else None,
             lost=sorted(self.lost), cmd_timeouts=self.sim.timeout_count, **self.counts,
+            rejected_by_key=self.rejected_by_key, rejected_by_reason=self.rejected_by_reason,
+            cmd_link={k: sum(getattr(link.counts, k) for link in self.cmd_links.values())
+                      for k in ("dropped", "duplicated", "reordered")},
         )
         log.info("end: %s at t=%.2f s, %d/%d arrived, %d contacts, %d rejected, %d stale",
                  reason, self.sim.t_s, len(arrived), len(self.robot_ids),
@@ -423,11 +489,19 @@ class WorldNode:
             return EXIT_FAILED
         self.control_pub.put(ControlMsg("start", self.sim.t_s).encode())
         self._event("start", mode="distributed", n_robots=len(self.robot_ids),
+                    cmd_link=self.options.link.as_dict(), fault_seed=self.options.fault_seed,
                     world_rate_hz=self.options.rate_hz,
                     control_rate_hz=self.options.control_rate_hz,
                     time_scale=self.options.time_scale, wall=time.time())
         log.info("start")
         return self.finish(self.run_loop())
+
+
+def _tally(counts: dict[str, int], name: str) -> None:
+    """Count `name`, or ``other`` once `MAX_TALLY_KEYS` distinct names are taken."""
+    if name not in counts and len(counts) >= MAX_TALLY_KEYS:
+        name = "other"
+    counts[name] = counts.get(name, 0) + 1
 
 
 def close_session(session: zenoh.Session, timeout_s: float = CLOSE_TIMEOUT_S) -> bool:

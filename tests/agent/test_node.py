@@ -104,3 +104,30 @@ def test_make_controller_builds_the_planner_for_the_control_period(planner: str)
     controller = make_controller(config, 0.05)
     assert controller.control_period_s == 0.05
     assert controller.planner.name == planner and controller.planner.control_period_s == 0.05
+
+
+def test_schedule_with_a_phase_plans_on_absolute_slots() -> None:
+    schedule = PlanSchedule(0.1, phase_s=0.04)
+    planned = []
+    for tick in range(20):
+        stamp = tick * 0.02 + 0.3  # the first pose the robot sees is stamped 0.30
+        if schedule.due(stamp):
+            planned.append(round(stamp, 6))
+            schedule.planned(stamp)
+    assert planned == [0.34, 0.44, 0.54, 0.64]
+
+
+def test_parse_fault_options() -> None:
+    from agent.link import LinkFaults
+
+    opts = parse_args(["--run", "r", "--id", "1", "--connect", "tcp/h:1", "--latency-ms", "100",
+                       "--jitter-ms", "30", "--drop", "0.1", "--dup", "0.05", "--reorder", "0.02",
+                       "--fault-seed", "9", "--control-phase-s", "0.05", "--plan-delay-ms", "40",
+                       "--no-latency-compensation"])
+    assert opts.link == LinkFaults(100.0, 30.0, 0.1, 0.05, 0.02)
+    assert opts.fault_seed == 9 and opts.control_phase_s == 0.05 and opts.plan_delay_ms == 40.0
+    assert not opts.compensate_latency
+    assert parse_args(["--run", "r", "--id", "1", "--connect", "tcp/h:1"]).compensate_latency
+    for bad in (["--drop", "1.5"], ["--latency-ms", "-1"], ["--plan-delay-ms", "inf"]):
+        with pytest.raises(SystemExit):
+            parse_args(["--run", "r", "--id", "1", "--connect", "tcp/h:1", *bad])

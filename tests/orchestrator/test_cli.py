@@ -113,9 +113,9 @@ def test_distributed_mode_calls_run_distributed_and_computes_metrics(tmp_path, m
 
     calls = {}
 
-    def fake(scenario_path, out_dir, run_id, *, rate_hz, time_scale, on_progress):
+    def fake(scenario_path, out_dir, run_id, *, rate_hz, time_scale, on_progress, faults):
         calls.update(path=Path(scenario_path), run_id=run_id, rate_hz=rate_hz,
-                     time_scale=time_scale)
+                     time_scale=time_scale, faults=faults)
         run_lockstep(load_scenario(scenario_path), out_dir, on_progress=on_progress)
         (Path(out_dir) / "metrics.json").unlink()  # the world does not write metrics
         return 0
@@ -125,6 +125,7 @@ def test_distributed_mode_calls_run_distributed_and_computes_metrics(tmp_path, m
     rc = main(["run", "setup_a", "--planner", "ifp", "--time-scale", "4", "--out", str(out)])
     assert rc in (0, 1)
     assert calls["time_scale"] == 4.0 and calls["rate_hz"] == 50.0
+    assert calls["faults"] is None  # no fault flag given
     assert calls["path"].parent == out and calls["run_id"].startswith("setup_a-0-")
     assert json.loads((out / "metrics.json").read_text())["robots"] == 2
     assert json.loads((out / "run.json").read_text())["mode"] == "distributed"
@@ -195,3 +196,63 @@ def test_unexpected_errors_exit_3(monkeypatch, capsys):
     monkeypatch.setattr(cli, "cmd_list", boom)  # build_parser binds the module's function
     assert main(["list"]) == 3
     assert "RuntimeError: kaput" in capsys.readouterr().err
+
+
+# --- fault flags and stress -----------------------------------------------------------------
+
+def test_run_with_fault_flags_in_lockstep_records_the_plan(tmp_path, capsys):
+    out = tmp_path / "run"
+    rc = main(["run", "setup_a", "--mode", "lockstep", "--planner", "ifp", "--quiet",
+               "--latency-ms", "50", "--jitter-ms", "15", "--drop", "0.1", "--slow-robot", "0:20",
+               "--out", str(out)])
+    assert rc == 0
+    faults = json.loads((out / "run.json").read_text())["faults"]
+    assert faults["links"]["latency_ms"] == 50.0 and faults["links"]["drop"] == 0.1
+    assert faults["timing"]["0"]["plan_delay_ms"] == 20.0
+    start = json.loads((out / "events.jsonl").read_text().splitlines()[0])
+    assert start["faults"]["links"]["jitter_ms"] == 15.0
+    assert json.loads((out / "metrics.json").read_text())["latency_ms_p50"] >= 100.0
+
+
+@pytest.mark.parametrize("flags, message", [
+    (["--drop", "2"], "drop"),
+    (["--kill-robot", "9@3"], "no robot 9"),
+    (["--stop-robot", "0@3"], "expected I@T:DUR"),
+    (["--slow-robot", "0"], "expected I:MS"),
+    (["--latency-ms", "-5"], "latency_ms"),
+    (["--robot-rate", "0:15"], "must divide 50 Hz"),
+])
+def test_bad_fault_flags_exit_2_with_the_flag_named(tmp_path, capsys, flags, message):
+    rc = main(["run", "setup_a", "--mode", "lockstep", "--out", str(tmp_path / "x"), *flags])
+    assert rc == 2
+    assert message in capsys.readouterr().err
+
+
+def test_stress_writes_table_rows_and_envelope(tmp_path, capsys):
+    out = tmp_path / "stress"
+    rc = main(["stress", "setup_a", "--sweep", "latency_ms=0,40", "--planners", "ifp",
+               "--seeds", "2", "--jobs", "2", "--out", str(out)])
+    assert rc == 0
+    text = capsys.readouterr().out
+    assert "largest contact-free level" in text and "max_latency_ms" in text
+    with open(out / "stress.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == 4 and {r["latency_ms"] for r in rows} == {"0.0", "40.0"}
+    content = json.loads((out / "stress.json").read_text())
+    assert [t["runs"] for t in content["table"]] == [2, 2]
+    assert content["envelope"][0]["planner"] == "ifp"
+    run = next(r for r in content["rows"] if r["latency_ms"] == 40.0 and r["seed"] == 1)
+    faults = json.loads((out / run["dir"] / "events.jsonl").read_text().splitlines()[0])
+    assert faults["faults"]["links"]["jitter_ms"] == pytest.approx(12.0)  # 0.3 x 40 ms
+    assert faults["faults"]["seed"] == 1
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--sweep", "speed=1,2"], "KEY one of"),
+    (["--sweep", "drop=0,3"], "drop"),
+    (["--sweep", "latency_ms=a"], "numbers"),
+    (["--planners", "magic"], "unknown"),
+])
+def test_stress_rejects_bad_options(tmp_path, capsys, argv, message):
+    assert main(["stress", "setup_a", "--out", str(tmp_path / "s"), *argv]) == 2
+    assert message in capsys.readouterr().err

@@ -7,6 +7,7 @@ import json
 import pytest
 
 from agent.config import PlannerConfig
+from orchestrator.faults import build_plan
 from orchestrator.lockstep import LockstepProgress, run_lockstep
 from world.scenario import RobotSpec, Scenario, load_scenario
 
@@ -88,3 +89,113 @@ def test_encounter_rules_break_the_mirror_symmetry_of_setup_a(tmp_path, planner)
     assert on.path_ratio_mean < 1.03 and on.oscillations_per_robot <= 2
     # Without the rules: the dance, a clearly longer path or no arrival at all.
     assert off.arrived < 2 or off.path_ratio_mean > on.path_ratio_mean + 0.05
+
+
+# --- the fault-injected (streaming) loop ---------------------------------------------------
+
+def crossing(time_limit_s: float = 40.0) -> Scenario:
+    """Robot 1 crosses robot 0's lane ahead of it (as the distributed kill test)."""
+    return Scenario(
+        name="crossing", description="", time_limit_s=time_limit_s, goal_tolerance_m=0.25,
+        planner_config=PlannerConfig(),
+        robots=(RobotSpec(0, (-6.0, 0.0, 0.0), (5.0, 0.0), radius_m=0.3),
+                RobotSpec(1, (0.0, -3.0, 1.5707963), (0.0, 4.0), radius_m=0.3)),
+    )
+
+
+def events_of(run) -> list[dict]:
+    return [json.loads(x) for x in (run / "events.jsonl").read_text().splitlines()]
+
+
+def test_faulty_loop_without_faults_succeeds_and_is_deterministic(tmp_path):
+    plan = build_plan()
+    a = run_lockstep(two_lanes(), tmp_path / "a", faults=plan)
+    run_lockstep(two_lanes(), tmp_path / "b", faults=plan)
+    assert a.success and a.metrics.latency_ms_p50 == 0.0
+    assert ((tmp_path / "a" / "trajectory.csv").read_text()
+            == (tmp_path / "b" / "trajectory.csv").read_text())
+
+
+def test_link_latency_is_the_measured_command_latency(tmp_path):
+    # 60 ms on the pose link plus 60 ms on the command link: 120 ms (+ < 1 tick) per command.
+    out = run_lockstep(two_lanes(), tmp_path / "run", faults=build_plan(latency_ms=60))
+    assert out.success
+    assert 120.0 <= out.metrics.latency_ms_p50 <= 140.0
+
+
+def test_faulty_runs_are_repeatable_per_seed(tmp_path):
+    def traj(seed, name):
+        run_lockstep(crossing(), tmp_path / name,
+                     faults=build_plan(latency_ms=50, jitter_ms=40, drop=0.2, dup=0.1,
+                                       reorder=0.1, seed=seed))
+        return (tmp_path / name / "trajectory.csv").read_text()
+
+    assert traj(3, "a") == traj(3, "b")
+    assert traj(3, "a") != traj(4, "c")
+
+
+def test_latency_compensation_makes_a_measurable_difference(tmp_path):
+    # 200 ms ± 60 ms on both links of setup D (four robots crossing at the centre).
+    from orchestrator.families import resolve
+
+    scenario = resolve("setup_d", agents=None, seed=0, start_jitter_m=0.0, planner=None)
+    results = {}
+    for on in (True, False):
+        out = run_lockstep(scenario, tmp_path / str(on), faults=build_plan(
+            latency_ms=200, jitter_ms=60, seed=1, compensate_latency=on))
+        end = events_of(tmp_path / str(on))[-1]
+        results[on] = (end["ego_error_m_mean"], out.metrics.min_gap_m)
+    (err_on, gap_on), (err_off, gap_off) = results[True], results[False]
+    # Own-position error at planning time: 1.1 m/s x ~0.2 s ~ 0.1-0.2 m without compensation.
+    assert err_off > 0.08 and err_on < 0.3 * err_off, results
+    assert gap_on > gap_off + 0.05, results
+    print(f"ego error {err_on:.3f} vs {err_off:.3f} m, min gap {gap_on:.3f} vs {gap_off:.3f} m")
+
+
+def test_killed_robot_is_avoided_where_it_stopped(tmp_path):
+    # Killed at 3 s, when it is about on robot 0's lane: it brakes and stays an obstacle.
+    out = run_lockstep(crossing(), tmp_path / "run", faults=build_plan(kill=["1@3"]))
+    events = events_of(tmp_path / "run")
+    lost = [e for e in events if e["kind"] == "robot_lost"]
+    assert [(e["robot"], e["t"]) for e in lost] == [(1, pytest.approx(3.0, abs=0.03))]
+    assert out.reason == "time_limit" and out.metrics.contacts == 0
+    assert [e["robot"] for e in events if e["kind"] == "arrived"] == [0]
+    assert events[-1]["lost"] == [1]
+    rows = [r.split(",") for r in (tmp_path / "run" / "trajectory.csv").read_text().split()[1:]]
+    y1 = [(float(r[0]), float(r[3])) for r in rows if r[1] == "1"]
+    after = [y for t, y in y1 if t > 5.0]  # braked to a stop within 2 s of the kill
+    assert max(after) - min(after) < 1e-9 and abs(after[0]) < 1.0, after[0]
+
+
+def test_stopped_robot_is_lost_after_the_lease_braked_and_rejoins(tmp_path):
+    out = run_lockstep(crossing(), tmp_path / "run", faults=build_plan(stop=["1@2:3"]))
+    events = events_of(tmp_path / "run")
+    kinds = {e["kind"]: e for e in reversed(events)}  # first of each kind
+    assert kinds["cmd_timeout"]["robot"] == 1
+    assert 2.4 < kinds["cmd_timeout"]["t"] < 2.7  # the world's 0.5 s command time-out
+    assert kinds["robot_lost"]["t"] == pytest.approx(3.0, abs=0.03)  # after the 1 s lease
+    assert kinds["robot_rejoined"]["t"] == pytest.approx(5.0, abs=0.03)
+    assert out.success, out.metrics
+
+
+def test_restarted_robot_rejoins_and_finishes(tmp_path):
+    out = run_lockstep(crossing(), tmp_path / "run", faults=build_plan(restart=["1@2"]))
+    events = events_of(tmp_path / "run")
+    assert [e["kind"] for e in events if e["kind"].startswith("robot_")] == [
+        "robot_lost", "robot_rejoined"]
+    assert out.success
+    seqs = [int(r.split(",")[2]) for r in
+            (tmp_path / "run" / "commands.csv").read_text().split()[1:] if r.split(",")[1] == "1"]
+    assert seqs.count(0) == 2  # the new controller numbers from 0 again
+
+
+def test_slow_robot_and_its_own_rate(tmp_path):
+    plan = build_plan(slow=["0:80"], rates=["1:5:0.1"])
+    out = run_lockstep(two_lanes(), tmp_path / "run", faults=plan)
+    assert out.success
+    rows = [r.split(",") for r in (tmp_path / "run" / "commands.csv").read_text().split()[1:]]
+    lat0 = [(float(r[0]) - float(r[3])) for r in rows if r[1] == "0"]
+    t1 = [float(r[0]) for r in rows if r[1] == "1"]
+    assert min(lat0) == pytest.approx(0.08, abs=0.021)  # applied one tick after the delay
+    assert t1[0] == pytest.approx(0.1) and all(
+        b - a == pytest.approx(0.2) for a, b in zip(t1, t1[1:]))

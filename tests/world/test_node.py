@@ -187,3 +187,16 @@ def test_parse_args_defaults_and_exclusive_endpoints(tmp_path: Path) -> None:
     for bad in (["--listen", "a", "--connect", "b"], ["--rate-hz", "-1"], ["--run", "x/y"]):
         with pytest.raises(SystemExit):
             parse_args(["--run", "r1", "--scenario", "s.yaml", *bad])
+
+
+def test_parse_command_link_fault_options() -> None:
+    from agent.link import LinkFaults
+
+    opts = parse_args(["--run", "r1", "--scenario", "s.yaml", "--latency-ms", "50",
+                       "--jitter-ms", "15", "--drop", "0.2", "--fault-seed", "3"])
+    assert opts.link == LinkFaults(latency_ms=50.0, jitter_ms=15.0, drop=0.2)
+    assert opts.fault_seed == 3
+    assert not parse_args(["--run", "r1", "--scenario", "s.yaml"]).link.active
+    for bad in (["--drop", "-0.1"], ["--reorder", "2"], ["--jitter-ms", "nan"]):
+        with pytest.raises(SystemExit):
+            parse_args(["--run", "r1", "--scenario", "s.yaml", *bad])
