@@ -24,7 +24,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import FrameType
@@ -196,6 +196,7 @@ def run_distributed(
     startup_timeout_s: float = 30.0,
     extra_world_args: Sequence[str] = (),
     on_progress: Callable[[DistributedProgress], None] | None = None,
+    robot_endpoints: Mapping[int, str] | None = None,
 ) -> int:
     """Run one scenario as real processes; return the world's exit status.
 
@@ -210,6 +211,9 @@ def run_distributed(
         startup_timeout_s: deadline for robots to connect and for all of them to be alive.
         extra_world_args: appended to the world's command line.
         on_progress: called with a `DistributedProgress` about every `POLL_S`.
+        robot_endpoints: robot id -> the endpoint it connects to, for robots that reach
+            the world through another address (as from another host); the others use
+            `endpoint` (which then usually listens on ``0.0.0.0``).
 
     Returns:
         The world's exit status: 0 if every robot arrived with no contact, 1 if not,
@@ -242,7 +246,8 @@ def run_distributed(
         world = spawn_logged(world_cmd, out_dir / "world.log")
         for rid in robot_ids:
             robots.append(spawn_logged(
-                robot_command(run_id, rid, endpoint, startup_timeout_s=startup_timeout_s),
+                robot_command(run_id, rid, (robot_endpoints or {}).get(rid, endpoint),
+                              startup_timeout_s=startup_timeout_s),
                 out_dir / f"robot_{rid}.log"))
         tail = _EventTail(out_dir / "events.jsonl")
         while True:
