@@ -1,6 +1,6 @@
 """Scale benchmark: real-time distributed runs of N robot processes, what each one costs.
 
-    orchestrator scale --agents 16,32,64,128 [--family random] [--planner P] [--seed S]
+    orchestrator scale --agents 16,32,64,128 [--family circles] [--planner P] [--seed S]
                        [--hosts 127.0.0.1,127.0.0.2] [--time-scale 1] --out DIR [--json]
 
 Every N is one normal distributed run (`orchestrator.distributed.run_distributed`: the world
@@ -56,8 +56,9 @@ from agent.config import PLANNER_NAMES
 SAMPLE_PERIOD_S = 0.5
 MEMORY_EVERY = 4
 """Read PSS on every this many samples (reading smaps costs ~1 ms per process)."""
-FAMILIES = ("random", "circle", "crossing")
-DEFAULT_FAMILY = "random"
+FAMILIES = ("circles", "circle", "crossing", "random")
+DEFAULT_FAMILY = "circles"
+"""Tiled 8-robot circles: the same local density and run length for every N (see README)."""
 MIB = float(1 << 20)
 
 COLUMNS = (
@@ -330,6 +331,80 @@ def _plot_run(out_dir: Path) -> None:
 
 
 # --------------------------------------------------------------------------------------
+# The world's per-tick cost against N (in-process, no transport)
+# --------------------------------------------------------------------------------------
+
+WORLD_STAGES = ("step", "poses", "record", "commands")
+
+
+def world_tick_costs(n: int, ticks: int, out_dir: Path) -> dict[str, Any]:
+    """Time the world's work per tick for n robots of the `circles` family.
+
+    Per tick, as `world.node.WorldNode.tick` does it: decode and apply the commands that
+    arrive in one tick (n / 5: every robot sends one per 0.1 s), step the dynamics
+    (integration, arrivals, contacts), encode the `PosesMsg`, write the trajectory rows.
+    Robots drive straight at their goals (a constant command). Returns median microseconds
+    per stage and the PosesMsg size.
+    """
+    import numpy as np
+
+    from orchestrator.families import circles
+    from protocol import CommandMsg, PosesMsg
+    from world.dynamics import WorldSim
+    from world.recorder import RunRecorder
+
+    scenario = circles(n)
+    sim = WorldSim(scenario)
+    ids = [int(r) for r in sim.robot_ids]
+    known = frozenset(ids)
+    per_tick = max(1, n // 5)
+    payloads = [CommandMsg(rid, 0, 0.0, 0.5, 0.0, 1.0, "ok").encode() for rid in ids]
+    times: dict[str, list[float]] = {k: [] for k in WORLD_STAGES}
+    size = 0
+    with RunRecorder(out_dir, scenario) as recorder:
+        for tick in range(ticks):
+            t0 = time.perf_counter()
+            for k in range(per_tick):
+                j = (tick * per_tick + k) % n
+                msg = CommandMsg.decode(payloads[j], known_ids=known, expected_robot_id=ids[j])
+                sim.set_command(msg.robot_id, msg.v_mps, msg.omega_radps)
+                recorder.record_command(sim.t_s, msg.robot_id, tick, 0.0, msg.v_mps,
+                                        msg.omega_radps, msg.plan_ms, msg.status)
+            t1 = time.perf_counter()
+            sim.step(0.02)
+            t2 = time.perf_counter()
+            data = PosesMsg.from_snapshot(sim.snapshot()).encode()
+            t3 = time.perf_counter()
+            recorder.record_tick(sim.t_s, sim.robot_ids, sim.pose, sim.applied)
+            t4 = time.perf_counter()
+            size = len(data)
+            for key, dt in zip(WORLD_STAGES, (t2 - t1, t3 - t2, t4 - t3, t1 - t0)):
+                times[key].append(dt * 1e6)
+    row: dict[str, Any] = {"agents": n, "ticks": ticks, "poses_bytes": size,
+                           "poses_bytes_per_robot": size / n}
+    total = np.sum([times[k] for k in WORLD_STAGES], axis=0)
+    row["tick_us_p50"] = float(np.percentile(total, 50))
+    row["tick_us_per_robot"] = row["tick_us_p50"] / n
+    for key in WORLD_STAGES:
+        row[f"{key}_us_p50"] = float(np.percentile(times[key], 50))
+    return row
+
+
+def format_world_rows(rows: Sequence[dict[str, Any]]) -> str:
+    """The world benchmark's table."""
+    head = ["N", "tick us p50", "us/robot", *(f"{k} us" for k in WORLD_STAGES), "PosesMsg B",
+            "B/robot"]
+    body = [[str(r["agents"]), f"{r['tick_us_p50']:.0f}", f"{r['tick_us_per_robot']:.2f}",
+             *(f"{r[f'{k}_us_p50']:.0f}" for k in WORLD_STAGES), str(r["poses_bytes"]),
+             f"{r['poses_bytes_per_robot']:.1f}"] for r in rows]
+    widths = [max(len(h), *(len(b[i]) for b in body)) for i, h in enumerate(head)]
+    lines = ["  ".join(h.ljust(w) for h, w in zip(head, widths)),
+             "  ".join("-" * w for w in widths)]
+    lines += ["  ".join(c.ljust(w) for c, w in zip(b, widths)) for b in body]
+    return "\n".join(lines)
+
+
+# --------------------------------------------------------------------------------------
 # Output
 # --------------------------------------------------------------------------------------
 
@@ -469,6 +544,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--out", type=Path, required=True, help="output directory")
     parser.add_argument("--json", action="store_true",
                         help="also print {\"rows\": [...]} as the last line")
+    parser.add_argument("--world-bench", action="store_true",
+                        help="instead of runs: time the world's per-tick work in-process for "
+                             "each N (no processes, no transport)")
+    parser.add_argument("--ticks", type=int, default=500,
+                        help="ticks timed per N with --world-bench (default 500)")
     return parser
 
 
@@ -481,6 +561,16 @@ def main(argv: list[str]) -> int:
     args.argv = ["orchestrator", "scale", *argv]
     out_root = Path(args.out)
     out_root.mkdir(parents=True, exist_ok=True)
+    if args.world_bench:
+        from orchestrator.rundir import write_json
+
+        rows = [world_tick_costs(n, max(1, args.ticks), out_root / f"world_{n}")
+                for n in args.agents]
+        print(format_world_rows(rows))
+        print(write_json(out_root / "world_bench.json", {"argv": args.argv, "rows": rows}))
+        if args.json:
+            print(json.dumps({"rows": rows}))
+        return 0
     env_note = os.environ.get("ZENOH_RUNTIME")
     if env_note:
         print(f"ZENOH_RUNTIME={env_note}", file=sys.stderr)
