@@ -26,8 +26,11 @@ controller dropped as old or out of order; ``overruns``: plan slots skipped).
 Exit status: 0 (end of run, or a signal), 2 (setup: cannot connect or get the
 configuration before the startup deadline), 3 (the world is gone).
 
-Between poses the loop sleeps until just before the next pose is due (the world's tick in
-wall time), so an idle robot costs little CPU.
+Planning slots are staggered over the world's ticks (`plan_phase_s`: robot k plans on the
+ticks k mod 5 of each 0.1 s period), so only a fifth of the robots plan on any one pose.
+Between slots the loop sleeps until just before the slot's pose is due; the poses of the
+ticks in between wait in the ring and are observed on waking. An idle robot costs little
+CPU and 128 robot processes share 2 cores (see README, "Scale").
 """
 
 from __future__ import annotations
@@ -75,6 +78,10 @@ CLOSE_TIMEOUT_S = 2.0
 """Wall time allowed for closing the session before the process leaves without it."""
 IDLE_SLEEP_S = 0.01
 MIN_SLEEP_S = 0.0005
+WAKE_MARGIN_S = 0.002
+"""Wall time before the next plan slot's pose is due at which the robot wakes to wait for it."""
+MAX_NAP_S = 0.05
+"""Longest single sleep: control and liveliness messages are read at least this often."""
 
 log = logging.getLogger("agent")
 
@@ -206,7 +213,7 @@ def fetch_config(session: zenoh.Session, keys: RunKeys, robot_id: int, stop: _St
 
 
 class PlanSchedule:
-    """When to plan, in sim time: every `period_s`, starting at the first pose's stamp.
+    """When to plan, in sim time: every `period_s`, from the first pose's stamp or on a phase.
 
     A plan is due when the newest pose's stamp reaches the next scheduled time. After a
     plan the schedule advances by one period; slots that have already passed (the robot was
@@ -214,25 +221,38 @@ class PlanSchedule:
 
     Args:
         period_s: planning period in sim time (> 0).
+        phase_s: None: the first slot is the first stamp seen. Else the slots are
+            ``phase_s + k * period_s`` (k integer): the first one at or after the first
+            stamp seen. Robots on different phases spread their planning over the world's
+            ticks instead of all planning on the same pose.
     """
 
-    def __init__(self, period_s: float) -> None:
+    def __init__(self, period_s: float, phase_s: float | None = None) -> None:
         if not period_s > 0.0:
             raise ValueError("period_s must be positive")
+        if phase_s is not None and not math.isfinite(phase_s):
+            raise ValueError("phase_s must be finite")
         self.period_s = float(period_s)
+        self.phase_s = None if phase_s is None else float(phase_s)
         self.next_s: float | None = None
         self.skipped = 0
+
+    def _first(self, stamp_s: float) -> float:
+        if self.phase_s is None:
+            return stamp_s
+        k = math.ceil((stamp_s - self.phase_s) / self.period_s - STAMP_EPS_S)
+        return self.phase_s + k * self.period_s
 
     def due(self, stamp_s: float) -> bool:
         """True if a pose stamped `stamp_s` should be planned on now."""
         if self.next_s is None:
-            self.next_s = stamp_s
+            self.next_s = self._first(stamp_s)
         return stamp_s + STAMP_EPS_S >= self.next_s
 
     def planned(self, stamp_s: float) -> int:
         """Record a plan made on the pose stamped `stamp_s`; returns the slots skipped."""
         if self.next_s is None:
-            self.next_s = stamp_s
+            self.next_s = self._first(stamp_s)
         self.next_s += self.period_s
         missed = 0
         if self.next_s + STAMP_EPS_S <= stamp_s:
@@ -240,6 +260,16 @@ class PlanSchedule:
             self.next_s += missed * self.period_s
         self.skipped += missed
         return missed
+
+
+def plan_phase_s(robot_id: int, period_s: float, tick_s: float) -> float:
+    """This robot's planning phase: robots spread evenly over the world ticks of a period.
+
+    With a 0.1 s period and 0.02 s ticks, robot k plans on the ticks ``k mod 5`` of every
+    period, so at any tick only a fifth of the robots plan (and compete for the CPU).
+    """
+    slots = max(1, round(period_s / tick_s))
+    return (robot_id % slots) * period_s / slots
 
 
 def make_controller(config: RunConfigMsg, period_s: float) -> RobotController:
@@ -295,7 +325,8 @@ class RobotNode:
         period_s = 1.0 / (options.control_rate_hz or config.control_rate_hz)
         self.controller = make_controller(config, period_s)
         warm_up(config, period_s)
-        self.schedule = PlanSchedule(period_s)
+        self.schedule = PlanSchedule(period_s, plan_phase_s(
+            config.robot.id, period_s, 1.0 / config.world_rate_hz))
         self.tick_wall_s = 1.0 / (config.world_rate_hz * config.time_scale)
         self.known_ids = frozenset(config.known_ids)
         self.counts = {"rejected": 0, "stale": 0, "plans": 0, "overruns": 0, "plan_errors": 0}
@@ -383,15 +414,24 @@ class RobotNode:
         self.counts["overruns"] += self.schedule.planned(msg.t_s)
 
     def _sleep(self) -> None:
-        """Sleep until just before the next pose is due (the world's tick in wall time)."""
+        """Sleep until just before the pose of the next plan slot is due, then poll for it.
+
+        The world publishes a pose every tick, but a robot needs one per plan slot: it
+        sleeps through the ticks in between (their poses wait in the ring) and wakes
+        `WAKE_MARGIN_S` before the slot's pose, predicted from the newest pose's stamp and
+        arrival time at the world's pace.
+        """
         now = time.monotonic()
-        if self.last_rx_wall is None:
+        msg = self.newest
+        if self.last_rx_wall is None or msg is None:
             time.sleep(IDLE_SLEEP_S)
             return
-        due = self.last_rx_wall + self.tick_wall_s - 0.001
+        ahead_s = max(0.0, (self.schedule.next_s or msg.t_s) - msg.t_s)
+        expected = self.last_rx_wall + max(ahead_s / self.config.time_scale, self.tick_wall_s)
+        due = expected - WAKE_MARGIN_S
         if now < due:
-            time.sleep(min(due - now, IDLE_SLEEP_S * 5))
-        elif now - self.last_rx_wall > 3.0 * self.tick_wall_s:
+            time.sleep(min(due - now, MAX_NAP_S))
+        elif now - expected > 3.0 * self.tick_wall_s:
             time.sleep(min(IDLE_SLEEP_S, self.tick_wall_s))  # poses late: back off
         else:
             time.sleep(MIN_SLEEP_S)

@@ -1,0 +1,52 @@
+"""`orchestrator scale` end to end with real processes, robots on two addresses of the world.
+
+Small N only: the figures are checked for presence and sanity, never against time budgets
+(the measured table is in the README, "Scale").
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import pytest
+
+from orchestrator.scale import main
+
+pytestmark = [pytest.mark.system, pytest.mark.timeout(180)]
+
+
+def test_scale_run_with_robots_connecting_through_a_second_address(tmp_path: Path,
+                                                                   capsys) -> None:
+    """The world listens on 0.0.0.0; robots 0, 2 dial 127.0.0.1 and robots 1, 3 dial
+    127.0.0.2, as robots on another host would dial the world's address."""
+    out = tmp_path / "scale"
+    code = main(["--agents", "4", "--family", "circles", "--hosts", "127.0.0.1,127.0.0.2",
+                 "--startup-timeout-s", "60", "--out", str(out), "--json"])
+    assert code == 0
+    row = json.loads(capsys.readouterr().out.strip().splitlines()[-1])["rows"][0]
+    run = out / "circles_4"
+    for name in ("scale.csv", "scale.json", "scale.png"):
+        assert (out / name).stat().st_size > 0, name
+    for name in ("metrics.json", "trajectory.png", "trajectory.csv", "world.log"):
+        assert (run / name).stat().st_size > 0, name
+
+    assert row["success"] and row["contacts"] == 0 and row["arrived"] == 4
+    assert row["world_status"] == 0
+    # Both addresses carried robots: the world's established sockets, by local address.
+    assert row["connections"].get("127.0.0.1", 0) >= 2, row["connections"]
+    assert row["connections"].get("127.0.0.2", 0) >= 2, row["connections"]
+    for rid in range(4):
+        log = (run / f"robot_{rid}.log").read_text()
+        host = "127.0.0.2" if rid % 2 else "127.0.0.1"
+        assert re.search(rf"connecting to tcp/{re.escape(host)}:\d+", log), log
+        assert "exit: reason='end (all_arrived)' code=0" in log
+    # Sane figures: present, positive, within physical bounds.
+    assert 0.0 < row["alive_s"] < 60.0
+    assert 0.0 < row["cpu_share_robots"] <= 1.0 and 0.0 < row["cpu_share_world"] <= 1.0
+    assert 5.0 < row["mem_robot_mib"] < 1024.0
+    assert row["mem_total_mib"] >= 4 * row["mem_robot_mib"] * 0.5
+    assert row["plan_ms_p50"] > 0.0 and row["latency_ms_p99"] >= 0.0
+    assert 0.0 <= row["deadline_miss_rate"] <= 1.0
+    assert row["sim_time_s"] > 0.0 and row["wall_s"] > row["sim_time_s"]
