@@ -8,8 +8,8 @@ explicit endpoint). It knows nothing but what arrives on the wire (see `protocol
 2. Declare the pose subscriber (a `RingChannel` of 2: the robot always acts on the newest
    pose, never a backlog), the control subscriber, the world-liveliness subscriber, the
    command publisher (DROP, express) and, last, its own liveliness token.
-3. Loop: drain control and liveliness, drain the pose ring (each valid snapshot goes to
-   `RobotController.observe`, which drops stale or out-of-order ones), and plan at the
+3. Loop: drain control and liveliness, drain the pose ring (the newest valid snapshot goes
+   to `RobotController.observe`, which drops stale or out-of-order ones), and plan at the
    control rate in SIM time: when the newest pose's stamp reaches the next scheduled plan
    time, plan and publish one `CommandMsg`; the schedule advances by one period (slots
    already passed are skipped and counted as overruns, never planned as a backlog).
@@ -19,9 +19,10 @@ to stderr (the first few, then every 100th) and the robot keeps running. The rob
 commanding and exits with `EXIT_WORLD_LOST` if the world's liveliness token disappears
 before the end message, or no pose arrives for ``--pose-timeout-s`` while running. It
 exits 0 on the ``end`` `ControlMsg` and on SIGTERM/SIGINT. On exit it logs one line
-``robot <id> exit: reason='...' code=N rejected=N stale=N plans=N overruns=N
+``robot <id> exit: reason='...' code=N rejected=N stale=N skipped=N plans=N overruns=N
 plan_errors=N seq=N`` to stderr (``rejected``: malformed messages; ``stale``: poses the
-controller dropped as old or out of order; ``overruns``: plan slots skipped).
+controller dropped as old or out of order; ``skipped``: poses never decoded because a newer
+one was waiting; ``overruns``: plan slots skipped).
 
 Exit status: 0 (end of run, or a signal), 2 (setup: cannot connect or get the
 configuration before the startup deadline), 3 (the world is gone).
@@ -329,7 +330,8 @@ class RobotNode:
             config.robot.id, period_s, 1.0 / config.world_rate_hz))
         self.tick_wall_s = 1.0 / (config.world_rate_hz * config.time_scale)
         self.known_ids = frozenset(config.known_ids)
-        self.counts = {"rejected": 0, "stale": 0, "plans": 0, "overruns": 0, "plan_errors": 0}
+        self.counts = {"rejected": 0, "stale": 0, "skipped": 0, "plans": 0, "overruns": 0,
+                       "plan_errors": 0}
         self.seq = 0
         self.last_rx_wall: float | None = None
         self.newest: PosesMsg | None = None
@@ -374,21 +376,30 @@ class RobotNode:
                 raise _Exit("world lost (liveliness token gone)", EXIT_WORLD_LOST)
 
     def poll_poses(self) -> bool:
-        """Observe every valid pose waiting in the ring; True if a newer one arrived."""
-        fresh = False
+        """Observe the newest valid pose waiting in the ring; True if it was new.
+
+        Samples are decoded newest first and the first valid one is observed: the older
+        ones are older than it, so the controller would drop them as out of order anyway
+        (they are counted as ``skipped``, never decoded). Malformed ones met on the way
+        are rejected and counted.
+        """
+        samples = []
         while (sample := self.pose_sub.try_recv()) is not None:
+            samples.append(sample)
+        for k in range(len(samples) - 1, -1, -1):
             try:
-                msg = PosesMsg.decode(sample.payload.to_bytes(), known_ids=self.known_ids)
+                msg = PosesMsg.decode(samples[k].payload.to_bytes(), known_ids=self.known_ids)
             except ProtocolError as exc:
                 self._reject("pose message", exc)
                 continue
+            self.counts["skipped"] += k
             if not self.controller.observe(msg.to_snapshot()):
                 self.counts["stale"] += 1
-                continue
+                return False
             self.newest = msg
             self.last_rx_wall = time.monotonic()
-            fresh = True
-        return fresh
+            return True
+        return False
 
     def plan_and_send(self) -> None:
         """Plan on the newest pose if its stamp reached the schedule; publish the command."""
