@@ -18,7 +18,8 @@ processes that map them; RSS where the kernel gives no PSS). Per N it reports:
   number of CPUs (1.0 = the whole machine); cpu_pct_per_robot: the same per robot, in % of
   one core;
 - mem_robot_mib: a robot process's peak PSS, mean over the robots; mem_total_mib: the
-  largest simultaneous sum over the world and all robots;
+  largest simultaneous sum over the world and all robots; threads_per_robot: the most
+  threads a robot process had;
 - alive_s: wall time from spawning the processes to the world seeing the last robot's
   liveliness token (`robot_joined` events carry the wall clock);
 - world_overruns: world ticks that fell more than a tick behind (the world resynchronises);
@@ -65,8 +66,8 @@ COLUMNS = (
     "agents", "family", "planner", "success", "arrived", "contacts", "min_gap_m",
     "plan_ms_p50", "plan_ms_p99", "latency_ms_p50", "latency_ms_p99", "deadline_miss_rate",
     "cpu_share_robots", "cpu_share_world", "cpu_pct_per_robot", "mem_robot_mib",
-    "mem_world_mib", "mem_total_mib", "mem_kind", "alive_s", "sim_time_s", "wall_s",
-    "world_overruns", "world_status", "connections",
+    "mem_world_mib", "mem_total_mib", "mem_kind", "threads_per_robot", "alive_s", "sim_time_s",
+    "wall_s", "world_overruns", "world_status", "connections",
 )
 PLOTTED = (
     ("plan_ms_p50", "plan_ms_p99", "planning time [ms]"),
@@ -85,6 +86,7 @@ class _Proc:
     role: str  # "world" or "robot"
     cpu_s: list[tuple[float, float]] = field(default_factory=list)  # (wall, user + system)
     mem_peak_b: float = 0.0
+    threads_peak: int = 0
 
 
 class ResourceSampler(threading.Thread):
@@ -140,6 +142,7 @@ class ResourceSampler(threading.Thread):
                 with proc.oneshot():
                     t = proc.cpu_times()
                     rec.cpu_s.append((wall, t.user + t.system))
+                    rec.threads_peak = max(rec.threads_peak, proc.num_threads())
                     if with_memory:
                         mem = self._memory_b(proc)
                         rec.mem_peak_b = max(rec.mem_peak_b, mem)
@@ -253,6 +256,7 @@ def scale_row(metrics: dict[str, Any], events: Sequence[dict], sampler: Resource
         "mem_world_mib": world[0].mem_peak_b / MIB if world else None,
         "mem_total_mib": sampler.mem_total_peak_b / MIB if sampler.mem_total_peak_b else None,
         "mem_kind": sampler.mem_kind,
+        "threads_per_robot": max((p.threads_peak for p in robots), default=None),
         "alive_s": alive_s,
         "sim_time_s": sim_time_s,
         "wall_s": wall_s,
