@@ -50,3 +50,58 @@ def test_scale_run_with_robots_connecting_through_a_second_address(tmp_path: Pat
     assert row["plan_ms_p50"] > 0.0 and row["latency_ms_p99"] >= 0.0
     assert 0.0 <= row["deadline_miss_rate"] <= 1.0
     assert row["sim_time_s"] > 0.0 and row["wall_s"] > row["sim_time_s"]
+
+
+def _fleet(tmp_path: Path, ids: str):
+    import subprocess
+    import sys
+
+    with open(tmp_path / "fleet.log", "wb") as log:
+        return subprocess.Popen(
+            [sys.executable, "-m", "agent.fleet", "--run", "t", "--ids", ids, "--connect",
+             "tcp/127.0.0.1:9", "--connect-id", "1=tcp/127.0.0.2:9", "--log-dir",
+             str(tmp_path), "--startup-timeout-s", "60"],
+            stdout=subprocess.DEVNULL, stderr=log, cwd=Path(__file__).resolve().parents[2])
+
+
+def _wait_children(proc, count: int, tmp_path: Path) -> list:
+    import time
+
+    import psutil
+
+    deadline = time.monotonic() + 60.0
+    while time.monotonic() < deadline:
+        kids = psutil.Process(proc.pid).children()
+        logs = [tmp_path / f"robot_{k}.log" for k in range(count)]
+        if len(kids) == count and all(p.exists() and p.stat().st_size for p in logs):
+            return kids  # every robot is running its own loop (it has logged)
+        assert proc.poll() is None, (tmp_path / "fleet.log").read_text()
+        time.sleep(0.05)
+    raise AssertionError(f"fleet did not fork {count} robots")
+
+
+@pytest.mark.parametrize("how", ["sigterm", "sigkill"])
+def test_fleet_robots_leave_with_the_fleet(tmp_path: Path, how: str) -> None:
+    """Robots forked by agent.fleet (waiting for a router that is not there) are real
+    processes with their own logs; SIGTERM is passed on, SIGKILL takes them along."""
+    import signal
+
+    import psutil
+
+    proc = _fleet(tmp_path, "0,1")
+    try:
+        kids = _wait_children(proc, 2, tmp_path)
+        proc.send_signal(signal.SIGTERM if how == "sigterm" else signal.SIGKILL)
+        gone, alive = psutil.wait_procs(kids, timeout=20.0)
+        assert not alive, alive
+        code = proc.wait(20.0)
+        assert code == (0 if how == "sigterm" else -signal.SIGKILL)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    log1 = (tmp_path / "robot_1.log").read_text()
+    assert "connecting to tcp/127.0.0.2:9" in log1
+    if how == "sigterm":
+        assert "exit: reason='signal' code=0" in log1
+        assert "connecting to tcp/127.0.0.1:9" in (tmp_path / "robot_0.log").read_text()
