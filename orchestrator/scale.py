@@ -1,7 +1,8 @@
 """Scale benchmark: real-time distributed runs of N robot processes, what each one costs.
 
     orchestrator scale --agents 16,32,64,128 [--family circles] [--planner P] [--seed S]
-                       [--hosts 127.0.0.1,127.0.0.2] [--time-scale 1] --out DIR [--json]
+                       [--hosts 127.0.0.1,127.0.0.2] [--launcher fork|spawn]
+                       [--time-scale 1] --out DIR [--json]
 
 Every N is one normal distributed run (`orchestrator.distributed.run_distributed`: the world
 process and one robot process per robot, over Zenoh) in ``DIR/<family>_<N>/``, with its
@@ -18,7 +19,8 @@ processes that map them; RSS where the kernel gives no PSS). Per N it reports:
   number of CPUs (1.0 = the whole machine); cpu_pct_per_robot: the same per robot, in % of
   one core;
 - mem_robot_mib: a robot process's peak PSS, mean over the robots; mem_total_mib: the
-  largest simultaneous sum over the world and all robots; threads_per_robot: the most
+  largest simultaneous sum over the world, the robots and (``--launcher fork``) the
+  `agent.fleet` parent that forked them (mem_fleet_mib); threads_per_robot: the most
   threads a robot process had;
 - alive_s: wall time from spawning the processes to the world seeing the last robot's
   liveliness token (`robot_joined` events carry the wall clock);
@@ -66,8 +68,9 @@ COLUMNS = (
     "agents", "family", "planner", "success", "arrived", "contacts", "min_gap_m",
     "plan_ms_p50", "plan_ms_p99", "latency_ms_p50", "latency_ms_p99", "deadline_miss_rate",
     "cpu_share_robots", "cpu_share_world", "cpu_pct_per_robot", "mem_robot_mib",
-    "mem_world_mib", "mem_total_mib", "mem_kind", "threads_per_robot", "alive_s", "sim_time_s",
-    "wall_s", "world_overruns", "world_status", "connections",
+    "mem_world_mib", "mem_fleet_mib", "mem_total_mib", "mem_kind", "threads_per_robot",
+    "alive_s", "sim_time_s", "wall_s", "world_overruns", "world_status", "connections",
+    "launcher",
 )
 PLOTTED = (
     ("plan_ms_p50", "plan_ms_p99", "planning time [ms]"),
@@ -122,6 +125,8 @@ class ResourceSampler(threading.Thread):
             module = cmd[cmd.index("-m") + 1] if cmd.index("-m") + 1 < len(cmd) else ""
             if module in ("world", "agent"):
                 return "world" if module == "world" else "robot"
+            if module == "agent.fleet":  # the launcher is our child, its robots are its
+                return "fleet" if proc.ppid() == os.getpid() else "robot"
         return None
 
     def sample(self, k: int) -> None:
@@ -214,7 +219,8 @@ def _events(out_dir: Path) -> list[dict]:
 
 def scale_row(metrics: dict[str, Any], events: Sequence[dict], sampler: ResourceSampler, *,
               n: int, family: str, planner: str, spawn_wall: float, spawn_mono: float,
-              wall_s: float, time_scale: float, world_status: int) -> dict[str, Any]:
+              wall_s: float, time_scale: float, world_status: int,
+              launcher: str = "spawn") -> dict[str, Any]:
     """One table row from a finished run (see the module docstring for each column)."""
     joined = [float(e["wall"]) for e in events
               if e.get("kind") in ("robot_joined", "robot_rejoined") and "wall" in e]
@@ -235,6 +241,7 @@ def scale_row(metrics: dict[str, Any], events: Sequence[dict], sampler: Resource
         cpu_per_robot = 100.0 * robots_s / span / max(n_robots, 1)
     robots = [p for p in sampler.procs.values() if p.role == "robot" and p.mem_peak_b > 0]
     world = [p for p in sampler.procs.values() if p.role == "world"]
+    fleet = [p for p in sampler.procs.values() if p.role == "fleet"]
     return {
         "agents": n,
         "family": family,
@@ -254,6 +261,8 @@ def scale_row(metrics: dict[str, Any], events: Sequence[dict], sampler: Resource
         "mem_robot_mib": (sum(p.mem_peak_b for p in robots) / len(robots) / MIB
                           if robots else None),
         "mem_world_mib": world[0].mem_peak_b / MIB if world else None,
+        "mem_fleet_mib": fleet[0].mem_peak_b / MIB if fleet else None,
+        "launcher": launcher,
         "mem_total_mib": sampler.mem_total_peak_b / MIB if sampler.mem_total_peak_b else None,
         "mem_kind": sampler.mem_kind,
         "threads_per_robot": max((p.threads_peak for p in robots), default=None),
@@ -306,7 +315,8 @@ def run_one(n: int, args: argparse.Namespace, out_root: Path) -> dict[str, Any]:
     try:
         status = run_distributed(scenario_path, out_dir, run_id, time_scale=args.time_scale,
                                  endpoint=endpoint, robot_endpoints=connect,
-                                 startup_timeout_s=args.startup_timeout_s)
+                                 startup_timeout_s=args.startup_timeout_s,
+                                 robot_launcher=args.launcher)
     finally:
         sampler.stop()
     wall_s = time.monotonic() - spawn_mono
@@ -320,7 +330,8 @@ def run_one(n: int, args: argparse.Namespace, out_root: Path) -> dict[str, Any]:
     _plot_run(out_dir)
     return scale_row(content, _events(out_dir), sampler, n=n, family=args.family,
                      planner=planner, spawn_wall=spawn_wall, spawn_mono=spawn_mono,
-                     wall_s=wall_s, time_scale=args.time_scale, world_status=status)
+                     wall_s=wall_s, time_scale=args.time_scale, world_status=status,
+                     launcher=args.launcher)
 
 
 def _plot_run(out_dir: Path) -> None:
@@ -543,6 +554,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--hosts", type=_hosts, default=["127.0.0.1"],
                         help="addresses of the world robots connect through, round robin "
                              "(e.g. 127.0.0.1,127.0.0.2; default 127.0.0.1)")
+    parser.add_argument("--launcher", choices=("fork", "spawn"), default="fork",
+                        help="fork: one agent.fleet process imports once and forks every "
+                             "robot process (default); spawn: one python -m agent each")
     parser.add_argument("--startup-timeout-s", type=_positive, default=60.0,
                         help="deadline for every robot to be alive (default 60)")
     parser.add_argument("--out", type=Path, required=True, help="output directory")
