@@ -79,9 +79,9 @@ CLOSE_TIMEOUT_S = 2.0
 """Wall time allowed for closing the session before the process leaves without it."""
 IDLE_SLEEP_S = 0.01
 MIN_SLEEP_S = 0.0005
-WAKE_MARGIN_S = 0.002
+WAKE_MARGIN_S = 0.001
 """Wall time before the next plan slot's pose is due at which the robot wakes to wait for it."""
-MAX_NAP_S = 0.05
+MAX_NAP_S = 0.1
 """Longest single sleep: control and liveliness messages are read at least this often."""
 
 log = logging.getLogger("agent")
