@@ -16,7 +16,8 @@ The parent never opens a Zenoh session (a session does not survive a fork; impor
 module is fine: its runtimes start with the first session). A child writes its stdout and
 stderr to ``DIR/robot_<id>.log`` and dies with the parent (``PR_SET_PDEATHSIG``). The
 parent passes SIGTERM/SIGINT on to the children still running, reaps them all, logs each
-exit and exits 0 if every robot did, else the largest robot exit status.
+exit and exits 0 if every robot did, else the largest robot exit status. With ``--nice N``
+the robots run N steps nicer than the parent (a world sharing their machine stays ahead).
 """
 
 from __future__ import annotations
@@ -67,6 +68,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--log-dir", required=True, type=Path, help="robot_<id>.log go here")
     parser.add_argument("--startup-timeout-s", default="30.0",
                         help="passed to every robot (python -m agent)")
+    parser.add_argument("--nice", type=int, default=0,
+                        help="robot processes add this to their niceness (>= 0; e.g. 5 keeps "
+                             "a world on the same machine ahead of them)")
     return parser
 
 
@@ -99,11 +103,13 @@ def _die_with_parent(parent_pid: int) -> None:
         os._exit(1)
 
 
-def _child(argv: list[str], log_path: Path, parent_pid: int) -> None:
+def _child(argv: list[str], log_path: Path, parent_pid: int, nice: int = 0) -> None:
     """In the forked child: become ``python -m agent`` with its own log; never returns."""
     code = 1
     try:
         _die_with_parent(parent_pid)
+        if nice > 0:
+            os.nice(nice)
         fd = os.open(log_path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
         os.dup2(fd, 1)
         os.dup2(fd, 2)
@@ -131,6 +137,9 @@ def _child(argv: list[str], log_path: Path, parent_pid: int) -> None:
 
 def run_fleet(args: argparse.Namespace) -> int:
     """Warm up, fork one child per robot, pass signals on, reap; returns the exit status."""
+    if args.nice < 0:
+        log.error("--nice must be >= 0, got %d", args.nice)
+        return 2
     overrides = dict(args.connect_id)
     unknown = sorted(set(overrides) - set(args.ids))
     if unknown:
@@ -164,7 +173,7 @@ def run_fleet(args: argparse.Namespace) -> int:
                 for signum in FORWARDED:
                     signal.signal(signum, signal.SIG_DFL)
                 signal.pthread_sigmask(signal.SIG_UNBLOCK, FORWARDED)
-                _child(argv, args.log_dir / f"robot_{rid}.log", parent)
+                _child(argv, args.log_dir / f"robot_{rid}.log", parent, args.nice)
             children[pid] = rid
             signal.pthread_sigmask(signal.SIG_UNBLOCK, FORWARDED)
         log.info("fleet: %d robot processes forked", len(children))

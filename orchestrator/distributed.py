@@ -149,7 +149,8 @@ def robot_command(run_id: str, robot_id: int, endpoint: str, *,
 
 def fleet_command(run_id: str, robot_ids: Sequence[int], endpoint: str, log_dir: Path, *,
                   startup_timeout_s: float = 30.0,
-                  robot_endpoints: Mapping[int, str] | None = None) -> list[str]:
+                  robot_endpoints: Mapping[int, str] | None = None,
+                  nice: int = 0) -> list[str]:
     """Command line of one `agent.fleet` process that forks every robot process."""
     overrides = [arg for rid, ep in sorted((robot_endpoints or {}).items())
                  for arg in ("--connect-id", f"{int(rid)}={ep}")]
@@ -157,7 +158,8 @@ def fleet_command(run_id: str, robot_ids: Sequence[int], endpoint: str, log_dir:
         sys.executable, "-m", "agent.fleet", "--run", run_id,
         "--ids", ",".join(str(int(r)) for r in robot_ids), "--connect", endpoint,
         "--log-dir", str(Path(log_dir).resolve()),
-        "--startup-timeout-s", repr(float(startup_timeout_s)), *overrides,
+        "--startup-timeout-s", repr(float(startup_timeout_s)), "--nice", str(int(nice)),
+        *overrides,
     ]
 
 
@@ -212,6 +214,7 @@ def run_distributed(
     on_progress: Callable[[DistributedProgress], None] | None = None,
     robot_endpoints: Mapping[int, str] | None = None,
     robot_launcher: str = "spawn",
+    robot_nice: int = 0,
 ) -> int:
     """Run one scenario as real processes; return the world's exit status.
 
@@ -232,6 +235,7 @@ def run_distributed(
         robot_launcher: ``"spawn"``: one ``python -m agent`` per robot; ``"fork"``: one
             ``python -m agent.fleet`` that imports and warms up once and forks every robot
             process (faster start-up, less memory; its own log is ``fleet.log``).
+        robot_nice: with ``"fork"``, robots run this much nicer than the world (>= 0).
 
     Returns:
         The world's exit status: 0 if every robot arrived with no contact, 1 if not,
@@ -268,7 +272,7 @@ def run_distributed(
             robots.append(spawn_logged(
                 fleet_command(run_id, robot_ids, endpoint, out_dir,
                               startup_timeout_s=startup_timeout_s,
-                              robot_endpoints=robot_endpoints),
+                              robot_endpoints=robot_endpoints, nice=robot_nice),
                 out_dir / "fleet.log"))
         for rid in robot_ids if robot_launcher == "spawn" else ():
             robots.append(spawn_logged(

@@ -63,6 +63,7 @@ FAMILIES = ("circles", "circle", "crossing", "random")
 DEFAULT_FAMILY = "circles"
 """Tiled 8-robot circles: the same local density and run length for every N (see README)."""
 MIB = float(1 << 20)
+ROBOT_NICE = 5
 
 COLUMNS = (
     "agents", "family", "planner", "success", "arrived", "contacts", "min_gap_m",
@@ -299,7 +300,8 @@ def run_one(n: int, args: argparse.Namespace, out_root: Path) -> dict[str, Any]:
     write_json(out_dir / "run.json", {
         "setup": args.family, "scenario": scenario.name, "planner": planner, "seed": args.seed,
         "mode": "distributed", "agents": n, "time_scale": args.time_scale,
-        "hosts": list(args.hosts), "argv": list(args.argv),
+        "hosts": list(args.hosts), "launcher": args.launcher, "robot_nice": args.robot_nice,
+        "argv": list(args.argv),
     })
     port = int(free_tcp_endpoint().rsplit(":", 1)[1])
     ids = [r.id for r in scenario.robots]
@@ -316,7 +318,8 @@ def run_one(n: int, args: argparse.Namespace, out_root: Path) -> dict[str, Any]:
         status = run_distributed(scenario_path, out_dir, run_id, time_scale=args.time_scale,
                                  endpoint=endpoint, robot_endpoints=connect,
                                  startup_timeout_s=args.startup_timeout_s,
-                                 robot_launcher=args.launcher)
+                                 robot_launcher=args.launcher,
+                                 robot_nice=args.robot_nice)
     finally:
         sampler.stop()
     wall_s = time.monotonic() - spawn_mono
@@ -557,6 +560,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--launcher", choices=("fork", "spawn"), default="fork",
                         help="fork: one agent.fleet process imports once and forks every "
                              "robot process (default); spawn: one python -m agent each")
+    parser.add_argument("--robot-nice", type=int, choices=range(0, 20), default=ROBOT_NICE,
+                        metavar="N", help="with --launcher fork: robots run N steps nicer "
+                        f"than the world (default {ROBOT_NICE}: the world, standing in for "
+                        "physics, keeps real time and a starved robot shows as its own "
+                        "deadline misses)")
     parser.add_argument("--startup-timeout-s", type=_positive, default=60.0,
                         help="deadline for every robot to be alive (default 60)")
     parser.add_argument("--out", type=Path, required=True, help="output directory")

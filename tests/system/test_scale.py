@@ -60,7 +60,7 @@ def _fleet(tmp_path: Path, ids: str):
         return subprocess.Popen(
             [sys.executable, "-m", "agent.fleet", "--run", "t", "--ids", ids, "--connect",
              "tcp/127.0.0.1:9", "--connect-id", "1=tcp/127.0.0.2:9", "--log-dir",
-             str(tmp_path), "--startup-timeout-s", "60"],
+             str(tmp_path), "--startup-timeout-s", "60", "--nice", "3"],
             stdout=subprocess.DEVNULL, stderr=log, cwd=Path(__file__).resolve().parents[2])
 
 
@@ -83,7 +83,8 @@ def _wait_children(proc, count: int, tmp_path: Path) -> list:
 @pytest.mark.parametrize("how", ["sigterm", "sigkill"])
 def test_fleet_robots_leave_with_the_fleet(tmp_path: Path, how: str) -> None:
     """Robots forked by agent.fleet (waiting for a router that is not there) are real
-    processes with their own logs; SIGTERM is passed on, SIGKILL takes them along."""
+    processes with their own logs and niceness; SIGTERM is passed on, SIGKILL takes them
+    along."""
     import signal
 
     import psutil
@@ -91,6 +92,7 @@ def test_fleet_robots_leave_with_the_fleet(tmp_path: Path, how: str) -> None:
     proc = _fleet(tmp_path, "0,1")
     try:
         kids = _wait_children(proc, 2, tmp_path)
+        assert all(k.nice() == psutil.Process(proc.pid).nice() + 3 for k in kids)
         proc.send_signal(signal.SIGTERM if how == "sigterm" else signal.SIGKILL)
         gone, alive = psutil.wait_procs(kids, timeout=20.0)
         assert not alive, alive
