@@ -132,3 +132,34 @@ def test_make_controller_builds_the_planner_for_the_control_period(planner: str)
     controller = make_controller(config, 0.05)
     assert controller.control_period_s == 0.05
     assert controller.planner.name == planner and controller.planner.control_period_s == 0.05
+
+
+def test_a_robot_process_imports_only_what_it_needs() -> None:
+    """After building and warming up an eifp-mpc robot: no YAML, plotting, ORCA, orchestrator
+    or psutil in the process (each costs start-up CPU and memory in 128 processes)."""
+    import json
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    code = """
+import json, sys
+from agent.node import make_controller, warm_up
+from protocol import RunConfigMsg
+from agent.config import PlannerConfig
+from world.scenario import RobotSpec
+spec = RobotSpec(0, (0.0, 0.0, 0.0), (10.0, 0.0), planner="eifp-mpc")
+cfg = RunConfigMsg(run_id="t", robot=spec, planner=PlannerConfig(), goal_tolerance_m=0.25,
+                   control_rate_hz=10.0, world_rate_hz=50.0, time_scale=1.0,
+                   time_limit_s=10.0, cmd_timeout_s=0.5, known_ids=(0, 1))
+make_controller(cfg, 0.1)
+warm_up(cfg, 0.1)
+print(json.dumps(sorted(sys.modules)))
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, cwd=Path(__file__).resolve().parents[2], timeout=60)
+    modules = set(json.loads(out.stdout.strip().splitlines()[-1]))
+    assert {"zenoh", "osqp", "agent.mpc", "agent.eifp"} <= modules
+    unneeded = {"yaml", "matplotlib", "PIL", "pyrvo", "agent.orca", "psutil"}
+    assert not (modules & unneeded), modules & unneeded
+    assert not any(m.startswith("orchestrator") for m in modules)
