@@ -65,6 +65,7 @@ def test_scale_row_from_events_and_samples() -> None:
     sampler.mem_total_peak_b = 130 * 2**20
     events = [{"kind": "robot_joined", "robot": 0, "wall": 1001.0},
               {"kind": "robot_joined", "robot": 1, "wall": 1001.5},
+              {"kind": "robot_rejoined", "robot": 1, "wall": 1030.0},  # not start-up
               {"kind": "start", "t": 0.0, "wall": 1002.0},
               {"kind": "end", "t": 10.0, "overruns": 3}]
     row = scale_row({"success": True, "sim_time_s": 10.0}, events, sampler, n=2,
