@@ -8,14 +8,15 @@ Every N is one normal distributed run (`orchestrator.distributed.run_distributed
 process and one robot process per robot, over Zenoh) in ``DIR/<family>_<N>/``, with its
 metrics.json and trajectory.png. While it runs, a sampler thread in this process reads every
 child process once per `SAMPLE_PERIOD_S` (psutil): its CPU time and, every
-`MEMORY_EVERY`-th sample, its PSS (proportional set size: shared pages split between the
+`MEMORY_EVERY`-th sample (5 s), its PSS (proportional set size: shared pages split between the
 processes that map them; RSS where the kernel gives no PSS). Per N it reports:
 
 - plan_ms p50/p99, latency_ms p50/p99, deadline_miss_rate, success, contacts, min_gap_m:
   the run's usual metrics (`orchestrator.metrics`; the latency is in sim time, quantised to
   world ticks);
 - cpu_share_robots / cpu_share_world: CPU seconds used by all robot processes (the world)
-  between the start and the end of the control phase, over that wall time times the
+  between the start and the end of the control phase (the first ``robot_left``), over that
+  wall time times the
   number of CPUs (1.0 = the whole machine); cpu_pct_per_robot: the same per robot, in % of
   one core;
 - mem_robot_mib: a robot process's peak PSS, mean over the robots; mem_total_mib: the
@@ -57,8 +58,8 @@ import psutil
 from agent.config import PLANNER_NAMES
 
 SAMPLE_PERIOD_S = 0.5
-MEMORY_EVERY = 4
-"""Read PSS on every this many samples (reading smaps costs ~1 ms per process)."""
+MEMORY_EVERY = 10
+"""Read PSS on every this many samples (reading smaps_rollup costs ~1 ms per process)."""
 FAMILIES = ("circles", "circle", "crossing", "random")
 DEFAULT_FAMILY = "circles"
 """Tiled 8-robot circles: the same local density and run length for every N (see README)."""
@@ -237,7 +238,11 @@ def scale_row(metrics: dict[str, Any], events: Sequence[dict], sampler: Resource
     cpu_robots = cpu_world = cpu_per_robot = None
     if start is not None and "wall" in start:
         t0 = spawn_mono + (float(start["wall"]) - spawn_wall)
-        t1 = t0 + sim_time_s / time_scale
+        # The end: robots leave within milliseconds of the world's end message. A world
+        # that fell behind real time took longer than sim time / time scale.
+        left = [float(e["wall"]) for e in events if e.get("kind") == "robot_left" and "wall" in e]
+        t1 = (spawn_mono + (min(left) - spawn_wall) if left
+              else t0 + sim_time_s / time_scale)
         span = max(t1 - t0, 1e-9)
         cpus = psutil.cpu_count() or 1
         robots_s, n_robots = sampler.cpu_between("robot", t0, t1)

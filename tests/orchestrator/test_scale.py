@@ -67,8 +67,10 @@ def test_scale_row_from_events_and_samples() -> None:
               {"kind": "robot_joined", "robot": 1, "wall": 1001.5},
               {"kind": "robot_rejoined", "robot": 1, "wall": 1030.0},  # not start-up
               {"kind": "start", "t": 0.0, "wall": 1002.0},
-              {"kind": "end", "t": 10.0, "overruns": 3}]
-    row = scale_row({"success": True, "sim_time_s": 10.0}, events, sampler, n=2,
+              {"kind": "end", "t": 5.0, "overruns": 3},
+              {"kind": "robot_left", "robot": 0, "wall": 1012.0}]
+    # The world fell behind: 5 s of sim time took 10 s of wall time (start to robot_left).
+    row = scale_row({"success": True, "sim_time_s": 5.0}, events, sampler, n=2,
                     family="circles", planner="eifp-mpc", spawn_wall=1000.0, spawn_mono=100.0,
                     wall_s=15.0, time_scale=1.0, world_status=0)
     assert row["alive_s"] == pytest.approx(1.5)
