@@ -26,6 +26,8 @@ processes that map them; RSS where the kernel gives no PSS). Per N it reports:
 - alive_s: wall time from spawning the processes to the world seeing the last robot's
   liveliness token (`robot_joined` events carry the wall clock);
 - world_overruns: world ticks that fell more than a tick behind (the world resynchronises);
+- robots_lost: robots whose liveliness token the world saw disappear during the run (a
+  process that missed its 1 s transport lease under overload, or crashed);
 - connections: the world's TCP connections per local address (robots reaching it through
   each of ``--hosts``).
 
@@ -73,7 +75,8 @@ COLUMNS = (
     "plan_ms_p50", "plan_ms_p99", "latency_ms_p50", "latency_ms_p99", "deadline_miss_rate",
     "cpu_share_robots", "cpu_share_world", "cpu_pct_per_robot", "mem_robot_mib",
     "mem_world_mib", "mem_fleet_mib", "mem_total_mib", "mem_kind", "threads_per_robot",
-    "alive_s", "sim_time_s", "wall_s", "world_overruns", "world_status", "connections",
+    "alive_s", "sim_time_s", "wall_s", "world_overruns", "robots_lost", "world_status",
+    "connections",
     "launcher",
 )
 PLOTTED = (
@@ -231,6 +234,7 @@ def scale_row(metrics: dict[str, Any], events: Sequence[dict], sampler: Resource
         if e.get("kind") == "robot_joined" and "wall" in e and "robot" in e:
             first_join.setdefault(int(e["robot"]), float(e["wall"]))
     joined = list(first_join.values())
+    lost = {int(e["robot"]) for e in events if e.get("kind") == "robot_lost" and "robot" in e}
     start = next((e for e in events if e.get("kind") == "start"), None)
     end = next((e for e in reversed(events) if e.get("kind") == "end"), {})
     alive_s = (max(joined) - spawn_wall) if len(joined) >= n else None
@@ -281,6 +285,7 @@ def scale_row(metrics: dict[str, Any], events: Sequence[dict], sampler: Resource
         "sim_time_s": sim_time_s,
         "wall_s": wall_s,
         "world_overruns": end.get("overruns"),
+        "robots_lost": len(lost),
         "world_status": world_status,
         "connections": dict(sorted(sampler.connections.items())),
     }
@@ -450,7 +455,7 @@ def format_rows(rows: Sequence[dict[str, Any]]) -> str:
     """The printed table, one row per N."""
     head = ["N", "ok", "arrived", "contacts", "plan p50/p99 ms", "latency p50/p99 ms",
             "miss %", "CPU robots/world %", "CPU/robot %", "PSS/robot MiB", "PSS total MiB",
-            "alive s", "sim s", "wall s"]
+            "alive s", "lost", "sim s", "wall s"]
     body = []
     for r in rows:
         miss = r["deadline_miss_rate"]
@@ -464,7 +469,8 @@ def format_rows(rows: Sequence[dict[str, Any]]) -> str:
             f"{_fmt(100 * cpu_r if cpu_r is not None else None, 1)}/"
             f"{_fmt(100 * cpu_w if cpu_w is not None else None, 1)}",
             _fmt(r["cpu_pct_per_robot"], 1), _fmt(r["mem_robot_mib"], 1),
-            _fmt(r["mem_total_mib"], 0), _fmt(r["alive_s"], 1), _fmt(r["sim_time_s"], 1),
+            _fmt(r["mem_total_mib"], 0), _fmt(r["alive_s"], 1), _fmt(r["robots_lost"]),
+            _fmt(r["sim_time_s"], 1),
             _fmt(r["wall_s"], 1),
         ])
     widths = [max(len(h), *(len(b[i]) for b in body)) if body else len(h)

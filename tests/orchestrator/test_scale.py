@@ -67,6 +67,7 @@ def test_scale_row_from_events_and_samples() -> None:
               {"kind": "robot_joined", "robot": 1, "wall": 1001.5},
               {"kind": "robot_rejoined", "robot": 1, "wall": 1030.0},  # not start-up
               {"kind": "start", "t": 0.0, "wall": 1002.0},
+              {"kind": "robot_lost", "t": 1.0, "robot": 1, "wall": 1003.0},
               {"kind": "end", "t": 5.0, "overruns": 3},
               {"kind": "robot_left", "robot": 0, "wall": 1012.0}]
     # The world fell behind: 5 s of sim time took 10 s of wall time (start to robot_left).
@@ -81,7 +82,7 @@ def test_scale_row_from_events_and_samples() -> None:
     assert row["mem_robot_mib"] == pytest.approx(50.0)
     assert row["mem_world_mib"] == pytest.approx(30.0)
     assert row["mem_total_mib"] == pytest.approx(130.0)
-    assert row["world_overruns"] == 3
+    assert row["world_overruns"] == 3 and row["robots_lost"] == 1
     assert set(row) == set(COLUMNS)
 
 
