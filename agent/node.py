@@ -21,8 +21,8 @@ before the end message, or no pose arrives for ``--pose-timeout-s`` while runnin
 exits 0 on the ``end`` `ControlMsg` and on SIGTERM/SIGINT. On exit it logs one line
 ``robot <id> exit: reason='...' code=N rejected=N stale=N skipped=N plans=N overruns=N
 plan_errors=N seq=N`` to stderr (``rejected``: malformed messages; ``stale``: poses the
-controller dropped as old or out of order; ``skipped``: poses never decoded because a newer
-one was waiting; ``overruns``: plan slots skipped).
+controller dropped as old or out of order; ``skipped``: valid poses not observed because a
+newer one was waiting; ``overruns``: plan slots skipped).
 
 Exit status: 0 (end of run, or a signal), 2 (setup: cannot connect or get the
 configuration before the startup deadline), 3 (the world is gone).
@@ -378,28 +378,33 @@ class RobotNode:
     def poll_poses(self) -> bool:
         """Observe the newest valid pose waiting in the ring; True if it was new.
 
-        Samples are decoded newest first and the first valid one is observed: the older
-        ones are older than it, so the controller would drop them as out of order anyway
-        (they are counted as ``skipped``, never decoded). Malformed ones met on the way
-        are rejected and counted.
+        Every sample is decoded (a malformed one is rejected and counted wherever it sits
+        in the ring), newest first; only the newest valid one is observed: the older ones
+        are older than it, so the controller would drop them as out of order anyway (they
+        are counted as ``skipped``).
         """
         samples = []
         while (sample := self.pose_sub.try_recv()) is not None:
             samples.append(sample)
-        for k in range(len(samples) - 1, -1, -1):
+        newest: PosesMsg | None = None
+        for sample in reversed(samples):
             try:
-                msg = PosesMsg.decode(samples[k].payload.to_bytes(), known_ids=self.known_ids)
+                msg = PosesMsg.decode(sample.payload.to_bytes(), known_ids=self.known_ids)
             except ProtocolError as exc:
                 self._reject("pose message", exc)
                 continue
-            self.counts["skipped"] += k
-            if not self.controller.observe(msg.to_snapshot()):
-                self.counts["stale"] += 1
-                return False
-            self.newest = msg
-            self.last_rx_wall = time.monotonic()
-            return True
-        return False
+            if newest is None:
+                newest = msg
+            else:
+                self.counts["skipped"] += 1
+        if newest is None:
+            return False
+        if not self.controller.observe(newest.to_snapshot()):
+            self.counts["stale"] += 1
+            return False
+        self.newest = newest
+        self.last_rx_wall = time.monotonic()
+        return True
 
     def plan_and_send(self) -> None:
         """Plan on the newest pose if its stamp reached the schedule; publish the command."""
