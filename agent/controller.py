@@ -27,6 +27,9 @@ from world.scenario import RobotSpec
 
 MAX_COMPENSATED_AGE_S = 1.0
 """Poses older than this are not extrapolated further (the prediction would be fiction)."""
+ESTIMATION_MARGIN_M = 5.0
+"""Only others within the sensing radius plus this are estimated: farther ones cannot come
+into range during the (<= 1 s) forward prediction below a closing speed of 5 m/s."""
 
 
 class RobotController:
@@ -84,7 +87,9 @@ class RobotController:
             raise RuntimeError("no snapshot observed yet")
         row = int(np.flatnonzero(snap.ids == self.spec.id)[0])
         x, y, heading = snap.pose[row]
-        others = self.tracker.others()
+        others = self.tracker.others(
+            near_m=snap.pose[row, :2],
+            within_m=self.config.sensing_radius_m + ESTIMATION_MARGIN_M)
         v, omega = self.command
         age = float(np.clip(now_s - snap.stamp_s, 0.0, MAX_COMPENSATED_AGE_S))
         if self.compensate_latency and age > 0.0:

@@ -49,6 +49,8 @@ class NeighborTracker:
         self._seen = np.zeros((self.max_samples, 0), dtype=bool)
         self._latest = np.zeros(0, dtype=bool)
         self._row = -1
+        self._last_ids: np.ndarray | None = None  # the previous snapshot's ids, and
+        self._last_cols = np.zeros(0, dtype=np.int64)  # their columns (most ticks repeat them)
 
     def reset(self) -> None:
         """Forget all history."""
@@ -70,11 +72,15 @@ class NeighborTracker:
         """Add one observed snapshot (the caller drops stale or out-of-order ones)."""
         mask = snapshot.ids != self.own_id
         ids = snapshot.ids[mask]
-        new = [int(i) for i in ids.tolist() if int(i) not in self._col]
-        if new:
-            self._grow(new)
-        cols = np.fromiter((self._col[int(i)] for i in ids.tolist()), dtype=np.int64,
-                           count=ids.shape[0])
+        if self._last_ids is not None and np.array_equal(ids, self._last_ids):
+            cols = self._last_cols  # the same discs in the same order as last time
+        else:
+            new = [int(i) for i in ids.tolist() if int(i) not in self._col]
+            if new:
+                self._grow(new)
+            cols = np.fromiter((self._col[int(i)] for i in ids.tolist()), dtype=np.int64,
+                               count=ids.shape[0])
+            self._last_ids, self._last_cols = ids.copy(), cols
         before = self._t[(self._row - 1) % self.max_samples] if self._row >= 0 else -np.inf
         if self._row < 0 or snapshot.stamp_s - before >= self.spacing_s:
             self._row = (self._row + 1) % self.max_samples  # else: replace the newest
@@ -86,16 +92,28 @@ class NeighborTracker:
         self._radius[cols] = snapshot.radius_m[mask]
         self._latest = self._seen[r].copy()
 
-    def others(self) -> Others:
-        """Estimates for every disc seen in the latest snapshot (ids in first-seen order)."""
+    def others(self, near_m: np.ndarray | None = None, within_m: float = np.inf) -> Others:
+        """Estimates for the discs seen in the latest snapshot (ids in first-seen order).
+
+        Args:
+            near_m: (2,) a point; with `within_m`, only discs whose latest position is at
+                most `within_m` from it are estimated (bounds the work in a crowd).
+            within_m: see `near_m`.
+        """
         if self._row < 0 or not np.any(self._latest):
             return Others.empty()
         r = self._row
+        sel = self._latest
+        if near_m is not None and np.isfinite(within_m):
+            gap = self._pos[r] - np.asarray(near_m, dtype=float)
+            sel = sel & (np.hypot(gap[:, 0], gap[:, 1]) <= within_m)
+            if not np.any(sel):
+                return Others.empty()
         t_now = self._t[r]
         order = np.argsort(self._t)  # oldest first; unused rows have -inf
         t = self._t[order]
-        pos = self._pos[order][:, self._latest]  # (H, k, 2)
-        seen = self._seen[order][:, self._latest]  # (H, k)
+        pos = self._pos[order][:, sel]  # (H, k, 2)
+        seen = self._seen[order][:, sel]  # (H, k)
         use = seen & (t_now - t <= self.window_s + 1e-9)[:, None]
         w = use.astype(float)
         count = w.sum(axis=0)  # (k,)
@@ -119,13 +137,13 @@ class NeighborTracker:
         path = (steps * both).sum(axis=0)
         chord = np.linalg.norm(latest - start, axis=1)
         linearity = np.where(path > _MIN_TRAVEL_M, chord / np.maximum(path, 1e-12), 0.0)
-        ids = self._ids[self._latest]
+        ids = self._ids[sel]
         # Built from a validated snapshot (finite poses, radii) by finite arithmetic.
         return Others.trusted(
             ids=ids,
             position_m=latest,
             velocity_mps=velocity,
-            radius_m=self._radius[self._latest],
+            radius_m=self._radius[sel],
             linearity=np.clip(linearity, 0.0, 1.0),
             track_start_m=start,
             is_robot=ids >= 0,

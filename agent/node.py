@@ -8,8 +8,8 @@ explicit endpoint). It knows nothing but what arrives on the wire (see `protocol
 2. Declare the pose subscriber (a `RingChannel` of 2: the robot always acts on the newest
    pose, never a backlog), the control subscriber, the world-liveliness subscriber, the
    command publisher (DROP, express) and, last, its own liveliness token.
-3. Loop: drain control and liveliness, drain the pose ring (each valid snapshot goes to
-   `RobotController.observe`, which drops stale or out-of-order ones), and plan at the
+3. Loop: drain control and liveliness, drain the pose ring (the newest valid snapshot goes
+   to `RobotController.observe`, which drops stale or out-of-order ones), and plan at the
    control rate in SIM time: when the newest pose's stamp reaches the next scheduled plan
    time, plan and publish one `CommandMsg`; the schedule advances by one period (slots
    already passed are skipped and counted as overruns, never planned as a backlog).
@@ -34,9 +34,10 @@ forward-predicts by it (``--no-latency-compensation`` turns that off). A pose ol
 ``--plan-delay-ms`` holds every command back that long (a CPU-starved robot),
 ``--control-phase-s`` shifts the planning slots. It
 exits 0 on the ``end`` `ControlMsg` and on SIGTERM/SIGINT. On exit it logs one line
-``robot <id> exit: reason='...' code=N rejected=N stale=N plans=N overruns=N
+``robot <id> exit: reason='...' code=N rejected=N stale=N skipped=N plans=N overruns=N
 plan_errors=N stale_plans=N link_dropped=N suspended=N seq=N`` to stderr (``rejected``:
 malformed messages; ``stale``: poses the controller dropped as old or out of order;
+``skipped``: valid poses not observed because a newer one was waiting in the ring;
 ``overruns``: plan slots skipped; ``stale_plans``: brakes on too-old poses;
 ``link_dropped``: poses the injected link lost; ``suspended``: times it found itself
 resumed after a stop). The launcher collects these lines into ``robots.json``.
@@ -44,8 +45,11 @@ resumed after a stop). The launcher collects these lines into ``robots.json``.
 Exit status: 0 (end of run, or a signal), 2 (setup: cannot connect or get the
 configuration before the startup deadline), 3 (the world is gone).
 
-Between poses the loop sleeps until just before the next pose is due (the world's tick in
-wall time), so an idle robot costs little CPU.
+Planning slots are staggered over the world's ticks (`plan_phase_s`: robot k plans on the
+ticks k mod 5 of each 0.1 s period), so only a fifth of the robots plan on any one pose.
+Between slots the loop sleeps until just before the slot's pose is due; the poses of the
+ticks in between wait in the ring and are observed on waking. An idle robot costs little
+CPU and 128 robot processes share 2 cores (see README, "Scale").
 """
 
 from __future__ import annotations
@@ -100,6 +104,10 @@ REJOIN_GRACE_S = 5.0
 """After a suspension, how long the robot waits for the world's token to come back."""
 STALE_PLAN_S = 1.0
 """Poses older than this [sim s] when planning: brake instead (compensation is capped there)."""
+WAKE_MARGIN_S = 0.001
+"""Wall time before the next plan slot's pose is due at which the robot wakes to wait for it."""
+MAX_NAP_S = 0.1
+"""Longest single sleep: control and liveliness messages are read at least this often."""
 
 log = logging.getLogger("agent")
 
@@ -277,7 +285,7 @@ def fetch_config(session: zenoh.Session, keys: RunKeys, robot_id: int, stop: _St
 
 
 class PlanSchedule:
-    """When to plan, in sim time: every `period_s`, starting at the first pose's stamp.
+    """When to plan, in sim time: every `period_s`, from the first pose's stamp or on a phase.
 
     A plan is due when the newest pose's stamp reaches the next scheduled time. After a
     plan the schedule advances by one period; slots that have already passed (the robot was
@@ -285,21 +293,25 @@ class PlanSchedule:
 
     Args:
         period_s: planning period in sim time (> 0).
-        phase_s: if given, slots are at ``phase_s + k * period_s`` of sim time (the first
-            at or after the first pose); if None, they start at the first pose's stamp.
+        phase_s: None: the first slot is the first stamp seen. Else the slots are
+            ``phase_s + k * period_s`` (k integer): the first one at or after the first
+            stamp seen. Robots on different phases spread their planning over the world's
+            ticks instead of all planning on the same pose.
     """
 
     def __init__(self, period_s: float, phase_s: float | None = None) -> None:
         if not period_s > 0.0:
             raise ValueError("period_s must be positive")
+        if phase_s is not None and not math.isfinite(phase_s):
+            raise ValueError("phase_s must be finite")
         self.period_s = float(period_s)
-        self.phase_s = phase_s
+        self.phase_s = None if phase_s is None else float(phase_s)
         self.next_s: float | None = None
         self.skipped = 0
 
     def _first(self, stamp_s: float) -> float:
-        if self.phase_s is None or stamp_s <= self.phase_s:
-            return stamp_s if self.phase_s is None else self.phase_s
+        if self.phase_s is None:
+            return stamp_s
         k = math.ceil((stamp_s - self.phase_s) / self.period_s - STAMP_EPS_S)
         return self.phase_s + k * self.period_s
 
@@ -320,6 +332,16 @@ class PlanSchedule:
             self.next_s += missed * self.period_s
         self.skipped += missed
         return missed
+
+
+def plan_phase_s(robot_id: int, period_s: float, tick_s: float) -> float:
+    """This robot's planning phase: robots spread evenly over the world ticks of a period.
+
+    With a 0.1 s period and 0.02 s ticks, robot k plans on the ticks ``k mod 5`` of every
+    period, so at any tick only a fifth of the robots plan (and compete for the CPU).
+    """
+    slots = max(1, round(period_s / tick_s))
+    return (robot_id % slots) * period_s / slots
 
 
 def make_controller(config: RunConfigMsg, period_s: float, *,
@@ -377,11 +399,15 @@ class RobotNode:
         self.controller = make_controller(config, period_s,
                                           compensate_latency=options.compensate_latency)
         warm_up(config, period_s)
-        self.schedule = PlanSchedule(period_s, options.control_phase_s or None)
+        # Slots: the injected phase if one is given, else spread over the world's ticks.
+        phase_s = options.control_phase_s
+        if not phase_s:
+            phase_s = plan_phase_s(config.robot.id, period_s, 1.0 / config.world_rate_hz)
+        self.schedule = PlanSchedule(period_s, phase_s)
         self.tick_wall_s = 1.0 / (config.world_rate_hz * config.time_scale)
         self.known_ids = frozenset(config.known_ids)
-        self.counts = {"rejected": 0, "stale": 0, "plans": 0, "overruns": 0, "plan_errors": 0,
-                       "stale_plans": 0, "link_dropped": 0, "suspended": 0}
+        self.counts = {"rejected": 0, "stale": 0, "skipped": 0, "plans": 0, "overruns": 0,
+                       "plan_errors": 0, "stale_plans": 0, "link_dropped": 0, "suspended": 0}
         self.seq = 0
         self.last_rx_wall: float | None = None
         self.newest: PosesMsg | None = None
@@ -460,22 +486,37 @@ class RobotNode:
         return self.clock_stamp_s + (time.monotonic() - self.clock_wall) * self.config.time_scale
 
     def poll_poses(self) -> bool:
-        """Pass every valid pose through the pose link; observe what it releases.
+        """Decode the ring, pass the newest valid pose through the pose link, observe what
+        the link releases.
+
+        Every sample is decoded (a malformed one is rejected and counted wherever it sits
+        in the ring), newest first; only the newest valid one enters the link: the older
+        ones are older than it, so the controller would drop them as out of order anyway
+        (they are counted as ``skipped``).
 
         Returns:
             True if a pose newer than any observed before was released.
         """
+        samples = []
         while (sample := self.pose_sub.try_recv()) is not None:
+            samples.append(sample)
+        newest: PosesMsg | None = None
+        for sample in reversed(samples):
             try:
                 msg = PosesMsg.decode(sample.payload.to_bytes(), known_ids=self.known_ids)
             except ProtocolError as exc:
                 self._reject("pose message", exc)
                 continue
+            if newest is None:
+                newest = msg
+            else:
+                self.counts["skipped"] += 1
+        if newest is not None:
             now = time.monotonic()
             self.last_rx_wall = now
-            if msg.tick > self.clock_tick:
-                self.clock_tick, self.clock_stamp_s, self.clock_wall = msg.tick, msg.t_s, now
-            self.pose_link.send(self.sim_now(), msg)
+            if newest.tick > self.clock_tick:
+                self.clock_tick, self.clock_stamp_s, self.clock_wall = newest.tick, newest.t_s, now
+            self.pose_link.send(self.sim_now(), newest)
         fresh = False
         for msg in self.pose_link.receive(self.sim_now()):
             if not self.controller.observe(msg.to_snapshot()):
@@ -519,19 +560,28 @@ class RobotNode:
         self.counts["overruns"] += self.schedule.planned(msg.t_s)
 
     def _sleep(self) -> None:
-        """Sleep until just before the next pose is due (the world's tick in wall time),
-        or until the pose link releases its next pose, whichever is first."""
+        """Sleep until just before the pose of the next plan slot is due, or until the pose
+        link releases its next pose, whichever is first.
+
+        The world publishes a pose every tick, but a robot needs one per plan slot: it
+        sleeps through the ticks in between (their poses wait in the ring) and wakes
+        `WAKE_MARGIN_S` before the slot's pose, predicted from the newest received pose's
+        stamp and arrival time at the world's pace.
+        """
         now = time.monotonic()
-        if self.last_rx_wall is None:
+        msg = self.newest
+        if self.last_rx_wall is None or msg is None:
             time.sleep(IDLE_SLEEP_S)
             return
-        due = self.last_rx_wall + self.tick_wall_s - 0.001
+        ahead_s = max(0.0, (self.schedule.next_s or self.clock_stamp_s) - self.clock_stamp_s)
+        expected = self.last_rx_wall + max(ahead_s / self.config.time_scale, self.tick_wall_s)
+        due = expected - WAKE_MARGIN_S
         link_due_s = self.pose_link.next_due_s
         if link_due_s is not None:
             due = min(due, now + (link_due_s - self.sim_now()) / self.config.time_scale)
         if now < due:
-            time.sleep(min(due - now, IDLE_SLEEP_S * 5))
-        elif now - self.last_rx_wall > 3.0 * self.tick_wall_s:
+            time.sleep(min(due - now, MAX_NAP_S))
+        elif now - expected > 3.0 * self.tick_wall_s:
             time.sleep(min(IDLE_SLEEP_S, self.tick_wall_s))  # poses late: back off
         else:
             time.sleep(MIN_SLEEP_S)

@@ -523,6 +523,12 @@ def cmd_bench(args: argparse.Namespace) -> int:
     return int(bench.main(list(args.bench_args)) or 0)
 
 
+def cmd_scale(args: argparse.Namespace) -> int:
+    from orchestrator import scale
+
+    return scale.main(list(args.scale_args))
+
+
 def cmd_compose(args: argparse.Namespace) -> int:
     from orchestrator import compose
 
@@ -597,6 +603,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("bench_args", nargs=argparse.REMAINDER)
     p.set_defaults(func=cmd_bench)
 
+    p = sub.add_parser("scale", help="real-time runs of N robot processes: timing, CPU, "
+                                     "memory, start-up (orchestrator.scale)")
+    p.add_argument("scale_args", nargs=argparse.REMAINDER)
+    p.set_defaults(func=cmd_scale)
+
     p = sub.add_parser("compose", help="steps of the docker-compose demo (orchestrator.compose)")
     p.add_argument("compose_args", nargs=argparse.REMAINDER)
     p.set_defaults(func=cmd_compose)
@@ -610,6 +621,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         # Everything after `bench` belongs to the benchmark, --help included (argparse's
         # REMAINDER would reject leading options such as `bench --planner`).
         return _guarded(cmd_bench, argparse.Namespace(bench_args=argv[1:], argv=argv))
+    if argv[:1] == ["scale"]:  # its own parser, help included (orchestrator.scale)
+        return _guarded(cmd_scale, argparse.Namespace(scale_args=argv[1:], argv=argv))
     if argv[:1] == ["compose"]:  # its own parser, help included (orchestrator.compose)
         return _guarded(cmd_compose, argparse.Namespace(compose_args=argv[1:], argv=argv))
     parser = build_parser()

@@ -98,6 +98,16 @@ def test_poses_empty_round_trip() -> None:
     assert back.robot_pose.shape == (0, 3) and back.obstacle_xy_m.shape == (0, 2)
 
 
+def test_poses_size_is_linear_in_the_robot_count() -> None:
+    """36 bytes per robot (int32 id, four float64) over a fixed envelope, up to MAX_ROBOTS."""
+    envelope = len(make_poses(n=0, m=0).encode())
+    for n in (1, 7, 8, 100, 128, 1000, 1820, 1821, protocol.MAX_ROBOTS):
+        size = len(make_poses(n=n, m=0).encode())
+        # msgpack's bin headers take 1, 2 or 4 bytes more per column as columns grow.
+        assert 36 * n <= size - envelope <= 36 * n + 15, n
+    assert len(make_poses(n=protocol.MAX_ROBOTS, m=0).encode()) <= protocol.MAX_MESSAGE_BYTES
+
+
 def test_poses_arrays_are_read_only() -> None:
     msg = PosesMsg.decode(make_poses().encode())
     with pytest.raises(ValueError):

@@ -77,3 +77,18 @@ def test_fifty_hz_poses_keep_the_whole_window():
     # The newest sample is always the newest snapshot.
     tr.update(snap(2.01, 101, [(1, 5.0, 0.0)]))
     np.testing.assert_allclose(tr.others().position_m[0], [5.0, 0.0])
+
+def test_estimates_only_within_a_distance_match_the_full_estimates():
+    tr = NeighborTracker(own_id=0, window_s=0.5)
+    for k in range(8):
+        t = 0.1 * k
+        # Disc 3 is in range, then leaves it; disc 2 is always far; ids change order once.
+        rows = [(0, 0.0, 0.0), (1, 2.0 + t, 0.0), (2, 40.0, 0.0), (3, 14.0 + 2.0 * t, 1.0)]
+        tr.update(snap(t, k, rows if k != 5 else rows[::-1]))
+    full = tr.others()
+    near = tr.others(near_m=np.array([0.0, 0.0]), within_m=15.0)
+    assert full.ids.tolist() == [1, 2, 3] and near.ids.tolist() == [1]
+    np.testing.assert_array_equal(near.velocity_mps[0], full.velocity_mps[0])
+    np.testing.assert_array_equal(near.track_start_m[0], full.track_start_m[0])
+    assert len(tr.others(near_m=np.array([100.0, 100.0]), within_m=1.0)) == 0
+    np.testing.assert_allclose(full.velocity_mps[2], [2.0, 0.0], atol=1e-9)  # reordered ids

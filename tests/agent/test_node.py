@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from agent.config import PlannerConfig
-from agent.node import AgentOptions, PlanSchedule, make_controller, parse_args
+from agent.node import AgentOptions, PlanSchedule, make_controller, parse_args, plan_phase_s
 from protocol import RunConfigMsg
 from world.scenario import RobotSpec
 
@@ -52,6 +52,34 @@ def test_schedule_tolerates_float_accumulation() -> None:
             plans += 1
         stamp += 0.02
     assert plans == 1000 and schedule.skipped == 0
+
+
+def test_schedule_on_a_phase_plans_on_its_slots_only() -> None:
+    schedule = PlanSchedule(0.1, phase_s=0.04)
+    planned = []
+    for tick in range(26):  # poses every 0.02 s: 0.00 .. 0.50
+        stamp = tick * 0.02
+        if schedule.due(stamp):
+            planned.append(round(stamp, 6))
+            assert schedule.planned(stamp) == 0
+    assert planned == [0.04, 0.14, 0.24, 0.34, 0.44]
+    assert schedule.skipped == 0
+
+
+def test_schedule_on_a_phase_joins_at_the_next_slot() -> None:
+    schedule = PlanSchedule(0.1, phase_s=0.04)
+    assert not schedule.due(3.16)  # a robot that starts late keeps its phase
+    assert schedule.next_s == pytest.approx(3.24)
+    assert schedule.due(3.24)
+
+
+def test_plan_phases_spread_robots_evenly_over_the_ticks() -> None:
+    phases = [plan_phase_s(rid, 0.1, 0.02) for rid in range(20)]
+    ticks = [round(p / 0.02) for p in phases]
+    assert all(abs(p - 0.02 * t) < 1e-12 for p, t in zip(phases, ticks))
+    assert sorted(set(ticks)) == [0, 1, 2, 3, 4]
+    assert all(ticks.count(t) == 4 for t in range(5))  # 20 robots: 4 plan on each tick
+    assert plan_phase_s(7, 0.1, 0.1) == 0.0  # one tick per period: everyone on it
 
 
 def test_schedule_rejects_bad_period() -> None:
@@ -131,3 +159,33 @@ def test_parse_fault_options() -> None:
     for bad in (["--drop", "1.5"], ["--latency-ms", "-1"], ["--plan-delay-ms", "inf"]):
         with pytest.raises(SystemExit):
             parse_args(["--run", "r", "--id", "1", "--connect", "tcp/h:1", *bad])
+
+def test_a_robot_process_imports_only_what_it_needs() -> None:
+    """After building and warming up an eifp-mpc robot: no YAML, plotting, ORCA, orchestrator
+    or psutil in the process (each costs start-up CPU and memory in 128 processes)."""
+    import json
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    code = """
+import json, sys
+from agent.node import make_controller, warm_up
+from protocol import RunConfigMsg
+from agent.config import PlannerConfig
+from world.scenario import RobotSpec
+spec = RobotSpec(0, (0.0, 0.0, 0.0), (10.0, 0.0), planner="eifp-mpc")
+cfg = RunConfigMsg(run_id="t", robot=spec, planner=PlannerConfig(), goal_tolerance_m=0.25,
+                   control_rate_hz=10.0, world_rate_hz=50.0, time_scale=1.0,
+                   time_limit_s=10.0, cmd_timeout_s=0.5, known_ids=(0, 1))
+make_controller(cfg, 0.1)
+warm_up(cfg, 0.1)
+print(json.dumps(sorted(sys.modules)))
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, cwd=Path(__file__).resolve().parents[2], timeout=60)
+    modules = set(json.loads(out.stdout.strip().splitlines()[-1]))
+    assert {"zenoh", "osqp", "agent.mpc", "agent.eifp"} <= modules
+    unneeded = {"yaml", "matplotlib", "PIL", "pyrvo", "agent.orca", "psutil"}
+    assert not (modules & unneeded), modules & unneeded
+    assert not any(m.startswith("orchestrator") for m in modules)

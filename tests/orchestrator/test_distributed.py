@@ -13,6 +13,7 @@ from orchestrator.distributed import (
     _EventTail,
     _last_trajectory_time,
     _progress,
+    fleet_command,
     free_tcp_endpoint,
     robot_command,
     run_distributed,
@@ -40,6 +41,25 @@ def test_commands(tmp_path: Path) -> None:
     robot = robot_command("r1", 3, "tcp/127.0.0.1:9")
     assert robot[:3] == [sys.executable, "-m", "agent"]
     assert robot[robot.index("--id") + 1] == "3"
+
+
+def test_fleet_command_passes_ids_and_per_robot_endpoints(tmp_path: Path) -> None:
+    from agent.fleet import build_parser
+
+    cmd = fleet_command("r1", [0, 1, 2], "tcp/127.0.0.1:9", tmp_path,
+                        robot_endpoints={2: "tcp/127.0.0.2:9"})
+    assert cmd[:3] == [sys.executable, "-m", "agent.fleet"]
+    args = build_parser().parse_args(cmd[3:])
+    assert args.ids == [0, 1, 2] and args.connect == "tcp/127.0.0.1:9"
+    assert args.connect_id == [(2, "tcp/127.0.0.2:9")] and args.log_dir == tmp_path.resolve()
+    for bad in (["--ids", "1,1"], ["--ids", "-1"], ["--ids", "0", "--connect-id", "x"]):
+        with pytest.raises(SystemExit):
+            build_parser().parse_args(["--run", "r", "--connect", "c", "--log-dir", "d", *bad])
+
+
+def test_run_distributed_rejects_an_unknown_launcher(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="robot_launcher"):
+        run_distributed(tmp_path / "s.yaml", tmp_path, "r1", robot_launcher="thread")
 
 
 def test_event_tail_reads_only_complete_lines(tmp_path: Path) -> None:

@@ -11,8 +11,11 @@ from hypothesis import strategies as st
 
 from orchestrator import families
 from orchestrator.families import (
+    CIRCLES_GROUP,
+    CIRCLES_RADIUS_M,
     SETUPS,
     circle,
+    circles,
     crossing,
     jitter_starts,
     random_scenario,
@@ -145,6 +148,26 @@ def test_circle_is_an_antipodal_swap_with_spacing(n):
     assert min_pair_distance(starts(s)) >= 2.5
     if n % 2 == 0:  # exact point symmetry, bit for bit
         np.testing.assert_array_equal(starts(s)[n // 2:], -starts(s)[: n // 2])
+
+
+@pytest.mark.parametrize("n", [2, 9, 16, 64, 128])
+def test_circles_tile_small_antipodal_swaps(n):
+    s = circles(n)
+    assert len(s.robots) == n and s.time_limit_s == 120.0
+    st, gl = starts(s), goals(s)
+    centre = (st + gl) / 2.0  # each robot swaps through its circle's centre
+    assert np.allclose(np.hypot(*(st - centre).T), CIRCLES_RADIUS_M, atol=1e-3)
+    centres = np.unique(np.round(centre, 2), axis=0)
+    groups = math.ceil(n / CIRCLES_GROUP)
+    assert len(centres) == groups
+    sizes = [int(np.sum(np.all(np.round(centre, 2) == c, axis=1))) for c in centres]
+    assert max(sizes) <= CIRCLES_GROUP and min(sizes) >= min(n, 2)
+    assert min_pair_distance(st) >= 2.5 and min_pair_distance(gl) >= 2.5
+    if groups > 1:  # rim robots of neighbouring circles start within sensing range
+        i, j = np.triu_indices(n, k=1)
+        other = np.any(np.round(centre[i], 2) != np.round(centre[j], 2), axis=1)
+        closest = np.hypot(*(st[i] - st[j]).T)[other].min()
+        assert closest < s.planner_config.sensing_radius_m
 
 
 def test_circle_grows_when_crowded():

@@ -201,3 +201,31 @@ def test_slow_robot_and_its_own_rate(tmp_path):
     assert min(lat0) == pytest.approx(0.08, abs=0.021)  # applied one tick after the delay
     assert t1[0] == pytest.approx(0.1) and all(
         b - a == pytest.approx(0.2) for a, b in zip(t1, t1[1:]))
+
+def test_dense_circle_with_a_small_neighbour_cap_has_no_contact(tmp_path):
+    """The neighbour cap bounds each robot's work; at 4 of 7 it still keeps everyone apart.
+
+    Eight robots swap antipodes through one point: near the centre every robot has all
+    seven others within its sensing radius but plans against its 4 nearest only (the MPC
+    also takes at most `MpcConfig.max_constraints` = 4). Measured here: a cap of 2 makes
+    contact in this scene, 3, 4, 6 and the default 10 do not (README, "Scale").
+    """
+    import dataclasses
+
+    import numpy as np
+
+    from orchestrator.families import circle
+    from orchestrator.rundir import read_run_dir
+
+    scenario = circle(8)
+    cap = 4
+    scenario = dataclasses.replace(scenario, planner_config=dataclasses.replace(
+        scenario.planner_config, max_neighbors=cap))
+    out = run_lockstep(scenario, tmp_path / "run")
+    assert out.metrics.contacts == 0 and out.metrics.success
+    assert out.metrics.min_gap_m is not None and out.metrics.min_gap_m > 0.0
+    # The cap was binding: at some tick a robot had more than `cap` others in range.
+    xy = read_run_dir(tmp_path / "run").trajectory.pose[:, :, :2]
+    dist = np.linalg.norm(xy[:, :, None, :] - xy[:, None, :, :], axis=-1)
+    in_range = (dist <= scenario.planner_config.sensing_radius_m).sum(axis=2) - 1
+    assert in_range.max() > cap

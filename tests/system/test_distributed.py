@@ -439,6 +439,8 @@ def test_ctrl_c_on_the_launcher_leaves_no_orphans(tmp_path: Path) -> None:
     run_id = unique_run_id("ctrlc")
     out_dir = tmp_path / "run"
     code = (
+        # A shell's background job inherits SIGINT ignored: give the launcher Ctrl-C back.
+        "import signal; signal.signal(signal.SIGINT, signal.default_int_handler); "
         "import sys; from pathlib import Path; "
         "from orchestrator.distributed import run_distributed; "
         f"sys.exit(run_distributed(Path({str(scenario)!r}), Path({str(out_dir)!r}), "

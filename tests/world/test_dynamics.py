@@ -8,7 +8,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from agent.config import PlannerConfig, RobotLimits
-from world.dynamics import WorldSim, integrate_unicycle, pair_gaps
+from world.dynamics import (
+    ALL_PAIRS_MAX_N,
+    WorldSim,
+    integrate_unicycle,
+    near_pair_gaps,
+    near_pairs,
+    pair_gaps,
+)
 from world.scenario import ObstacleSpec, RobotSpec, Scenario
 
 
@@ -94,6 +101,55 @@ def test_offline_robot_stops_and_stays_visible():
     assert sim.applied[0, 0] == 0.0
     assert 0 in sim.snapshot().ids.tolist()
     assert sim.pose[1, 0] > sim.pose[0, 0] + 1.0
+
+
+@settings(max_examples=60, deadline=None)
+@given(n=st.integers(0, 300), side=st.floats(1.0, 200.0), reach=st.floats(0.1, 30.0),
+       seed=st.integers(0, 2**31 - 1))
+def test_near_pairs_equals_brute_force(n, side, reach, seed):
+    """The grid finds exactly the pairs all-pairs finds, in the same order."""
+    xy = np.random.default_rng(seed).uniform(-side / 2, side / 2, size=(n, 2))
+    if n > 3:
+        xy[1] = xy[0]  # coincident discs and cell borders must not be missed
+        xy[3] = np.floor(xy[2] / reach) * reach
+    i, j = np.triu_indices(n, k=1)
+    close = np.hypot(*(xy[i] - xy[j]).T) <= reach
+    expected = np.stack([i[close], j[close]], axis=1)
+    assert np.array_equal(near_pairs(xy, reach), expected)
+
+
+def test_near_pair_gaps_keeps_gaps_up_to_the_reach():
+    n = ALL_PAIRS_MAX_N + 20  # the grid path
+    xy = np.stack([np.arange(n) * 1.5, np.zeros(n)], axis=1)  # a row, 1.5 m apart
+    radius = np.full(n, 0.5)
+    pairs, gaps = near_pair_gaps(xy, radius, reach_gap_m=2.0)
+    # Gaps: 0.5 m to the next disc, 2.0 m to the one after, 3.5 m beyond (dropped).
+    assert sorted(np.round(gaps, 9).tolist()) == [0.5] * (n - 1) + [2.0] * (n - 2)
+    assert np.all(pairs[:, 1] - pairs[:, 0] <= 2)
+    all_pairs, all_gaps = pair_gaps(xy, radius)
+    assert np.isclose(gaps.min(), all_gaps.min())
+
+
+def test_world_contacts_in_a_crowd_match_brute_force():
+    """60 robots (the grid path) driven into each other: contacts as all-pairs sees them."""
+    rng = np.random.default_rng(3)
+    robots, placed = [], []
+    while len(robots) < 60:
+        p = rng.uniform(-12, 12, size=2)
+        if all(np.hypot(*(p - q)) > 1.05 for q in placed):
+            placed.append(p)
+            robots.append(RobotSpec(len(robots), (p[0], p[1], rng.uniform(-3, 3)), (0, 0)))
+    sim = WorldSim(make_scenario(robots))
+    seen = set()
+    for _ in range(150):
+        for r in robots:
+            sim.set_command(r.id, 1.0, 0.3)
+        for a, b, _ in sim.step(0.02).new_contacts:
+            seen.add((a, b))
+        pairs, gaps = pair_gaps(sim.pose[:, :2], sim.radius_m)
+        touching = {tuple(int(x) for x in p) for p in pairs[gaps < -1e-3]}
+        assert touching == sim._in_contact
+    assert seen  # the crowd did collide
 
 
 def test_contact_reported_once_per_encounter_and_min_gap():

@@ -1,0 +1,209 @@
+"""Many robot processes from one launch: import and warm up once, then fork one per robot.
+
+    python -m agent.fleet --run R --connect EP --ids 0,1,2 --log-dir DIR
+                          [--connect-id 1=tcp/127.0.0.2:7447 ...] [--startup-timeout-s S]
+
+Each robot is still its own OS process with its own Zenoh session, liveliness token, loop
+and exit status: the child runs exactly what ``python -m agent`` runs (`agent.node.main`).
+The difference is where it comes from. A fresh ``python -m agent`` spends ~0.4 s of CPU on
+the interpreter, importing numpy, scipy, osqp and zenoh and planning a first time; 128 of
+them starting together keep 2 cores busy for ~25 s. Here the parent does that once (it
+plans once with every planner, then `gc.freeze()`), and forks: a child is ready in
+milliseconds and shares the parent's pages until it writes to them (copy-on-write), which
+also lowers each robot's PSS.
+
+The parent never opens a Zenoh session (a session does not survive a fork; importing the
+module is fine: its runtimes start with the first session). A child writes its stdout and
+stderr to ``DIR/robot_<id>.log`` and dies with the parent (``PR_SET_PDEATHSIG``). The
+parent passes SIGTERM/SIGINT on to the children still running, reaps them all, logs each
+exit and exits 0 if every robot did, else the largest robot exit status. With ``--nice N``
+the robots run N steps nicer than the parent (a world sharing their machine stays ahead).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import ctypes
+import gc
+import logging
+import os
+import signal
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from types import FrameType
+
+log = logging.getLogger("fleet")
+
+PR_SET_PDEATHSIG = 1
+FORWARDED = (signal.SIGTERM, signal.SIGINT)
+
+
+def _ids(text: str) -> list[int]:
+    try:
+        ids = [int(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        ids = []
+    if not ids or min(ids) < 0 or len(set(ids)) != len(ids):
+        raise argparse.ArgumentTypeError(f"expected distinct robot ids >= 0, got {text!r}")
+    return ids
+
+
+def _override(text: str) -> tuple[int, str]:
+    rid, sep, endpoint = text.partition("=")
+    if not sep or not rid.strip().isdigit() or not endpoint.strip():
+        raise argparse.ArgumentTypeError(f"expected ID=ENDPOINT, got {text!r}")
+    return int(rid), endpoint.strip()
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="python -m agent.fleet",
+                                     description=__doc__.split("\n")[0])
+    parser.add_argument("--run", required=True, help="run id")
+    parser.add_argument("--ids", required=True, type=_ids, help="robot ids, comma-separated")
+    parser.add_argument("--connect", required=True, help="router endpoint (tcp/HOST:PORT)")
+    parser.add_argument("--connect-id", type=_override, action="append", default=[],
+                        metavar="ID=ENDPOINT", help="robot ID connects here instead")
+    parser.add_argument("--log-dir", required=True, type=Path, help="robot_<id>.log go here")
+    parser.add_argument("--startup-timeout-s", default="30.0",
+                        help="passed to every robot (python -m agent)")
+    parser.add_argument("--nice", type=int, default=0,
+                        help="robot processes add this to their niceness (>= 0; e.g. 5 keeps "
+                             "a world on the same machine ahead of them)")
+    return parser
+
+
+def robot_argv(run_id: str, robot_id: int, endpoint: str, startup_timeout_s: str) -> list[str]:
+    """The ``python -m agent`` arguments of one robot."""
+    return ["--run", run_id, "--id", str(robot_id), "--connect", endpoint,
+            "--startup-timeout-s", startup_timeout_s]
+
+
+def warm_up_planners() -> None:
+    """Import every planner and plan once with each (a throwaway robot), before forking."""
+    from agent.config import PLANNER_NAMES, PlannerConfig
+    from agent.node import warm_up
+    from protocol import RunConfigMsg
+    from world.scenario import RobotSpec
+
+    for k, name in enumerate(PLANNER_NAMES):
+        spec = RobotSpec(k, (0.0, 0.0, 0.0), (10.0, 0.0), planner=name)
+        warm_up(RunConfigMsg(
+            run_id="warm-up", robot=spec, planner=PlannerConfig(), goal_tolerance_m=0.25,
+            control_rate_hz=10.0, world_rate_hz=50.0, time_scale=1.0, time_limit_s=10.0,
+            cmd_timeout_s=0.5, known_ids=(k, k + 1)), 0.1)
+
+
+def _die_with_parent(parent_pid: int) -> None:
+    # Not Linux: no prctl; the launcher's teardown of the process group still reaches us.
+    with contextlib.suppress(OSError, AttributeError):
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+    if os.getppid() != parent_pid:  # the parent died before prctl took effect
+        os._exit(1)
+
+
+def _child(argv: list[str], log_path: Path, parent_pid: int, nice: int = 0) -> None:
+    """In the forked child: become ``python -m agent`` with its own log; never returns."""
+    code = 1
+    try:
+        _die_with_parent(parent_pid)
+        if nice > 0:
+            os.nice(nice)
+        fd = os.open(log_path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        os.dup2(fd, 1)
+        os.dup2(fd, 2)
+        os.close(fd)
+        null = os.open(os.devnull, os.O_RDONLY)
+        os.dup2(null, 0)
+        os.close(null)
+        logging.root.handlers.clear()  # the robot sets up its own (agent.node.main)
+        from agent.node import main as agent_main
+
+        code = agent_main(argv)
+    except SystemExit as exc:  # argparse errors
+        code = exc.code if isinstance(exc.code, int) else 2
+    except BaseException:  # noqa: BLE001 - report, then leave with a failure status
+        import traceback
+
+        traceback.print_exc()
+    finally:
+        try:
+            sys.stdout.flush()
+            sys.stderr.flush()
+        finally:
+            os._exit(code)
+
+
+def run_fleet(args: argparse.Namespace) -> int:
+    """Warm up, fork one child per robot, pass signals on, reap; returns the exit status."""
+    if args.nice < 0:
+        log.error("--nice must be >= 0, got %d", args.nice)
+        return 2
+    overrides = dict(args.connect_id)
+    unknown = sorted(set(overrides) - set(args.ids))
+    if unknown:
+        log.error("--connect-id for robots not in --ids: %s", unknown)
+        return 2
+    args.log_dir.mkdir(parents=True, exist_ok=True)
+    warm_up_planners()
+    gc.collect()
+    gc.freeze()  # children never scan (and so never copy) the parent's objects
+    parent = os.getpid()
+    children: dict[int, int] = {}
+    pending: list[int] = []
+
+    def _forward(signum: int, frame: FrameType | None) -> None:
+        pending.append(signum)
+        for pid in list(children):
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signum)
+
+    previous = {s: signal.signal(s, _forward) for s in FORWARDED}
+    try:
+        for rid in args.ids:
+            if pending:
+                break
+            argv = robot_argv(args.run, rid, overrides.get(rid, args.connect),
+                              args.startup_timeout_s)
+            # Signals wait until the child has its own handlers (never run _forward there).
+            signal.pthread_sigmask(signal.SIG_BLOCK, FORWARDED)
+            pid = os.fork()
+            if pid == 0:
+                for signum in FORWARDED:
+                    signal.signal(signum, signal.SIG_DFL)
+                signal.pthread_sigmask(signal.SIG_UNBLOCK, FORWARDED)
+                _child(argv, args.log_dir / f"robot_{rid}.log", parent, args.nice)
+            children[pid] = rid
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, FORWARDED)
+        log.info("fleet: %d robot processes forked", len(children))
+        worst = 0
+        while children:
+            try:
+                pid, status = os.waitpid(-1, 0)
+            except ChildProcessError:
+                break
+            except InterruptedError:
+                continue
+            rid = children.pop(pid, None)
+            if rid is None:
+                continue
+            code = os.waitstatus_to_exitcode(status)
+            code = code if code >= 0 else 128 - code
+            worst = max(worst, code)
+            log.info("fleet: robot %d (pid %d) exited %d", rid, pid, code)
+        return worst
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``python -m agent.fleet``."""
+    logging.basicConfig(level=logging.INFO, stream=sys.stderr,
+                        format="%(asctime)s fleet %(levelname)s %(message)s")
+    return run_fleet(build_parser().parse_args(argv))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

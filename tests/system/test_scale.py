@@ -1,0 +1,109 @@
+"""`orchestrator scale` end to end with real processes, robots on two addresses of the world.
+
+Small N only: the figures are checked for presence and sanity, never against time budgets
+(the measured table is in the README, "Scale").
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import pytest
+
+from orchestrator.scale import main
+
+pytestmark = [pytest.mark.system, pytest.mark.timeout(180)]
+
+
+def test_scale_run_with_robots_connecting_through_a_second_address(tmp_path: Path,
+                                                                   capsys) -> None:
+    """The world listens on 0.0.0.0; robots 0, 2 dial 127.0.0.1 and robots 1, 3 dial
+    127.0.0.2, as robots on another host would dial the world's address."""
+    out = tmp_path / "scale"
+    code = main(["--agents", "4", "--family", "circles", "--hosts", "127.0.0.1,127.0.0.2",
+                 "--startup-timeout-s", "60", "--out", str(out), "--json"])
+    assert code == 0
+    row = json.loads(capsys.readouterr().out.strip().splitlines()[-1])["rows"][0]
+    run = out / "circles_4"
+    for name in ("scale.csv", "scale.json", "scale.png"):
+        assert (out / name).stat().st_size > 0, name
+    for name in ("metrics.json", "trajectory.png", "trajectory.csv", "world.log"):
+        assert (run / name).stat().st_size > 0, name
+
+    assert row["success"] and row["contacts"] == 0 and row["arrived"] == 4
+    assert row["world_status"] == 0
+    # Both addresses carried robots: the world's established sockets, by local address.
+    assert row["connections"].get("127.0.0.1", 0) >= 2, row["connections"]
+    assert row["connections"].get("127.0.0.2", 0) >= 2, row["connections"]
+    for rid in range(4):
+        log = (run / f"robot_{rid}.log").read_text()
+        host = "127.0.0.2" if rid % 2 else "127.0.0.1"
+        assert re.search(rf"connecting to tcp/{re.escape(host)}:\d+", log), log
+        assert "exit: reason='end (all_arrived)' code=0" in log
+    # Sane figures: present, positive, within physical bounds.
+    assert 0.0 < row["alive_s"] < 60.0
+    assert 0.0 < row["cpu_share_robots"] <= 1.0 and 0.0 < row["cpu_share_world"] <= 1.0
+    assert 5.0 < row["mem_robot_mib"] < 1024.0
+    assert row["mem_total_mib"] >= 4 * row["mem_robot_mib"] * 0.5
+    assert row["plan_ms_p50"] > 0.0 and row["latency_ms_p99"] >= 0.0
+    assert 0.0 <= row["deadline_miss_rate"] <= 1.0
+    assert row["sim_time_s"] > 0.0 and row["wall_s"] > row["sim_time_s"]
+
+
+def _fleet(tmp_path: Path, ids: str):
+    import subprocess
+    import sys
+
+    with open(tmp_path / "fleet.log", "wb") as log:
+        return subprocess.Popen(
+            [sys.executable, "-m", "agent.fleet", "--run", "t", "--ids", ids, "--connect",
+             "tcp/127.0.0.1:9", "--connect-id", "1=tcp/127.0.0.2:9", "--log-dir",
+             str(tmp_path), "--startup-timeout-s", "60", "--nice", "3"],
+            stdout=subprocess.DEVNULL, stderr=log, cwd=Path(__file__).resolve().parents[2])
+
+
+def _wait_children(proc, count: int, tmp_path: Path) -> list:
+    import time
+
+    import psutil
+
+    deadline = time.monotonic() + 60.0
+    while time.monotonic() < deadline:
+        kids = psutil.Process(proc.pid).children()
+        logs = [tmp_path / f"robot_{k}.log" for k in range(count)]
+        if len(kids) == count and all(p.exists() and p.stat().st_size for p in logs):
+            return kids  # every robot is running its own loop (it has logged)
+        assert proc.poll() is None, (tmp_path / "fleet.log").read_text()
+        time.sleep(0.05)
+    raise AssertionError(f"fleet did not fork {count} robots")
+
+
+@pytest.mark.parametrize("how", ["sigterm", "sigkill"])
+def test_fleet_robots_leave_with_the_fleet(tmp_path: Path, how: str) -> None:
+    """Robots forked by agent.fleet (waiting for a router that is not there) are real
+    processes with their own logs and niceness; SIGTERM is passed on, SIGKILL takes them
+    along."""
+    import signal
+
+    import psutil
+
+    proc = _fleet(tmp_path, "0,1")
+    try:
+        kids = _wait_children(proc, 2, tmp_path)
+        assert all(k.nice() == psutil.Process(proc.pid).nice() + 3 for k in kids)
+        proc.send_signal(signal.SIGTERM if how == "sigterm" else signal.SIGKILL)
+        gone, alive = psutil.wait_procs(kids, timeout=20.0)
+        assert not alive, alive
+        code = proc.wait(20.0)
+        assert code == (0 if how == "sigterm" else -signal.SIGKILL)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    log1 = (tmp_path / "robot_1.log").read_text()
+    assert "connecting to tcp/127.0.0.2:9" in log1
+    if how == "sigterm":
+        assert "exit: reason='signal' code=0" in log1
+        assert "connecting to tcp/127.0.0.1:9" in (tmp_path / "robot_0.log").read_text()
