@@ -28,11 +28,16 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from orchestrator.faults import FaultPlan
 from orchestrator.metrics import RunMetrics
 from orchestrator.rundir import metrics_from_run_dir, write_metrics
 from world.scenario import Scenario
+
+if TYPE_CHECKING:
+    from world.dynamics import WorldSim
+    from world.recorder import RunRecorder
 
 CMD_TIMEOUT_S = 0.5
 RESTART_DELAY_S = 2.0
@@ -75,6 +80,18 @@ class LockstepOutcome:
     ticks: int
     wall_s: float
     metrics: RunMetrics
+
+
+def _step_and_record(world: WorldSim, rec: RunRecorder, dt_s: float) -> None:
+    """Step the world by dt_s and record the tick and its events (both loops share it)."""
+    events = world.step(dt_s)
+    rec.record_tick(world.t_s, world.robot_ids, world.pose, world.applied)
+    for rid in events.arrivals:
+        rec.event("arrived", world.t_s, robot=rid)
+    for a, b, overlap in events.new_contacts:
+        rec.event("contact", world.t_s, a=a, b=b, overlap_m=round(overlap, 6))
+    for rid in events.timeouts:
+        rec.event("cmd_timeout", world.t_s, robot=rid)
 
 
 def run_lockstep(scenario: Scenario, out_dir: Path, *, world_rate_hz: float = 50.0,
@@ -148,14 +165,7 @@ def run_lockstep(scenario: Scenario, out_dir: Path, *, world_rate_hz: float = 50
                                        str(res.status.value), side=int(res.side),
                                        resolved=res.resolved_id)
                     seq[k] += 1
-            events = world.step(dt_s)
-            rec.record_tick(world.t_s, world.robot_ids, world.pose, world.applied)
-            for rid in events.arrivals:
-                rec.event("arrived", world.t_s, robot=rid)
-            for a, b, overlap in events.new_contacts:
-                rec.event("contact", world.t_s, a=a, b=b, overlap_m=round(overlap, 6))
-            for rid in events.timeouts:
-                rec.event("cmd_timeout", world.t_s, robot=rid)
+            _step_and_record(world, rec, dt_s)
             if on_progress is not None and world.tick % progress_ticks == 0:
                 on_progress(_progress(world, wall0))
         success = world.all_arrived() and world.contact_count == 0
@@ -336,14 +346,7 @@ def _run_faulty(scenario: Scenario, out_dir: Path, world_rate_hz: float,
                     rec.record_command(t, rid, seq, stamp, res.v_mps, res.omega_radps,
                                        res.times.total_ms, str(res.status.value),
                                        side=int(res.side), resolved=res.resolved_id)
-            events = world.step(dt_s)
-            rec.record_tick(world.t_s, world.robot_ids, world.pose, world.applied)
-            for rid in events.arrivals:
-                rec.event("arrived", world.t_s, robot=rid)
-            for a, b, overlap in events.new_contacts:
-                rec.event("contact", world.t_s, a=a, b=b, overlap_m=round(overlap, 6))
-            for rid in events.timeouts:
-                rec.event("cmd_timeout", world.t_s, robot=rid)
+            _step_and_record(world, rec, dt_s)
             if on_progress is not None and world.tick % progress_ticks == 0:
                 on_progress(_progress(world, wall0))
         success = world.all_arrived() and world.contact_count == 0
