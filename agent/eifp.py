@@ -57,7 +57,7 @@ import numpy as np
 from agent.config import PlannerConfig
 from agent.encounters import Role, encounter_roles, update_role_memory
 from agent.ifp import CandidateSelector, ViaPlan, plan_via_points
-from agent.threats import as_complex, nearby_others, rank_threats
+from agent.threats import as_complex
 from agent.types import Observation, Others, Side
 from agent.viapoints import SIDES, inflated_radius
 
@@ -289,9 +289,33 @@ def plan_eifp(
     config: PlannerConfig,
     side_memory: Mapping[int, Side] | None = None,
     timer: Callable[[], float] | None = None,
-    encounters: Encounters | None = None,
     primary_id: int | None = None,
 ) -> ViaPlan:
+    """One eIFP cycle as the paper has it (no encounter rules); see `plan_eifp_encounters`."""
+    return _plan_eifp(observation, config, side_memory, timer, None, primary_id)[0]
+
+
+def plan_eifp_encounters(
+    observation: Observation,
+    config: PlannerConfig,
+    side_memory: Mapping[int, Side] | None,
+    role_memory: Mapping[int, Role],
+    timer: Callable[[], float] | None = None,
+    primary_id: int | None = None,
+) -> tuple[ViaPlan, dict[int, Role]]:
+    """One eIFP cycle with the encounter rules; returns (plan, role memory for next cycle)."""
+    plan, roles = _plan_eifp(observation, config, side_memory, timer, role_memory, primary_id)
+    return plan, roles or {}
+
+
+def _plan_eifp(
+    observation: Observation,
+    config: PlannerConfig,
+    side_memory: Mapping[int, Side] | None,
+    timer: Callable[[], float] | None,
+    role_memory: Mapping[int, Role] | None,
+    primary_id: int | None,
+) -> tuple[ViaPlan, dict[int, Role] | None]:
     """One eIFP cycle: IFP's iteration with cost-based candidate selection (Eqs. 14-16).
 
     Args:
@@ -300,32 +324,42 @@ def plan_eifp(
         side_memory: threat id -> side chosen last time (None: no memory). Use
             `update_side_memory` to carry it to the next cycle, or `EifpSelector`.
         timer: a wall clock for the stage timings only.
-        encounters: this cycle's encounter rules (`assess_encounters`); None: none (the
-            paper's eIFP).
+        role_memory: with `config.encounter_rules`, the encounter roles of earlier cycles
+            (`agent.encounters`); None: the rules are not applied (the paper's eIFP).
         primary_id: the threat the previous cycle resolved first (kept first while it is
             nearly as imminent as the most imminent one; `ifp.plan_via_points`).
+
+    Returns:
+        The plan, and (with `role_memory`) the role memory for the next cycle, else None.
 
     Raises:
         ValueError: on non-finite inputs or configuration.
     """
     memory = side_memory or {}
     committed = frozenset(memory) if config.threat_commitment else frozenset()
-    ignored: frozenset[int] = frozenset()
-    give_way: frozenset[int] = frozenset()
-    if encounters is not None:
-        ignored, give_way = encounters.stand_on_ids, encounters.give_way_ids
-        # A give-way manoeuvre is kept until the other is passed, or it would be undone as
-        # soon as it works (the swerve pushes DCPA past D_thresh).
-        committed |= give_way & frozenset(memory)
-    return plan_via_points(
-        observation,
-        config,
-        lambda others: cost_selector(observation, config, others, memory, give_way),
-        committed,
-        timer,
-        ignored,
-        primary_id,
-    )
+    found: dict[str, Encounters] = {}
+    rule = None
+    if role_memory is not None:
+        def rule(others: Others, index: np.ndarray, tcpa: np.ndarray, dcpa: np.ndarray,
+                 inflated: np.ndarray) -> tuple[frozenset[int], frozenset[int]]:
+            enc = assess_encounters(observation, config, others, index, tcpa, dcpa, inflated,
+                                    role_memory)
+            found["encounters"] = enc
+            # A give-way manoeuvre is kept until the other is passed, or it would be undone
+            # as soon as it works (the swerve pushes DCPA past D_thresh).
+            return enc.stand_on_ids, enc.give_way_ids & frozenset(memory)
+
+    def make_selector(others: Others) -> CandidateSelector:
+        enc = found.get("encounters")
+        give_way = enc.give_way_ids if enc is not None else frozenset()
+        return cost_selector(observation, config, others, memory, give_way)
+
+    plan = plan_via_points(observation, config, make_selector, committed, timer,
+                           primary_id=primary_id, encounter_rule=rule)
+    if role_memory is None:
+        return plan, None
+    enc = found.get("encounters")
+    return plan, (enc.memory if enc is not None else {})
 
 
 @dataclass(frozen=True)
@@ -344,24 +378,29 @@ class Encounters:
 
 
 def assess_encounters(
-    observation: Observation, config: PlannerConfig, memory: Mapping[int, Role]
+    observation: Observation,
+    config: PlannerConfig,
+    others: Others,
+    index: np.ndarray,
+    tcpa: np.ndarray,
+    dcpa: np.ndarray,
+    inflated: np.ndarray,
+    memory: Mapping[int, Role],
 ) -> Encounters:
     """Classify the encounters of this cycle (see `agent.encounters`).
 
-    Uses the same neighbours (sensing radius, cap) and the same Eq. (5) quantities as the
-    via-point cycle.
+    Args:
+        observation: what the robot knows now (its pose and speed).
+        config: planner parameters (`stand_on_emergency_s`).
+        others: the cycle's neighbours (after the sensing radius and cap).
+        index: their Eq. (5) threats, ranked; tcpa, dcpa: (K,) Eqs. (4)-(5);
+        inflated: (K,) inflated radii L (Eq. 7) -- all as `ifp.plan_via_points` computed
+            them for the cycle.
+        memory: the role memory of earlier cycles.
     """
     ego = observation.ego
     p = np.array([ego.x_m, ego.y_m])
-    others = nearby_others(p, observation.others, config.sensing_radius_m, config.max_neighbors)
-    if len(others) == 0:
-        return Encounters(frozenset(), frozenset(), {})
-    v_r = ego.v_mps * np.array([math.cos(ego.heading_rad), math.sin(ego.heading_rad)])
-    index, tcpa, dcpa = rank_threats(
-        p, v_r, others, config.dcpa_threshold_m(observation.radius_m), config.t_max_s
-    )
-    radius = inflated_radius(observation.radius_m, others.radius_m, config.d_safety_m)
-    roles = encounter_roles(ego.heading_rad, ego.v_mps, p, others, tcpa, dcpa, radius,
+    roles = encounter_roles(ego.heading_rad, ego.v_mps, p, others, tcpa, dcpa, inflated,
                             config.stand_on_emergency_s, memory)
     threat = np.zeros(len(others), dtype=bool)
     threat[index] = True
@@ -413,12 +452,12 @@ class EifpSelector:
         self, observation: Observation, timer: Callable[[], float] | None = None
     ) -> ViaPlan:
         """Plan one cycle and remember the sides chosen (see `plan_eifp`)."""
-        encounters = None
-        if self.config.encounter_rules:
-            encounters = assess_encounters(observation, self.config, self._roles)
-            self._roles = encounters.memory
         primary = self._primary if self.config.primary_hysteresis else None
-        plan = plan_eifp(observation, self.config, self._memory, timer, encounters, primary)
+        if self.config.encounter_rules:
+            plan, self._roles = plan_eifp_encounters(observation, self.config, self._memory,
+                                                     self._roles, timer, primary)
+        else:
+            plan = plan_eifp(observation, self.config, self._memory, timer, primary)
         self._memory = update_side_memory(self._memory, plan, observation.others.ids)
         self._primary = plan.resolved_id
         return plan

@@ -85,6 +85,14 @@ VIA_MARGIN_M = 0.05
 # A leg start within L * (1 + this) of a disc centre is on the disc: no tangent from it.
 ON_DISC_REL_TOL = 1.0e-6
 
+# rule(others, index, tcpa, dcpa, inflated) -> (ignored ids, committed ids): eIFP's encounter
+# rules, given the cycle's neighbours and their Eq. (5) assessment (threat indices ranked,
+# TCPA, DCPA, inflated radii L), so the assessment is made once per cycle.
+EncounterRule = Callable[
+    [Others, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    "tuple[frozenset[int], frozenset[int]]",
+]
+
 # select(k, points, times, leg_start, leg_end) -> index into SIDES of the chosen candidate
 # of other k, or None if none is acceptable. points: the (RIGHT, LEFT) via-points as
 # complex numbers x + iy [m]; times: their lambda* [s], inf where infeasible; leg_start,
@@ -207,6 +215,7 @@ def plan_via_points(
     timer: Callable[[], float] | None = None,
     ignored_ids: frozenset[int] = frozenset(),
     primary_id: int | None = None,
+    encounter_rule: EncounterRule | None = None,
 ) -> ViaPlan:
     """The IFP cycle (module docstring) with a pluggable candidate selector.
 
@@ -216,6 +225,7 @@ def plan_via_points(
         make_selector: given the neighbours the cycle plans against (after the sensing
             radius and neighbour cap), returns the rule that picks one candidate of a
             threat; IFP's is `select_earliest`, eIFP's cost rule is in `agent.eifp`.
+            Called after `encounter_rule`.
         committed_ids: others the robot is already resolving (eIFP's threat commitment):
             they stay threats while still approaching (0 < TCPA < T_max), even when the
             robot's own swerve has pushed their DCPA past D_thresh.
@@ -227,6 +237,8 @@ def plan_via_points(
         primary_id: the other the previous cycle's first via-point resolved (eIFP): if it
             is still a threat it is resolved first again unless another one's TCPA is
             more than `PRIMARY_TCPA_MARGIN_S` smaller (hysteresis on the ranking).
+        encounter_rule: eIFP's encounter rules (`EncounterRule`): their ignored ids join
+            `ignored_ids`, their committed ids `committed_ids`.
 
     Raises:
         ValueError: on non-finite inputs or configuration.
@@ -236,7 +248,6 @@ def plan_via_points(
     p = np.array([ego.x_m, ego.y_m])
     goal = observation.goal_m
     others = nearby_others(p, observation.others, config.sensing_radius_m, config.max_neighbors)
-    select = make_selector(others)
     speed = float(observation.limits.v_max_mps)
     radius = inflated_radius(observation.radius_m, others.radius_m, config.d_safety_m)
 
@@ -246,6 +257,11 @@ def plan_via_points(
     index, tcpa, dcpa = rank_threats(
         p, v_r, others, config.dcpa_threshold_m(observation.radius_m), config.t_max_s
     )
+    if encounter_rule is not None and len(others):
+        more_ignored, more_committed = encounter_rule(others, index, tcpa, dcpa, radius)
+        ignored_ids = ignored_ids | more_ignored
+        committed_ids = committed_ids | more_committed
+    select = make_selector(others)
     if committed_ids and len(others):
         index = _with_committed(index, tcpa, others, committed_ids, config.t_max_s)
     threats = threat_records(index, tcpa, dcpa, others)
@@ -256,7 +272,8 @@ def plan_via_points(
     index = index[tcpa[index] <= to_goal_s + GOAL_TCPA_MARGIN_S]
     ignored = np.zeros(len(others), dtype=bool)
     if ignored_ids and len(others):
-        ignored = np.isin(others.ids, np.fromiter(ignored_ids, dtype=np.int64))
+        ignored = np.fromiter((i in ignored_ids for i in others.ids.tolist()), dtype=bool,
+                              count=len(others))
         index = index[~ignored[index]]
     if primary_id is not None and index.size > 1:
         hit = (others.ids[index] == primary_id).nonzero()[0]
