@@ -73,7 +73,7 @@ class RobotController:
         if last is not None and (snapshot.tick <= last.tick or snapshot.stamp_s < last.stamp_s):
             self.rejected_stale += 1
             return False
-        if not np.any(snapshot.ids == self.spec.id):
+        if not (snapshot.ids == self.spec.id).any():
             self.rejected_stale += 1
             return False
         self.tracker.update(snapshot)
@@ -91,7 +91,7 @@ class RobotController:
             near_m=snap.pose[row, :2],
             within_m=self.config.sensing_radius_m + ESTIMATION_MARGIN_M)
         v, omega = self.command
-        age = float(np.clip(now_s - snap.stamp_s, 0.0, MAX_COMPENSATED_AGE_S))
+        age = min(max(float(now_s - snap.stamp_s), 0.0), MAX_COMPENSATED_AGE_S)
         if self.compensate_latency and age > 0.0:
             x, y, heading = _predict_unicycle(x, y, heading, v, omega, age)
             others = _advance(others, age)

@@ -40,13 +40,13 @@ encounter (`update_role_memory`).
 
 from __future__ import annotations
 
+import cmath
 import enum
 import math
 from collections.abc import Mapping
 
 import numpy as np
 
-from agent.threats import as_complex
 from agent.types import Others
 
 RECIPROCAL_RAD = math.radians(45.0)
@@ -84,31 +84,40 @@ def classify(
     """
     k = len(others)
     roles = np.full(k, int(Role.RESOLVE), dtype=np.int64)
-    velocity = as_complex(others.velocity_mps)
-    moving = others.is_robot & (np.abs(velocity) >= MOVING_MPS)
-    if k == 0 or speed_mps < MOVING_MPS or not moving.any():
-        return roles, np.zeros(k, dtype=bool)
+    overtaken = np.zeros(k, dtype=bool)
+    if k == 0 or speed_mps < MOVING_MPS:
+        return roles, overtaken
+    # Plain Python over complex numbers: K is at most the neighbour cap (10 by default),
+    # where a loop costs a fraction of the ~40 small numpy calls of the array form.
     turn = complex(math.cos(-heading_rad), math.sin(-heading_rad))  # world -> own frame
-    offset = as_complex(others.position_m) - complex(*position_m)
-    bearing = np.angle(offset * turn)  # where the other is, from our heading
-    course = np.angle(velocity * turn)  # the other's course relative to ours
-    # Where we are, seen from the other's course (its heading is its velocity).
-    unit = np.divide(velocity, np.abs(velocity), out=np.ones_like(velocity),
-                     where=np.abs(velocity) > 0.0)
-    back_bearing = np.angle(-offset * unit.conjugate())
-    reciprocal = np.abs(np.angle(-np.exp(1j * course))) <= RECIPROCAL_RAD
-    same = np.abs(course) <= SAME_COURSE_RAD
-    ahead = np.abs(bearing) < 0.5 * math.pi
-    behind_it = np.abs(back_bearing) > 0.5 * math.pi
-    overtaking = same & ahead & behind_it  # we come up from behind it
-    overtaken = same & ~ahead & ~behind_it  # it comes up from behind us
-    on_right = bearing < 0.0
-    crossing = ~reciprocal & ~overtaking & ~overtaken
-    give_way = reciprocal | (crossing & on_right)
-    stand_on = overtaken | (crossing & ~on_right)
-    roles[moving & give_way] = int(Role.GIVE_WAY)
-    roles[moving & stand_on] = int(Role.STAND_ON)
-    return roles, moving & overtaking
+    here = complex(position_m[0], position_m[1])
+    give_way_role, stand_on_role = int(Role.GIVE_WAY), int(Role.STAND_ON)
+    half_pi = 0.5 * math.pi
+    rows = zip(others.position_m.tolist(), others.velocity_mps.tolist(),
+               others.is_robot.tolist())
+    for j, ((px, py), (vx, vy), is_robot) in enumerate(rows):
+        velocity = complex(vx, vy)
+        speed = abs(velocity)
+        if not is_robot or speed < MOVING_MPS:
+            continue  # an obstacle or a robot that barely moves: RESOLVE
+        offset = complex(px, py) - here
+        bearing = cmath.phase(offset * turn)  # where the other is, from our heading
+        course = cmath.phase(velocity * turn)  # the other's course relative to ours
+        # Where we are, seen from the other's course (its heading is its velocity).
+        back_bearing = cmath.phase(-offset * (velocity / speed).conjugate())
+        reciprocal = abs(cmath.phase(-cmath.exp(1j * course))) <= RECIPROCAL_RAD
+        same = abs(course) <= SAME_COURSE_RAD
+        ahead = abs(bearing) < half_pi
+        behind_it = abs(back_bearing) > half_pi
+        if same and ahead and behind_it:  # we come up from behind it
+            overtaken[j] = True
+        elif same and not ahead and not behind_it:  # it comes up from behind us
+            roles[j] = stand_on_role
+        elif reciprocal or bearing < 0.0:  # head-on, or crossing with it on our right
+            roles[j] = give_way_role
+        else:  # crossing with it on our left
+            roles[j] = stand_on_role
+    return roles, overtaken
 
 
 def encounter_roles(

@@ -100,51 +100,95 @@ class NeighborTracker:
                 most `within_m` from it are estimated (bounds the work in a crowd).
             within_m: see `near_m`.
         """
-        if self._row < 0 or not np.any(self._latest):
+        if self._row < 0 or not self._latest.any():
             return Others.empty()
         r = self._row
         sel = self._latest
         if near_m is not None and np.isfinite(within_m):
             gap = self._pos[r] - np.asarray(near_m, dtype=float)
             sel = sel & (np.hypot(gap[:, 0], gap[:, 1]) <= within_m)
-            if not np.any(sel):
+            if not sel.any():
                 return Others.empty()
         t_now = self._t[r]
         order = np.argsort(self._t)  # oldest first; unused rows have -inf
         t = self._t[order]
-        pos = self._pos[order][:, sel]  # (H, k, 2)
-        seen = self._seen[order][:, sel]  # (H, k)
-        use = seen & (t_now - t <= self.window_s + 1e-9)[:, None]
-        w = use.astype(float)
-        count = w.sum(axis=0)  # (k,)
-        tt = np.where(np.isfinite(t), t - t_now, 0.0)[:, None]  # relative times, (H, 1)
-        safe_count = np.maximum(count, 1.0)
-        t_mean = (w * tt).sum(axis=0) / safe_count
-        p_mean = (w[..., None] * pos).sum(axis=0) / safe_count[:, None]
-        dt = (tt - t_mean) * w
-        var_t = (dt * (tt - t_mean)).sum(axis=0)
-        cov = (dt[..., None] * (pos - p_mean)).sum(axis=0)
-        ok = (count >= 2) & (var_t > 1e-12)
-        velocity = np.where(ok[:, None], cov / np.where(ok, var_t, 1.0)[:, None], 0.0)
-
-        # Oldest used sample per disc (ghost path start s_j) and straightness of the track.
-        first = np.argmax(use, axis=0)
-        k = np.arange(pos.shape[1])
-        start = pos[first, k]
-        latest = pos[-1]
-        steps = np.linalg.norm(np.diff(pos, axis=0), axis=2)  # (H-1, k)
-        both = use[1:] & use[:-1]
-        path = (steps * both).sum(axis=0)
-        chord = np.linalg.norm(latest - start, axis=1)
-        linearity = np.where(path > _MIN_TRAVEL_M, chord / np.maximum(path, 1e-12), 0.0)
-        ids = self._ids[sel]
+        in_window = t_now - t <= self.window_s + 1e-9  # a suffix of `order` (t is sorted)
+        cols = sel.nonzero()[0]
+        rows = order[in_window]
+        seen = self._seen[rows][:, cols]  # (h, k)
+        if seen.all():
+            # Every disc in every sample of the window (the usual case: the world publishes
+            # all discs each tick): one set of least-squares weights serves all columns.
+            velocity, start, linearity = self._estimate_dense(
+                self._pos[rows][:, cols], t[in_window] - t_now)
+        else:
+            velocity, start, linearity = self._estimate_sparse(
+                self._pos[rows][:, cols], seen, t[in_window] - t_now)
+        latest = self._pos[r][cols]
+        ids = self._ids[cols]
         # Built from a validated snapshot (finite poses, radii) by finite arithmetic.
         return Others.trusted(
             ids=ids,
             position_m=latest,
             velocity_mps=velocity,
-            radius_m=self._radius[sel],
-            linearity=np.clip(linearity, 0.0, 1.0),
+            radius_m=self._radius[cols],
+            linearity=np.minimum(linearity, 1.0),  # >= 0 already
             track_start_m=start,
             is_robot=ids >= 0,
         )
+
+    @staticmethod
+    def _estimate_dense(pos: np.ndarray, tt: np.ndarray
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Velocity, track start and straightness when every disc is in every sample.
+
+        Args:
+            pos: (h, k, 2) positions in the window, oldest first; the last row is the newest.
+            tt: (h,) sample times relative to the newest (<= 0).
+        """
+        k = pos.shape[1]
+        dtt = tt - tt.sum() / tt.shape[0]
+        var_t = float(dtt @ dtt)
+        if tt.shape[0] >= 2 and var_t > 1e-12:
+            # Slope = sum (t_i - t_mean)(p_i - p_mean) / var = sum (t_i - t_mean) p_i / var,
+            # summed sample by sample (not BLAS) so a disc's estimate never depends on
+            # which other discs are estimated with it.
+            velocity = ((dtt / var_t)[:, None, None] * pos).sum(axis=0)
+        else:
+            velocity = np.zeros((k, 2))
+        start = pos[0]
+        steps = pos[1:] - pos[:-1]
+        path = np.sqrt((steps * steps).sum(axis=2)).sum(axis=0)
+        chord_v = pos[-1] - start
+        chord = np.sqrt((chord_v * chord_v).sum(axis=1))
+        linearity = np.where(path > _MIN_TRAVEL_M, chord / np.maximum(path, 1e-12), 0.0)
+        return velocity, start, linearity
+
+    @staticmethod
+    def _estimate_sparse(pos: np.ndarray, use: np.ndarray, tt: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """As `_estimate_dense`, for discs missing from some samples (weighted by `use`).
+
+        Args:
+            pos: (h, k, 2) positions in the window (stale where not seen).
+            use: (h, k) whether disc j was seen in sample i; the last row is all True.
+            tt: (h,) sample times relative to the newest (<= 0).
+        """
+        w = use.astype(float)
+        tt = tt[:, None]
+        safe_count = np.maximum(w.sum(axis=0), 1.0)  # (k,)
+        t_mean = (w * tt).sum(axis=0) / safe_count
+        p_mean = (w[..., None] * pos).sum(axis=0) / safe_count[:, None]
+        dt = (tt - t_mean) * w
+        var_t = (dt * (tt - t_mean)).sum(axis=0)
+        cov = (dt[..., None] * (pos - p_mean)).sum(axis=0)
+        ok = (w.sum(axis=0) >= 2) & (var_t > 1e-12)
+        velocity = np.where(ok[:, None], cov / np.where(ok, var_t, 1.0)[:, None], 0.0)
+        # Oldest used sample per disc (ghost path start s_j) and straightness of the track.
+        first = np.argmax(use, axis=0)
+        start = pos[first, np.arange(pos.shape[1])]
+        steps = np.linalg.norm(np.diff(pos, axis=0), axis=2)  # (h-1, k)
+        path = (steps * (use[1:] & use[:-1])).sum(axis=0)
+        chord = np.linalg.norm(pos[-1] - start, axis=1)
+        linearity = np.where(path > _MIN_TRAVEL_M, chord / np.maximum(path, 1e-12), 0.0)
+        return velocity, start, linearity

@@ -45,6 +45,7 @@ Choices the paper leaves open (documented here, tested in tests/agent/test_ifp.p
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 from collections.abc import Callable
@@ -170,10 +171,18 @@ def validate_inputs(observation: Observation, config: PlannerConfig) -> None:
         observation.radius_m,
         observation.limits.v_max_mps,
     )
+    if not observation.limits.v_max_mps > 0.0:
+        raise ValueError("limits.v_max_mps: must be positive")
+    _validate_config(config, float(observation.radius_m))
+
+
+@functools.lru_cache(maxsize=64)
+def _validate_config(config: PlannerConfig, radius_m: float) -> None:
+    """The configuration half of `validate_inputs`; a frozen config is checked once."""
     require_finite(
         "config",
         config.d_safety_m,
-        config.dcpa_threshold_m(observation.radius_m),
+        config.dcpa_threshold_m(radius_m),
         config.t_max_s,
         config.sensing_radius_m,
         config.w_length,
@@ -183,8 +192,6 @@ def validate_inputs(observation: Observation, config: PlannerConfig) -> None:
         config.side_hysteresis,
         0.0 if config.ghost_clearance_m is None else config.ghost_clearance_m,
     )
-    if not observation.limits.v_max_mps > 0.0:
-        raise ValueError("limits.v_max_mps: must be positive")
     if config.max_depth < 1:
         raise ValueError("config.max_depth: must be at least 1")
 

@@ -63,6 +63,7 @@ command is always clipped to the bounds and to the rate limits from the last com
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from typing import Protocol
@@ -114,7 +115,9 @@ class MpcResult:
         v_mps, omega_radps: command to apply now, always within the bounds and rate limits.
         status: OK, SOLVER_INACCURATE (iterate used, clipped) or SOLVER_FAILED (braking).
         iterations: OSQP iterations (0 when OSQP was not called).
-        predicted_states: (N + 1, 3) Eq. (1) rollout of the planned inputs from the state.
+        planned_inputs: (N, 2) the planned [v_mps, omega_radps] per step, the first applied.
+        initial_state: (3,) the state the plan starts from.
+        dt_s: step length of the plan.
         max_slack_m: largest half-plane violation the plan accepts (0 when feasible).
     """
 
@@ -122,8 +125,18 @@ class MpcResult:
     omega_radps: float
     status: PlanStatus
     iterations: int
-    predicted_states: np.ndarray
+    planned_inputs: np.ndarray
+    initial_state: np.ndarray
+    dt_s: float
     max_slack_m: float
+
+    @functools.cached_property
+    def predicted_states(self) -> np.ndarray:
+        """(N + 1, 3) Eq. (1) rollout of the planned inputs from the state.
+
+        Computed on first use: the robot's cycle only needs the command (saves a rollout).
+        """
+        return rollout(self.initial_state, self.planned_inputs, self.dt_s)
 
 
 def _csc(rows: np.ndarray, cols: np.ndarray, vals: np.ndarray, shape: tuple[int, int]):
@@ -487,7 +500,9 @@ class MpcTracker:
             omega_radps=omega,
             status=status,
             iterations=iterations,
-            predicted_states=rollout(x0, u_opt, dt),
+            planned_inputs=u_opt,
+            initial_state=x0,
+            dt_s=dt,
             max_slack_m=max_slack,
         )
 
@@ -584,7 +599,9 @@ class MpcTracker:
             omega_radps=float(w[0]),
             status=PlanStatus.SOLVER_FAILED,
             iterations=iterations,
-            predicted_states=rollout(x0, controls, dt),
+            planned_inputs=controls,
+            initial_state=x0,
+            dt_s=dt,
             max_slack_m=0.0,
         )
 

@@ -257,10 +257,10 @@ def distance_profile(
         return v_peak * t_s, np.full_like(t_s, v_peak)
     # v(t) is piecewise linear: ramp, cruise, brake; s(t) sums the three phase integrals.
     ramp = np.minimum(t_s, t1)
-    brake = np.clip(t_s - t2, 0.0, t3 - t2)
+    brake = np.minimum(np.maximum(t_s - t2, 0.0), t3 - t2)
     s = (
         ramp * (v_se + 0.5 * a * ramp)
-        + v_peak * (np.clip(t_s, t1, t2) - t1)
+        + v_peak * (np.minimum(np.maximum(t_s, t1), t2) - t1)
         + brake * (v_peak - 0.5 * a * brake)
     )
     v = np.where(t_s < t1, v_se + a * t_s, v_peak - a * brake)
