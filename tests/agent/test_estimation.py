@@ -92,3 +92,27 @@ def test_estimates_only_within_a_distance_match_the_full_estimates():
     np.testing.assert_array_equal(near.track_start_m[0], full.track_start_m[0])
     assert len(tr.others(near_m=np.array([100.0, 100.0]), within_m=1.0)) == 0
     np.testing.assert_allclose(full.velocity_mps[2], [2.0, 0.0], atol=1e-9)  # reordered ids
+
+
+def test_dense_fast_path_matches_the_weighted_fit():
+    """Every disc in every sample takes the shared-weights path; it must equal the general
+    weighted least squares with all weights one (the path used when a disc is missing)."""
+    rng = np.random.default_rng(3)
+    pos = rng.normal(size=(6, 4, 2))
+    tt = np.array([-0.5, -0.41, -0.3, -0.2, -0.12, 0.0])
+    dense = NeighborTracker._estimate_dense(pos, tt)
+    sparse = NeighborTracker._estimate_sparse(pos, np.ones((6, 4), dtype=bool), tt)
+    for a, b in zip(dense, sparse, strict=True):
+        np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12)
+
+
+def test_a_disc_missing_from_one_sample_is_fitted_on_the_samples_it_was_in():
+    tr = NeighborTracker(own_id=0, window_s=0.5, max_samples=8)
+    for k in range(7):
+        t = 0.1 * k
+        rows = [(1, 1.0 * t, 0.0)] + ([(2, 3.0, 2.0 * t)] if k != 5 else [])
+        tr.update(snap(t, k, rows))
+    o = tr.others()
+    assert o.ids.tolist() == [1, 2]
+    np.testing.assert_allclose(o.velocity_mps, [[1.0, 0.0], [0.0, 2.0]], atol=1e-9)
+    assert o.linearity.tolist() == pytest.approx([1.0, 1.0])
