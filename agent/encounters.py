@@ -93,8 +93,10 @@ def classify(
     bearing = np.angle(offset * turn)  # where the other is, from our heading
     course = np.angle(velocity * turn)  # the other's course relative to ours
     # Where we are, seen from the other's course (its heading is its velocity).
+    # (Only the moving others' directions are used; slower ones, down to denormal speeds
+    # whose division overflows, get a dummy unit.)
     unit = np.divide(velocity, np.abs(velocity), out=np.ones_like(velocity),
-                     where=np.abs(velocity) > 0.0)
+                     where=np.abs(velocity) >= MOVING_MPS)
     back_bearing = np.angle(-offset * unit.conjugate())
     reciprocal = np.abs(np.angle(-np.exp(1j * course))) <= RECIPROCAL_RAD
     same = np.abs(course) <= SAME_COURSE_RAD
