@@ -157,7 +157,8 @@ def test_latency_compensation_makes_a_measurable_difference(tmp_path):
 def test_latency_aware_half_planes_keep_setup_d_clear_at_150_ms(tmp_path, monkeypatch):
     # 150 ms +- 45 ms on both links of setup D, link seed 8: with the half-planes' clearance
     # at its fault-free value the robots touch (measured min gap -0.15 m; 8 of seeds 0-9
-    # touch), with 2 x pose age x relative speed on top they keep clear (+0.30 m; 0 of 10).
+    # touch), with 2 x pose age x relative speed on top they keep clear (+0.30 m; 0 of 10);
+    # figures measured with the earlier 200-iteration OSQP cap.
     import agent.planners
     from orchestrator.families import resolve
 
