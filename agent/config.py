@@ -48,7 +48,11 @@ class MpcConfig:
         clearance_margin_m: gap the half-planes keep between discs (the via-point planner
             keeps the larger d_safety; the MPC constraint is the last line of defence).
         slack_weight: linear and quadratic weight on half-plane slack (soft constraints).
-        max_iter: OSQP iteration cap per solve.
+        max_iter: OSQP iteration cap per solve. 1000, not OSQP's usual few hundred: in the
+            crowded centre of setups F and G (more so with the wider half-planes of a
+            delayed link) 200 iterations often stopped short (`SOLVER_INACCURATE`, the
+            iterate used), and such iterates drove robots into each other at 100 ms
+            latency (F, link seeds 4, 7, 8: contacts at 200, none at 1000).
         eps_abs: OSQP absolute tolerance.
         eps_rel: OSQP relative tolerance.
     """
@@ -65,7 +69,7 @@ class MpcConfig:
     max_constraints: int = 4
     clearance_margin_m: float = 0.1
     slack_weight: float = 1.0e4
-    max_iter: int = 200
+    max_iter: int = 1000
     eps_abs: float = 1.0e-3
     eps_rel: float = 1.0e-3
 

@@ -103,6 +103,7 @@ class RobotController:
             limits=self.spec.limits,
             goal_tolerance_m=self.goal_tolerance_m,
             others=others,
+            pose_age_s=age,
         )
 
     def plan(self, now_s: float) -> PlanResult:

@@ -7,7 +7,11 @@
 - `eifp`: eIFP (`agent.eifp`): TCPA ranking and the cost of Eqs. (14)-(16) with side memory;
   the spline followed by the same tracking law, as the paper's eIFP (no MPC).
 - `eifp-mpc`: eIFP whose spline is tracked by the OSQP LTV-MPC (`agent.mpc`), with the
-  neighbours' constant-velocity predictions as soft half-plane constraints.
+  neighbours' constant-velocity predictions as soft half-plane constraints. Not in the
+  paper: with stale poses (`Observation.pose_age_s` > 0, i.e. a delayed link) each
+  half-plane keeps `LATENCY_CLEARANCE_FACTOR` x age x |v_j - v_r| more clearance, the
+  distance the pair can close before a command planned now takes effect; with fresh poses
+  (an undisturbed lockstep run) nothing changes.
 - `orca`: ORCA through `pyrvo` (`agent.orca`) plus a heading controller.
 
 Every planner stops (status ARRIVED) once its centre is within half the goal tolerance of
@@ -43,6 +47,10 @@ turn on the spot, and a reference forced along its heading would send it the wro
 
 CONTROL_PERIOD_S = 0.1
 """Default command period: the rate limits of the tracking laws use it."""
+
+LATENCY_CLEARANCE_FACTOR = 2.0
+"""eIFP-MPC's half-planes keep this many pose ages of relative motion on top of their
+clearance (pose link plus the command link, assumed as slow); 0 with fresh poses."""
 
 
 class Planner(Protocol):
@@ -185,6 +193,14 @@ class ViaPointPlanner:
         near = observation.others
         preds = near.position_m[:, None, :] + near.velocity_mps[:, None, :] * t_s[None, :, None]
         clearance = observation.radius_m + near.radius_m + cfg.mpc.clearance_margin_m
+        if observation.pose_age_s > 0.0 and len(near):
+            # Loop delay: the poses are pose_age_s old and the command reaches the wheels
+            # about as late again (links are assumed symmetric), so the pair can close by
+            # up to 2 * age * |v_j - v_r| before our command takes effect.
+            ego = observation.ego
+            v_r = ego.v_mps * np.array([np.cos(ego.heading_rad), np.sin(ego.heading_rad)])
+            rel = np.hypot(*(near.velocity_mps - v_r).T)
+            clearance = clearance + LATENCY_CLEARANCE_FACTOR * observation.pose_age_s * rel
         return preds, clearance
 
 

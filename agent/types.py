@@ -192,6 +192,8 @@ class Observation:
         goal_tolerance_m: the robot stops when this close to its goal.
         others: the sensed others (already limited to the sensing radius / neighbour cap
             or not: planners apply `PlannerConfig.sensing_radius_m` and `max_neighbors`).
+        pose_age_s: how old the poses were when the robot planned, after it predicted them
+            forward to now (0: fresh poses, as in an undisturbed lockstep run) [s].
     """
 
     robot_id: int
@@ -201,9 +203,14 @@ class Observation:
     limits: RobotLimits = field(default_factory=RobotLimits)
     goal_tolerance_m: float = 0.25
     others: Others = field(default_factory=Others.empty)
+    pose_age_s: float = 0.0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "goal_m", _as_array("goal_m", self.goal_m, (2,)))
+        age = _check_finite("pose_age_s", self.pose_age_s)
+        if age < 0.0:
+            raise ValueError("pose_age_s: must not be negative")
+        object.__setattr__(self, "pose_age_s", age)
         radius = _check_finite("radius_m", self.radius_m)
         if radius <= 0.0:
             raise ValueError("radius_m: must be positive")

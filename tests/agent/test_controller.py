@@ -129,6 +129,7 @@ def test_latency_compensation_moves_ego_along_its_arc_and_others_by_velocity_tim
 
     for obs in (on, off):  # odometry is the command either way; the rest is not moved
         assert (obs.ego.v_mps, obs.ego.omega_radps) == command
+        assert obs.pose_age_s == pytest.approx(AGE_S, abs=1e-12)  # the planner's margin
         np.testing.assert_allclose(obs.others.track_start_m, [[5.0, 1.0]], atol=1e-12)
 
 
@@ -136,11 +137,12 @@ def test_latency_compensation_is_capped_and_never_runs_backwards() -> None:
     ctrl = _latency_case(True, (1.0, 0.0))
     far = ctrl.observation(0.2 + 10.0)  # 10 s old: extrapolated by the cap only
     assert far.ego.y_m == pytest.approx(2.0 + MAX_COMPENSATED_AGE_S, abs=1e-12)
+    assert far.pose_age_s == MAX_COMPENSATED_AGE_S
     np.testing.assert_allclose(far.others.position_m,
                                [[4.8 - MAX_COMPENSATED_AGE_S, 1.1 + 0.5 * MAX_COMPENSATED_AGE_S]],
                                atol=1e-9)
     early = ctrl.observation(0.1)  # planning "before" the stamp: no prediction
-    assert (early.ego.x_m, early.ego.y_m) == EGO_SEEN[:2]
+    assert (early.ego.x_m, early.ego.y_m) == EGO_SEEN[:2] and early.pose_age_s == 0.0
     np.testing.assert_allclose(early.others.position_m, [[4.8, 1.1]], atol=1e-12)
 
 

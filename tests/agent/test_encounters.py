@@ -114,3 +114,15 @@ def test_mirror_images_never_both_stand_on_or_both_resolve_by_cost(angle_deg):
     r1 = role(h1, p1, p0, heading_vel(h0))
     assert Role.GIVE_WAY in (r0, r1)
     assert not (r0 is Role.RESOLVE and r1 is Role.RESOLVE)
+
+
+def test_a_denormal_speed_is_a_parked_robot_without_overflow():
+    # Found by hypothesis in tests/agent/test_planners.py: |v| = 2e-313 overflowed v / |v|
+    # (a RuntimeWarning, an error under -W error).
+    two = Others(ids=np.array([1, 2]), position_m=np.array([[3.0, 0.0], [0.0, 3.0]]),
+                 velocity_mps=np.array([[-V, 0.0], [0.0, 2.2250738585e-313]]),
+                 radius_m=np.full(2, 0.5), linearity=np.ones(2),
+                 track_start_m=np.zeros((2, 2)), is_robot=np.ones(2, dtype=bool))
+    roles, overtaken = classify(0.0, V, np.zeros(2), two)
+    assert [Role(int(r)) for r in roles] == [Role.GIVE_WAY, Role.RESOLVE]
+    assert not overtaken.any()

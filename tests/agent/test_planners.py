@@ -118,6 +118,24 @@ def test_threat_ahead_gets_a_via_point_and_side():
     assert res.waypoints_m.shape[0] >= 3
 
 
+def test_half_plane_clearance_grows_with_the_pose_age():
+    from dataclasses import replace
+
+    from agent.planners import LATENCY_CLEARANCE_FACTOR
+
+    # Head-on at 1 m/s each (relative speed 2 m/s) and a parked robot (relative 1 m/s).
+    obs = observation(0.0, 0.0, 0.0, 1.0, [[6.0, 0.0], [0.0, 4.0]], [[-1.0, 0.0], [0.0, 0.0]])
+    planner = make_planner("eifp-mpc", PlannerConfig())
+    t = np.arange(21) * 0.1
+    preds, fresh = planner._predictions(obs, t)
+    assert fresh == pytest.approx([1.0 + PlannerConfig().mpc.clearance_margin_m] * 2)
+    _, late = planner._predictions(replace(obs, pose_age_s=0.15), t)
+    assert late - fresh == pytest.approx(LATENCY_CLEARANCE_FACTOR * 0.15 * np.array([2.0, 1.0]))
+    np.testing.assert_allclose(preds[0, -1], [4.0, 0.0])  # predictions do not change
+    with pytest.raises(ValueError, match="pose_age_s"):
+        replace(obs, pose_age_s=-0.1)
+
+
 def test_non_finite_input_is_a_clear_value_error():
     with pytest.raises(ValueError, match="non-finite"):
         observation(float("nan"), 0.0, 0.0, 1.0, [], [])

@@ -154,6 +154,26 @@ def test_latency_compensation_makes_a_measurable_difference(tmp_path):
     print(f"ego error {err_on:.3f} vs {err_off:.3f} m, min gap {gap_on:.3f} vs {gap_off:.3f} m")
 
 
+def test_latency_aware_half_planes_keep_setup_d_clear_at_150_ms(tmp_path, monkeypatch):
+    # 150 ms +- 45 ms on both links of setup D, link seed 8: with the half-planes' clearance
+    # at its fault-free value the robots touch (measured min gap -0.15 m; 8 of seeds 0-9
+    # touch), with 2 x pose age x relative speed on top they keep clear (+0.30 m; 0 of 10);
+    # figures measured with the earlier 200-iteration OSQP cap.
+    import agent.planners
+    from orchestrator.families import resolve
+
+    scenario = resolve("setup_d", agents=None, seed=8, start_jitter_m=0.0, planner=None)
+    faults = build_plan(latency_ms=150, jitter_ms=45, seed=8)
+    gaps = {}
+    for factor in (0.0, agent.planners.LATENCY_CLEARANCE_FACTOR):
+        monkeypatch.setattr(agent.planners, "LATENCY_CLEARANCE_FACTOR", factor)
+        out = run_lockstep(scenario, tmp_path / str(factor), faults=faults)
+        gaps[factor] = (out.metrics.contacts, out.metrics.min_gap_m)
+    (touch_off, gap_off), (touch_on, gap_on) = gaps.values()
+    assert touch_off > 0 and gap_off < 0.0, gaps
+    assert touch_on == 0 and gap_on > 0.1, gaps
+
+
 def test_killed_robot_is_avoided_where_it_stopped(tmp_path):
     # Killed at 3 s, when it is about on robot 0's lane: it brakes and stays an obstacle.
     out = run_lockstep(crossing(), tmp_path / "run", faults=build_plan(kill=["1@3"]))
