@@ -114,10 +114,6 @@ STALE_PLAN_S = 1.0
 WAKE_MARGIN_S = 0.001
 """Wall time before the next plan slot's pose is due at which the robot wakes to wait for it."""
 MAX_NAP_S = 0.1
-PLAN_NICE = 5
-"""Niceness added to a robot's planning thread (not to its Zenoh threads). When more robots
-want the CPU than there is, the transport still runs first: leases are kept, poses and
-commands flow, the world (the router) keeps its pace; only the planning is late."""
 """Longest single sleep: control and liveliness messages are read at least this often."""
 
 log = logging.getLogger("agent")
@@ -140,8 +136,6 @@ class AgentOptions:
         control_phase_s: offset of the planning slots [sim s].
         plan_delay_ms: added planning delay [sim ms] before each command is published.
         compensate_latency: forward-predict by the poses' age before planning.
-        plan_nice: niceness added to the robot's own (planning) thread once its Zenoh
-            session is up; the session's threads keep the process's (see `PLAN_NICE`).
     """
 
     run_id: str
@@ -155,7 +149,6 @@ class AgentOptions:
     control_phase_s: float = 0.0
     plan_delay_ms: float = 0.0
     compensate_latency: bool = True
-    plan_nice: int = PLAN_NICE
 
 
 def _positive(text: str) -> float:
@@ -220,9 +213,6 @@ def parse_args(argv: list[str] | None = None) -> AgentOptions:
                         help="offset of the planning slots [sim s]")
     faults.add_argument("--plan-delay-ms", type=_non_negative, default=0.0,
                         help="added planning delay [sim ms] (a CPU-starved robot)")
-    parser.add_argument("--plan-nice", type=int, choices=range(0, 20), default=PLAN_NICE,
-                        metavar="N", help="niceness added to the planning thread only "
-                        f"(0-19, default {PLAN_NICE}; Zenoh's threads keep the process's)")
     faults.add_argument("--no-latency-compensation", action="store_true",
                         help="plan on the poses as stamped (no forward prediction by age)")
     args = parser.parse_args(argv)
@@ -234,8 +224,7 @@ def parse_args(argv: list[str] | None = None) -> AgentOptions:
                                         drop=args.drop, dup=args.dup, reorder=args.reorder),
                         fault_seed=args.fault_seed, control_phase_s=args.control_phase_s,
                         plan_delay_ms=args.plan_delay_ms,
-                        compensate_latency=not args.no_latency_compensation,
-                        plan_nice=args.plan_nice)
+                        compensate_latency=not args.no_latency_compensation)
 
 
 class _StopFlag:
@@ -628,7 +617,6 @@ class RobotNode:
             startup_deadline: monotonic time by which the world's token must have been seen
                 (after that, the world owns the start: it ends the run if robots are missing).
         """
-        lower_thread_priority(self.options.plan_nice)
         try:
             while not self.stop:
                 now = time.monotonic()
@@ -661,20 +649,6 @@ class RobotNode:
     def summary(self) -> str:
         """Counters as key=value pairs."""
         return " ".join(f"{k}={v}" for k, v in {**self.counts, "seq": self.seq}.items())
-
-
-def lower_thread_priority(nice: int) -> bool:
-    """Add `nice` to the calling thread's niceness only (Linux: a thread id is a process id
-    for setpriority); threads started before keep theirs. Returns False where it cannot."""
-    if nice <= 0:
-        return False
-    try:
-        tid = threading.get_native_id()
-        os.setpriority(os.PRIO_PROCESS, tid, min(19, os.getpriority(os.PRIO_PROCESS, tid) + nice))
-    except (AttributeError, OSError) as exc:
-        log.warning("cannot lower the planning thread's priority: %s", exc)
-        return False
-    return True
 
 
 def close_session(session: zenoh.Session, timeout_s: float = CLOSE_TIMEOUT_S) -> bool:

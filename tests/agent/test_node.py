@@ -2,22 +2,10 @@
 
 from __future__ import annotations
 
-import os
-import sys
-import threading
-
 import pytest
 
 from agent.config import PlannerConfig
-from agent.node import (
-    PLAN_NICE,
-    AgentOptions,
-    PlanSchedule,
-    lower_thread_priority,
-    make_controller,
-    parse_args,
-    plan_phase_s,
-)
+from agent.node import AgentOptions, PlanSchedule, make_controller, parse_args, plan_phase_s
 from protocol import RunConfigMsg
 from world.scenario import RobotSpec
 
@@ -117,9 +105,6 @@ def test_parse_args() -> None:
         ]
     )
     assert opts.control_rate_hz == 20.0 and opts.startup_timeout_s == 5.0
-    assert opts.plan_nice == PLAN_NICE > 0
-    assert parse_args(["--run", "r", "--id", "0", "--connect", "tcp/h:1",
-                       "--plan-nice", "0"]).plan_nice == 0
 
 
 @pytest.mark.parametrize(
@@ -130,8 +115,6 @@ def test_parse_args() -> None:
         ["--run", "r", "--id", "0"],
         ["--run", "r", "--id", "0", "--connect", "tcp/h:1", "--control-rate-hz", "0"],
         ["--run", "r", "--id", "0", "--connect", "tcp/h:1", "--control-rate-hz", "nan"],
-        ["--run", "r", "--id", "0", "--connect", "tcp/h:1", "--plan-nice", "20"],
-        ["--run", "r", "--id", "0", "--connect", "tcp/h:1", "--plan-nice", "-1"],
     ],
 )
 def test_parse_args_rejects(argv) -> None:
@@ -206,23 +189,3 @@ print(json.dumps(sorted(sys.modules)))
     unneeded = {"yaml", "matplotlib", "PIL", "pyrvo", "agent.orca", "psutil"}
     assert not (modules & unneeded), modules & unneeded
     assert not any(m.startswith("orchestrator") for m in modules)
-
-
-@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="per-thread niceness is Linux")
-def test_lower_thread_priority_changes_the_calling_thread_only() -> None:
-    main_tid = threading.get_native_id()
-    before = os.getpriority(os.PRIO_PROCESS, main_tid)
-    seen: dict[str, object] = {}
-
-    def worker() -> None:
-        tid = threading.get_native_id()
-        seen["lowered"] = lower_thread_priority(3)
-        seen["nice"] = os.getpriority(os.PRIO_PROCESS, tid)
-        seen["zero"] = lower_thread_priority(0)
-
-    thread = threading.Thread(target=worker)
-    thread.start()
-    thread.join()
-    assert seen["lowered"] is True and seen["zero"] is False
-    assert seen["nice"] == min(19, before + 3)
-    assert os.getpriority(os.PRIO_PROCESS, main_tid) == before  # the caller's thread only
