@@ -536,6 +536,7 @@ def test_session_settings() -> None:
     router = session_settings(mode="router", listen=["tcp/127.0.0.1:7447"])
     assert router["mode"] == '"router"' and router["scouting/multicast/enabled"] == "false"
     assert router["transport/link/tx/lease"] == str(protocol.LINK_LEASE_MS)
+    assert router["transport/shared_memory/enabled"] == "false"
     assert "connect/endpoints" not in router
     client = session_settings(mode="client", connect=["tcp/127.0.0.1:1"], connect_timeout_ms=500)
     assert client["connect/endpoints"] == '["tcp/127.0.0.1:1"]'
