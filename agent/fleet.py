@@ -24,6 +24,12 @@ their fork and their liveliness token at once; each reports ready through a pipe
 parent forks the next. 128 robots forked in one burst all connect, query and warm up at
 the same moment, and on a loaded 2-core machine that starved the router's Zenoh threads
 past the 1 s transport lease: the world dropped most of them and they left (README, "Scale").
+
+CPU tokens: the children share a semaphore of ``--cpu-tokens`` (default: one per CPU); a
+robot holds one while it senses and plans (`agent.node.RobotNode.sense_and_plan`), so at
+most that many compute at once, each to the end of its cycle, instead of 100 runnable
+robots time-sliced against each other (and against the world) when they want more CPU than
+the host has.
 """
 
 from __future__ import annotations
@@ -33,6 +39,7 @@ import contextlib
 import ctypes
 import gc
 import logging
+import multiprocessing
 import os
 import select
 import signal
@@ -84,6 +91,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--max-starting", type=int, default=MAX_STARTING,
                         help="robots starting up at once: the next is forked when one has "
                              f"declared its liveliness token (default {MAX_STARTING})")
+    parser.add_argument("--cpu-tokens", type=int, default=None,
+                        help="robots computing at once (one per core: default the number of "
+                             "CPUs; 0: no tokens, every robot competes for the CPU)")
     parser.add_argument("--nice", type=int, default=0,
                         help="robot processes add this to their niceness (>= 0; e.g. 5 keeps "
                              "a world on the same machine ahead of them)")
@@ -120,7 +130,7 @@ def _die_with_parent(parent_pid: int) -> None:
 
 
 def _child(argv: list[str], log_path: Path, parent_pid: int, nice: int = 0,
-           ready_fd: int | None = None) -> None:
+           ready_fd: int | None = None, cpu_tokens: object | None = None) -> None:
     """In the forked child: become ``python -m agent`` with its own log; never returns.
 
     Once its liveliness token is declared the child writes its pid and a newline to
@@ -148,7 +158,7 @@ def _child(argv: list[str], log_path: Path, parent_pid: int, nice: int = 0,
         logging.root.handlers.clear()  # the robot sets up its own (agent.node.main)
         from agent.node import main as agent_main
 
-        code = agent_main(argv, on_ready=_ready)
+        code = agent_main(argv, on_ready=_ready, cpu_tokens=cpu_tokens)  # type: ignore[arg-type]
     except SystemExit as exc:  # argparse errors
         code = exc.code if isinstance(exc.code, int) else 2
     except BaseException:  # noqa: BLE001 - report, then leave with a failure status
@@ -176,6 +186,13 @@ def run_fleet(args: argparse.Namespace) -> int:
     if args.max_starting < 1:
         log.error("--max-starting must be >= 1, got %d", args.max_starting)
         return 2
+    n_tokens = (os.cpu_count() or 1) if args.cpu_tokens is None else args.cpu_tokens
+    if n_tokens < 0:
+        log.error("--cpu-tokens must be >= 0, got %d", n_tokens)
+        return 2
+    # A POSIX semaphore in shared memory, inherited by every child (see
+    # agent.node.RobotNode.sense_and_plan).
+    cpu_tokens = multiprocessing.get_context("fork").Semaphore(n_tokens) if n_tokens else None
     overrides = dict(args.connect_id)
     unknown = sorted(set(overrides) - set(args.ids))
     if unknown:
@@ -240,13 +257,14 @@ def run_fleet(args: argparse.Namespace) -> int:
                     signal.signal(signum, signal.SIG_DFL)
                 signal.pthread_sigmask(signal.SIG_UNBLOCK, FORWARDED)
                 os.close(ready_r)
-                _child(argv, args.log_dir / f"robot_{rid}.log", parent, args.nice, ready_w)
+                _child(argv, args.log_dir / f"robot_{rid}.log", parent, args.nice, ready_w,
+                       cpu_tokens)
             children[pid] = rid
             starting[pid] = time.monotonic()
             signal.pthread_sigmask(signal.SIG_UNBLOCK, FORWARDED)
         os.close(ready_w)
         os.close(ready_r)
-        log.info("fleet: %d robot processes forked", len(children))
+        log.info("fleet: %d robot processes forked, %d CPU tokens", len(children), n_tokens)
         worst = 0
         while children:
             if exited:

@@ -71,7 +71,7 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from types import FrameType
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 import zenoh
@@ -114,6 +114,17 @@ STALE_PLAN_S = 1.0
 WAKE_MARGIN_S = 0.001
 """Wall time before the next plan slot's pose is due at which the robot wakes to wait for it."""
 MAX_NAP_S = 0.1
+CPU_TOKEN_WAIT_S = 0.05
+"""Longest wait for a CPU token (`RobotNode.sense_and_plan`) before planning without one."""
+
+
+class CpuTokens(Protocol):
+    """A counting semaphore shared by the robots of one host (e.g. multiprocessing's)."""
+
+    def acquire(self, block: bool = True, timeout: float | None = None) -> bool: ...
+
+    def release(self) -> None: ...
+
 """Longest single sleep: control and liveliness messages are read at least this often."""
 
 log = logging.getLogger("agent")
@@ -396,9 +407,10 @@ class RobotNode:
     """
 
     def __init__(self, session: zenoh.Session, options: AgentOptions, config: RunConfigMsg,
-                 stop: _StopFlag) -> None:
+                 stop: _StopFlag, cpu_tokens: CpuTokens | None = None) -> None:
         self.keys = RunKeys(options.run_id)
         self.options = options
+        self.cpu_tokens = cpu_tokens
         self.config = config
         self.robot_id = config.robot.id
         self.stop = stop
@@ -414,7 +426,8 @@ class RobotNode:
         self.tick_wall_s = 1.0 / (config.world_rate_hz * config.time_scale)
         self.known_ids = frozenset(config.known_ids)
         self.counts = {"rejected": 0, "stale": 0, "skipped": 0, "plans": 0, "overruns": 0,
-                       "plan_errors": 0, "stale_plans": 0, "link_dropped": 0, "suspended": 0}
+                       "plan_errors": 0, "stale_plans": 0, "link_dropped": 0, "suspended": 0,
+                       "token_timeouts": 0}
         self.seq = 0
         self.last_rx_wall: float | None = None
         self.newest: PosesMsg | None = None
@@ -583,6 +596,36 @@ class RobotNode:
         self.counts["plans"] += 1
         self.counts["overruns"] += self.schedule.planned(msg.t_s)
 
+    def sense_and_plan(self) -> bool:
+        """`poll_poses`, then `plan_and_send` if a fresh pose came (and the world is seen),
+        holding one of the host's CPU tokens meanwhile if the robot has them.
+
+        With tokens (`agent.fleet` hands them out, one per core) at most that many robots
+        of a host compute at once and each runs its cycle to the end instead of being time-
+        sliced against every other runnable robot: when they want more CPU than there is,
+        the first in line are on time and the queue's tail is late, instead of all of
+        them late. A robot that gets no token within `CPU_TOKEN_WAIT_S` goes ahead
+        without one (counted as ``token_timeouts``): a lost token costs throughput, never
+        a stop.
+
+        Returns:
+            True if a pose newer than any observed before was released.
+        """
+        tokens = self.cpu_tokens
+        held = False
+        if tokens is not None and self.pose_ring:
+            held = tokens.acquire(timeout=CPU_TOKEN_WAIT_S)
+            if not held:
+                self.counts["token_timeouts"] += 1
+        try:
+            fresh = self.poll_poses()
+            if fresh and self.world_alive:  # never command a world we cannot see
+                self.plan_and_send()
+            return fresh
+        finally:
+            if held and tokens is not None:
+                tokens.release()
+
     def _sleep(self) -> None:
         """Wait for the next thing to do: the plan slot's pose, or the pose link's next release.
 
@@ -630,12 +673,9 @@ class RobotNode:
                 self.poll_world()
                 if not self.world_seen and time.monotonic() > startup_deadline:
                     raise _Exit("world not seen before the startup deadline", EXIT_WORLD_LOST)
-                if self.poll_poses():
-                    if self.world_alive:  # never command a world we cannot see
-                        self.plan_and_send()
-                elif (self.last_rx_wall is not None
-                      and time.monotonic() - max(self.last_rx_wall, self.resumed_wall)
-                      > self.options.pose_timeout_s):
+                if (not self.sense_and_plan() and self.last_rx_wall is not None
+                        and time.monotonic() - max(self.last_rx_wall, self.resumed_wall)
+                        > self.options.pose_timeout_s):
                     raise _Exit(f"no poses for {self.options.pose_timeout_s:.1f} s",
                                 EXIT_WORLD_LOST)
                 self._sleep()
@@ -671,11 +711,12 @@ def close_session(session: zenoh.Session, timeout_s: float = CLOSE_TIMEOUT_S) ->
     return done.wait(timeout_s)
 
 
-def run_agent(options: AgentOptions, on_ready: Callable[[], None] | None = None) -> int:
+def run_agent(options: AgentOptions, on_ready: Callable[[], None] | None = None,
+              cpu_tokens: CpuTokens | None = None) -> int:
     """Run one robot process to its end; returns its exit status.
 
     `on_ready` is called once the robot's liveliness token is declared (`agent.fleet` uses
-    it to start the next robot).
+    it to start the next robot); `cpu_tokens`: see `RobotNode.sense_and_plan`.
 
     If the session cannot be closed in time (the router hangs), the process leaves with
     `os._exit` after logging: nothing is left to flush but stderr.
@@ -692,7 +733,7 @@ def run_agent(options: AgentOptions, on_ready: Callable[[], None] | None = None)
         try:
             session = open_session(options, stop, deadline)
             config = fetch_config(session, keys, options.robot_id, stop, deadline)
-            node = RobotNode(session, options, config, stop)
+            node = RobotNode(session, options, config, stop, cpu_tokens)
             if on_ready is not None:
                 on_ready()
             reason, code = node.run(deadline)
@@ -716,8 +757,9 @@ def run_agent(options: AgentOptions, on_ready: Callable[[], None] | None = None)
             signal.signal(signum, handler)
 
 
-def main(argv: list[str] | None = None, on_ready: Callable[[], None] | None = None) -> int:
-    """Entry point of ``python -m agent`` (`on_ready`: see `run_agent`)."""
+def main(argv: list[str] | None = None, on_ready: Callable[[], None] | None = None,
+         cpu_tokens: CpuTokens | None = None) -> int:
+    """Entry point of ``python -m agent`` (`on_ready`, `cpu_tokens`: see `run_agent`)."""
     logging.basicConfig(level=logging.INFO, stream=sys.stderr,
                         format="%(asctime)s agent %(levelname)s %(message)s")
-    return run_agent(parse_args(argv), on_ready)
+    return run_agent(parse_args(argv), on_ready, cpu_tokens)
