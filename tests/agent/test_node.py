@@ -2,10 +2,19 @@
 
 from __future__ import annotations
 
+from collections import deque
+
 import pytest
 
 from agent.config import PlannerConfig
-from agent.node import AgentOptions, PlanSchedule, make_controller, parse_args, plan_phase_s
+from agent.node import (
+    AgentOptions,
+    PlanSchedule,
+    RobotNode,
+    make_controller,
+    parse_args,
+    plan_phase_s,
+)
 from protocol import RunConfigMsg
 from world.scenario import RobotSpec
 
@@ -189,3 +198,76 @@ print(json.dumps(sorted(sys.modules)))
     unneeded = {"yaml", "matplotlib", "PIL", "pyrvo", "agent.orca", "psutil"}
     assert not (modules & unneeded), modules & unneeded
     assert not any(m.startswith("orchestrator") for m in modules)
+
+
+class _Tokens:
+    """A CpuTokens stand-in that records what the robot did while holding one."""
+
+    def __init__(self, available: bool) -> None:
+        self.available = available
+        self.held = False
+        self.log: list[str] = []
+
+    def acquire(self, block: bool = True, timeout: float | None = None) -> bool:
+        assert timeout is not None and timeout > 0.0  # never an unbounded wait
+        self.held = self.available
+        self.log.append("acquire" if self.available else "timeout")
+        return self.available
+
+    def release(self) -> None:
+        assert self.held
+        self.held = False
+        self.log.append("release")
+
+
+def _node_with(tokens: _Tokens, *, ring: bool, fresh: bool = True) -> RobotNode:
+    """A RobotNode without a session: only what sense_and_plan touches."""
+    node = object.__new__(RobotNode)
+    node.cpu_tokens = tokens
+    node.pose_ring = deque(["sample"] if ring else [])
+    node.counts = {"token_timeouts": 0}
+    node.world_alive = True
+
+    def poll_poses() -> bool:
+        tokens.log.append(f"poll held={tokens.held}")
+        return fresh
+
+    def plan_and_send() -> None:
+        tokens.log.append(f"plan held={tokens.held}")
+
+    node.poll_poses = poll_poses  # type: ignore[method-assign]
+    node.plan_and_send = plan_and_send  # type: ignore[method-assign]
+    return node
+
+
+def test_a_robot_senses_and_plans_holding_a_cpu_token_and_gives_it_back() -> None:
+    tokens = _Tokens(available=True)
+    assert _node_with(tokens, ring=True).sense_and_plan() is True
+    assert tokens.log == ["acquire", "poll held=True", "plan held=True", "release"]
+
+
+def test_without_a_token_in_time_a_robot_plans_anyway_and_counts_it() -> None:
+    tokens = _Tokens(available=False)
+    node = _node_with(tokens, ring=True)
+    assert node.sense_and_plan() is True
+    assert tokens.log == ["timeout", "poll held=False", "plan held=False"]
+    assert node.counts["token_timeouts"] == 1
+
+
+def test_no_token_is_taken_without_a_pose_to_work_on() -> None:
+    tokens = _Tokens(available=True)
+    assert _node_with(tokens, ring=False, fresh=False).sense_and_plan() is False
+    assert tokens.log == ["poll held=False"]
+
+
+def test_the_token_is_given_back_when_planning_raises() -> None:
+    tokens = _Tokens(available=True)
+    node = _node_with(tokens, ring=True)
+
+    def boom() -> None:
+        raise RuntimeError("planner bug")
+
+    node.plan_and_send = boom  # type: ignore[method-assign]
+    with pytest.raises(RuntimeError):
+        node.sense_and_plan()
+    assert tokens.log[-1] == "release" and not tokens.held
