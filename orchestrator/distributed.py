@@ -272,7 +272,7 @@ def fleet_command(run_id: str, robot_ids: Sequence[int], endpoint: str, log_dir:
                   robot_endpoints: Mapping[int, str] | None = None,
                   nice: int = 0, cpu_tokens: int | None = None) -> list[str]:
     """Command line of one `agent.fleet` process that forks every robot process
-    (`cpu_tokens` None: the fleet's default, one per CPU)."""
+    (`cpu_tokens` None: the fleet's default, none)."""
     overrides = [arg for rid, ep in sorted((robot_endpoints or {}).items())
                  for arg in ("--connect-id", f"{int(rid)}={ep}")]
     return [
@@ -361,7 +361,7 @@ def run_distributed(
             ``python -m agent.fleet`` that imports and warms up once and forks every robot
             process (faster start-up, less memory; its own log is ``fleet.log``).
         robot_nice: with ``"fork"``, robots run this much nicer than the world (>= 0).
-        cpu_tokens: with ``"fork"``, robots computing at once (None: one per CPU; 0: off).
+        cpu_tokens: with ``"fork"``, robots computing at once (None or 0: no tokens).
 
     Returns:
         The world's exit status: 0 if every robot arrived with no contact, 1 if not,

@@ -581,8 +581,8 @@ def build_parser() -> argparse.ArgumentParser:
                         metavar="N", help="with --launcher fork: robots run N steps nicer "
                         f"than the world (default {ROBOT_NICE})")
     parser.add_argument("--cpu-tokens", type=int, default=None, metavar="N",
-                        help="with --launcher fork: robots computing at once (default one "
-                             "per CPU; 0: off, see agent.fleet)")
+                        help="with --launcher fork: robots computing at once (default: no "
+                             "tokens; see agent.fleet)")
     parser.add_argument("--startup-timeout-s", type=_positive, default=60.0,
                         help="deadline for every robot to be alive (default 60)")
     parser.add_argument("--out", type=Path, required=True, help="output directory")
