@@ -454,7 +454,7 @@ class RobotNode:
                     else self.keys.poses_slot(self.pose_slot))
         # The subscriber's callback only appends to a ring and sets an event (it runs on a
         # Zenoh thread, under the GIL): the loop waits on the event instead of polling.
-        self.pose_ring: deque[zenoh.Sample] = deque(maxlen=POSE_RING)
+        self.pose_ring: deque[tuple[float, zenoh.Sample]] = deque(maxlen=POSE_RING)
         self.pose_arrived = threading.Event()
         self.pose_sub = session.declare_subscriber(pose_key, self._on_pose)
         log.info("robot %d: poses from %s", self.robot_id, pose_key)
@@ -468,8 +468,9 @@ class RobotNode:
         self.token = session.liveliness().declare_token(self.keys.alive_robot(self.robot_id))
 
     def _on_pose(self, sample: zenoh.Sample) -> None:
-        """Zenoh callback: keep the sample (the ring drops the oldest), wake the loop."""
-        self.pose_ring.append(sample)
+        """Zenoh callback: keep the sample and its arrival time (the ring drops the oldest),
+        wake the loop."""
+        self.pose_ring.append((time.monotonic(), sample))
         self.pose_arrived.set()
 
     def _reject(self, what: str, exc: ProtocolError) -> None:
@@ -538,21 +539,25 @@ class RobotNode:
         while self.pose_ring:
             samples.append(self.pose_ring.popleft())
         newest: PosesMsg | None = None
-        for sample in reversed(samples):
+        arrived = 0.0
+        for rx_wall, sample in reversed(samples):
             try:
                 msg = PosesMsg.decode(sample.payload.to_bytes(), known_ids=self.known_ids)
             except ProtocolError as exc:
                 self._reject("pose message", exc)
                 continue
             if newest is None:
-                newest = msg
+                newest, arrived = msg, rx_wall
             else:
                 self.counts["skipped"] += 1
         if newest is not None:
-            now = time.monotonic()
-            self.last_rx_wall = now
+            # The pose's arrival, not the moment it was read: a robot that once read late
+            # would otherwise predict every next pose that much late and stay late (and
+            # its sim clock would run behind by as much).
+            self.last_rx_wall = arrived
             if newest.tick > self.clock_tick:
-                self.clock_tick, self.clock_stamp_s, self.clock_wall = newest.tick, newest.t_s, now
+                self.clock_tick, self.clock_stamp_s, self.clock_wall = (
+                    newest.tick, newest.t_s, arrived)
             self.pose_link.send(self.sim_now(), newest)
         fresh = False
         for msg in self.pose_link.receive(self.sim_now()):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections import deque
 
+import numpy as np
 import pytest
 
 from agent.config import PlannerConfig
@@ -271,3 +272,50 @@ def test_the_token_is_given_back_when_planning_raises() -> None:
     with pytest.raises(RuntimeError):
         node.sense_and_plan()
     assert tokens.log[-1] == "release" and not tokens.held
+
+
+class _Payload:
+    def __init__(self, data: bytes) -> None:
+        self.data = data
+
+    def to_bytes(self) -> bytes:
+        return self.data
+
+
+class _Sample:
+    def __init__(self, data: bytes) -> None:
+        self.payload = _Payload(data)
+
+
+def test_the_robot_times_the_next_pose_from_when_the_last_one_arrived_not_when_read() -> None:
+    import threading
+    import time
+    from types import SimpleNamespace
+
+    from agent.controller import RobotController
+    from agent.link import FaultyLink, LinkFaults
+    from protocol import PosesMsg
+
+    spec = RobotSpec(0, (0.0, 0.0, 0.0), (10.0, 0.0))
+    node = object.__new__(RobotNode)
+    node.robot_id = 0
+    node.pose_arrived = threading.Event()
+    node.pose_ring = deque(maxlen=2)
+    node.known_ids = frozenset({0, 1})
+    node.counts = {k: 0 for k in ("rejected", "skipped", "stale", "link_dropped")}
+    node.last_rx_wall = None
+    node.clock_tick, node.clock_stamp_s, node.clock_wall = -1, 0.0, 0.0
+    node.config = SimpleNamespace(time_scale=1.0)
+    node.pose_link = FaultyLink(LinkFaults(), None)
+    node.controller = RobotController(spec, PlannerConfig(), 0.25)
+    node.newest = None
+    pose = PosesMsg(t_s=0.2, tick=10, robot_ids=[0, 1], robot_pose=[[0, 0, 0], [5, 0, 3.1]],
+                    robot_radius_m=[0.5, 0.5], obstacle_ids=[], obstacle_xy_m=np.zeros((0, 2)),
+                    obstacle_radius_m=[])
+    arrived = time.monotonic() - 0.03  # it arrived 30 ms ago; the robot reads it only now
+    node.pose_ring.append((arrived, _Sample(pose.encode())))
+    node.pose_arrived.set()
+    assert node.poll_poses() is True
+    assert not node.pose_arrived.is_set() and not node.pose_ring
+    assert node.last_rx_wall == arrived and node.clock_wall == arrived
+    assert node.sim_now() == pytest.approx(0.2 + 0.03, abs=0.01)  # the pose is 30 ms old
