@@ -5,7 +5,10 @@ else builds key strings or serialises messages. This module never imports zenoh.
 
 Key expressions (all prefixed by the run id, so two runs on one machine never cross):
 
-- ``eifp/<run>/poses``             world -> robots, `PosesMsg`, once per world tick.
+- ``eifp/<run>/poses/<slot>``      world -> robots, `PosesMsg`, once per world tick, on the
+                                   slot ``tick mod K`` (`pose_slot_count`); a robot that
+                                   plans on one slot of every control period subscribes
+                                   to that slot only, anything else to ``poses/*``.
 - ``eifp/<run>/cmd/<id>``          robot <id> -> world, `CommandMsg`.
 - ``eifp/<run>/config/<id>``       queryable served by the world, replies `RunConfigMsg`.
 - ``eifp/<run>/control``           world -> all, `ControlMsg` (run started / ended).
@@ -58,6 +61,8 @@ MAX_SPEED = 1.0e3
 MAX_REASON_CHARS = 256
 MAX_SEQ = 2**63 - 1
 MAX_RUN_ID_CHARS = 64
+MAX_POSE_SLOTS = 1000
+"""Upper bound on `pose_slot_count` (a world ticking 1000 times per control period)."""
 
 _RUN_ID_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")
 _ROBOT_ID_RE = re.compile(r"0|[1-9][0-9]{0,9}")
@@ -117,10 +122,16 @@ class RunKeys:
         """``eifp/<run>``."""
         return f"{KEY_ROOT}/{self.run_id}"
 
+    def poses_slot(self, slot: int) -> str:
+        """World -> robots pose stream of the ticks ``tick mod K == slot`` (`pose_slot_count`)."""
+        if isinstance(slot, bool) or not isinstance(slot, int) or not 0 <= slot < MAX_POSE_SLOTS:
+            raise ProtocolError(f"pose slot must be an int in [0, {MAX_POSE_SLOTS}), got {slot!r}")
+        return f"{self.prefix}/poses/{slot}"
+
     @property
-    def poses(self) -> str:
-        """World -> robots pose stream."""
-        return f"{self.prefix}/poses"
+    def poses_all(self) -> str:
+        """Wildcard over every pose slot: every world tick's poses."""
+        return f"{self.prefix}/poses/*"
 
     @property
     def control(self) -> str:
@@ -186,6 +197,55 @@ class RunKeys:
 # Shared transport settings (JSON5 values for zenoh.Config.insert_json5; no zenoh import)
 # ---------------------------------------------------------------------------------------------
 
+def pose_slot_count(world_rate_hz: float, control_rate_hz: float) -> int:
+    """K, the number of pose slots: world ticks per control period if that is a whole number.
+
+    The world publishes tick t's poses on ``poses/<t mod K>``. With K world ticks per control
+    period, a robot planning once a period on a fixed tick phase needs only the poses of one
+    slot, a K-th of the stream (K = 5 at 50 Hz world, 10 Hz control). If the ratio is not a
+    whole number (within 1e-6) there is one slot, every tick on ``poses/0``.
+    """
+    if not (math.isfinite(world_rate_hz) and math.isfinite(control_rate_hz)
+            and world_rate_hz > 0.0 and control_rate_hz > 0.0):
+        raise ValueError("rates must be positive and finite")
+    ratio = world_rate_hz / control_rate_hz
+    k = round(ratio)
+    if k < 1 or abs(ratio - k) > 1e-6 * max(1.0, ratio):
+        return 1
+    return min(k, MAX_POSE_SLOTS)
+
+
+def pose_slot_of_tick(tick: int, slots: int) -> int:
+    """The slot a world tick's poses are published on."""
+    return int(tick) % int(slots)
+
+
+def plan_pose_slot(period_s: float, phase_s: float, tick_s: float, slots: int) -> int | None:
+    """The one pose slot that holds every plan slot ``phase_s + k * period_s`` (k integer).
+
+    Returns None when the plan slots do not all fall on world ticks of one slot (a phase
+    between ticks, a period that is not a multiple of the tick, or one that cycles through
+    several slots): such a robot needs every tick's poses (``poses/*``).
+
+    Args:
+        period_s: planning period [sim s].
+        phase_s: offset of the planning slots [sim s].
+        tick_s: world tick [sim s].
+        slots: K, from `pose_slot_count`.
+    """
+    if not (period_s > 0.0 and tick_s > 0.0 and slots >= 1):
+        raise ValueError("period_s and tick_s must be positive, slots >= 1")
+    ticks_per_period = period_s / tick_s
+    phase_ticks = phase_s / tick_s
+    if (abs(ticks_per_period - round(ticks_per_period)) > 1e-6
+            or abs(phase_ticks - round(phase_ticks)) > 1e-6):
+        return None
+    step = round(ticks_per_period) % slots
+    if step != 0:  # successive plans land on different slots
+        return None
+    return round(phase_ticks) % slots
+
+
 LINK_LEASE_MS = 1000
 """Transport lease: a hung (SIGSTOPped) peer is noticed after about this long."""
 
@@ -200,7 +260,8 @@ def session_settings(
     """Zenoh configuration every process of a run uses, as ``key -> JSON5 value``.
 
     Multicast scouting is off and endpoints are explicit; the link lease is
-    `LINK_LEASE_MS` on both sides so crashed or hung processes are noticed quickly.
+    `LINK_LEASE_MS` on both sides so crashed or hung processes are noticed quickly; shared
+    memory transport is off.
 
     Args:
         mode: ``"router"`` (the world) or ``"client"`` (robots, tools).
@@ -216,6 +277,9 @@ def session_settings(
         "mode": json.dumps(mode),
         "scouting/multicast/enabled": "false",
         "transport/link/tx/lease": str(LINK_LEASE_MS),
+        # Messages travel as bytes over TCP; shared memory would only add a watchdog
+        # thread per process (~0.05 % of a core each, 6.5 % of a core over 128 robots).
+        "transport/shared_memory/enabled": "false",
     }
     listen = list(listen)
     connect = list(connect)

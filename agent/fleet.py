@@ -18,6 +18,19 @@ stderr to ``DIR/robot_<id>.log`` and dies with the parent (``PR_SET_PDEATHSIG``)
 parent passes SIGTERM/SIGINT on to the children still running, reaps them all, logs each
 exit and exits 0 if every robot did, else the largest robot exit status. With ``--nice N``
 the robots run N steps nicer than the parent (a world sharing their machine stays ahead).
+
+Start-up is throttled: at most ``--max-starting`` (`MAX_STARTING`) children are between
+their fork and their liveliness token at once; each reports ready through a pipe and the
+parent forks the next. 128 robots forked in one burst all connect, query and warm up at
+the same moment, and on a loaded 2-core machine that starved the router's Zenoh threads
+past the 1 s transport lease: the world dropped most of them and they left (README, "Scale").
+
+CPU tokens (``--cpu-tokens N``, off by default): the children share a semaphore of N; a
+robot holds one while it senses and plans (`agent.node.RobotNode.sense_and_plan`), so at
+most N compute at once, each to the end of its cycle, instead of 100 runnable robots
+time-sliced against each other (and against the world) when they want more CPU than the
+host has. Measured with N = 2 on 2 cores it kept every robot's lease but raised the
+deadline misses (the queue's wait adds to every late cycle), so it is off (README, "Scale").
 """
 
 from __future__ import annotations
@@ -27,9 +40,12 @@ import contextlib
 import ctypes
 import gc
 import logging
+import multiprocessing
 import os
+import select
 import signal
 import sys
+import time
 from collections.abc import Sequence
 from pathlib import Path
 from types import FrameType
@@ -38,6 +54,11 @@ log = logging.getLogger("fleet")
 
 PR_SET_PDEATHSIG = 1
 FORWARDED = (signal.SIGTERM, signal.SIGINT)
+MAX_STARTING = 8
+"""Robots starting at once (connect, fetch the configuration, warm up, declare): 128 started
+together starve the router's and each other's Zenoh threads past the 1 s transport lease."""
+READY_TIMEOUT_S = 5.0
+"""A child that has not reported ready after this long no longer holds up the next fork."""
 
 
 def _ids(text: str) -> list[int]:
@@ -68,6 +89,12 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--log-dir", required=True, type=Path, help="robot_<id>.log go here")
     parser.add_argument("--startup-timeout-s", default="30.0",
                         help="passed to every robot (python -m agent)")
+    parser.add_argument("--max-starting", type=int, default=MAX_STARTING,
+                        help="robots starting up at once: the next is forked when one has "
+                             f"declared its liveliness token (default {MAX_STARTING})")
+    parser.add_argument("--cpu-tokens", type=int, default=0,
+                        help="robots computing at once (e.g. the number of CPUs; default 0: "
+                             "no tokens, every robot competes for the CPU; see README, Scale)")
     parser.add_argument("--nice", type=int, default=0,
                         help="robot processes add this to their niceness (>= 0; e.g. 5 keeps "
                              "a world on the same machine ahead of them)")
@@ -103,9 +130,21 @@ def _die_with_parent(parent_pid: int) -> None:
         os._exit(1)
 
 
-def _child(argv: list[str], log_path: Path, parent_pid: int, nice: int = 0) -> None:
-    """In the forked child: become ``python -m agent`` with its own log; never returns."""
+def _child(argv: list[str], log_path: Path, parent_pid: int, nice: int = 0,
+           ready_fd: int | None = None, cpu_tokens: object | None = None) -> None:
+    """In the forked child: become ``python -m agent`` with its own log; never returns.
+
+    Once its liveliness token is declared the child writes its pid and a newline to
+    `ready_fd` and closes it (one write of a few bytes: atomic on a pipe).
+    """
     code = 1
+
+    def _ready() -> None:
+        if ready_fd is not None:
+            with contextlib.suppress(OSError):
+                os.write(ready_fd, f"{os.getpid()}\n".encode())
+                os.close(ready_fd)
+
     try:
         _die_with_parent(parent_pid)
         if nice > 0:
@@ -120,7 +159,7 @@ def _child(argv: list[str], log_path: Path, parent_pid: int, nice: int = 0) -> N
         logging.root.handlers.clear()  # the robot sets up its own (agent.node.main)
         from agent.node import main as agent_main
 
-        code = agent_main(argv)
+        code = agent_main(argv, on_ready=_ready, cpu_tokens=cpu_tokens)  # type: ignore[arg-type]
     except SystemExit as exc:  # argparse errors
         code = exc.code if isinstance(exc.code, int) else 2
     except BaseException:  # noqa: BLE001 - report, then leave with a failure status
@@ -136,10 +175,25 @@ def _child(argv: list[str], log_path: Path, parent_pid: int, nice: int = 0) -> N
 
 
 def run_fleet(args: argparse.Namespace) -> int:
-    """Warm up, fork one child per robot, pass signals on, reap; returns the exit status."""
+    """Warm up, fork one child per robot, pass signals on, reap; returns the exit status.
+
+    At most ``args.max_starting`` children are starting up at once: the next is forked when
+    a starting child reports ready (its token is declared), exits, or has been starting
+    for `READY_TIMEOUT_S`.
+    """
     if args.nice < 0:
         log.error("--nice must be >= 0, got %d", args.nice)
         return 2
+    if args.max_starting < 1:
+        log.error("--max-starting must be >= 1, got %d", args.max_starting)
+        return 2
+    n_tokens = args.cpu_tokens
+    if n_tokens < 0:
+        log.error("--cpu-tokens must be >= 0, got %d", n_tokens)
+        return 2
+    # A POSIX semaphore in shared memory, inherited by every child (see
+    # agent.node.RobotNode.sense_and_plan).
+    cpu_tokens = multiprocessing.get_context("fork").Semaphore(n_tokens) if n_tokens else None
     overrides = dict(args.connect_id)
     unknown = sorted(set(overrides) - set(args.ids))
     if unknown:
@@ -152,6 +206,35 @@ def run_fleet(args: argparse.Namespace) -> int:
     parent = os.getpid()
     children: dict[int, int] = {}
     pending: list[int] = []
+    starting: dict[int, float] = {}  # pid -> monotonic fork time, until ready
+    exited: dict[int, int] = {}  # pid -> wait status, reaped while forking
+    ready_r, ready_w = os.pipe()
+    os.set_blocking(ready_r, False)
+    buffered = b""
+
+    def _wait_for_a_start_slot() -> None:
+        nonlocal buffered
+        while len(starting) >= args.max_starting and not pending:
+            with contextlib.suppress(InterruptedError):
+                select.select([ready_r], [], [], 0.05)
+            with contextlib.suppress(BlockingIOError, InterruptedError):
+                buffered += os.read(ready_r, 4096)
+            *lines, buffered = buffered.split(b"\n")
+            for line in lines:
+                starting.pop(int(line), None)
+            while True:  # children that died while starting
+                try:
+                    pid, status = os.waitpid(-1, os.WNOHANG)
+                except ChildProcessError:
+                    break
+                if pid == 0:
+                    break
+                exited[pid] = status
+                starting.pop(pid, None)
+            now = time.monotonic()
+            for pid, t0 in list(starting.items()):
+                if now - t0 > READY_TIMEOUT_S:
+                    starting.pop(pid)
 
     def _forward(signum: int, frame: FrameType | None) -> None:
         pending.append(signum)
@@ -162,6 +245,7 @@ def run_fleet(args: argparse.Namespace) -> int:
     previous = {s: signal.signal(s, _forward) for s in FORWARDED}
     try:
         for rid in args.ids:
+            _wait_for_a_start_slot()
             if pending:
                 break
             argv = robot_argv(args.run, rid, overrides.get(rid, args.connect),
@@ -173,18 +257,26 @@ def run_fleet(args: argparse.Namespace) -> int:
                 for signum in FORWARDED:
                     signal.signal(signum, signal.SIG_DFL)
                 signal.pthread_sigmask(signal.SIG_UNBLOCK, FORWARDED)
-                _child(argv, args.log_dir / f"robot_{rid}.log", parent, args.nice)
+                os.close(ready_r)
+                _child(argv, args.log_dir / f"robot_{rid}.log", parent, args.nice, ready_w,
+                       cpu_tokens)
             children[pid] = rid
+            starting[pid] = time.monotonic()
             signal.pthread_sigmask(signal.SIG_UNBLOCK, FORWARDED)
-        log.info("fleet: %d robot processes forked", len(children))
+        os.close(ready_w)
+        os.close(ready_r)
+        log.info("fleet: %d robot processes forked, %d CPU tokens", len(children), n_tokens)
         worst = 0
         while children:
-            try:
-                pid, status = os.waitpid(-1, 0)
-            except ChildProcessError:
-                break
-            except InterruptedError:
-                continue
+            if exited:
+                pid, status = exited.popitem()
+            else:
+                try:
+                    pid, status = os.waitpid(-1, 0)
+                except ChildProcessError:
+                    break
+                except InterruptedError:
+                    continue
             rid = children.pop(pid, None)
             if rid is None:
                 continue

@@ -47,9 +47,14 @@ configuration before the startup deadline), 3 (the world is gone).
 
 Planning slots are staggered over the world's ticks (`plan_phase_s`: robot k plans on the
 ticks k mod 5 of each 0.1 s period), so only a fifth of the robots plan on any one pose.
-Between slots the loop sleeps until just before the slot's pose is due; the poses of the
-ticks in between wait in the ring and are observed on waking. An idle robot costs little
-CPU and 128 robot processes share 2 cores (see README, "Scale").
+The world publishes tick t on the pose slot ``poses/<t mod 5>`` (`protocol.pose_slot_count`)
+and a robot subscribes to the one slot its plans fall on (`protocol.plan_pose_slot`): it
+receives and decodes 10 poses per second instead of 50, and the router sends a fifth of the
+bytes. A robot whose plan slots are not on one pose slot (``--control-phase-s`` between
+ticks, ``--control-rate-hz`` 20 ...) subscribes to every slot (``poses/*``).
+Between slots the loop sleeps until just before the slot's pose is due, then waits on the
+pose subscriber's event (woken by the pose itself: no polling while the world runs late).
+An idle robot costs little CPU (see README, "Scale").
 """
 
 from __future__ import annotations
@@ -62,9 +67,11 @@ import signal
 import sys
 import threading
 import time
+from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from types import FrameType
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 import zenoh
@@ -77,6 +84,8 @@ from protocol import (
     ProtocolError,
     RunConfigMsg,
     RunKeys,
+    plan_pose_slot,
+    pose_slot_count,
     session_settings,
     validate_run_id,
 )
@@ -89,15 +98,13 @@ EXIT_SETUP = 2
 EXIT_WORLD_LOST = 3
 
 POSE_RING = 2
-"""Capacity of the pose channel: older poses are overwritten, never queued."""
+"""Capacity of the pose ring: older poses are overwritten, never queued."""
 CONNECT_ATTEMPT_MS = 1000
 QUERY_TIMEOUT_S = 1.0
 STAMP_EPS_S = 1e-6
 """Tolerance on sim-time comparisons (stamps are sums of float ticks)."""
 CLOSE_TIMEOUT_S = 2.0
 """Wall time allowed for closing the session before the process leaves without it."""
-IDLE_SLEEP_S = 0.01
-MIN_SLEEP_S = 0.0005
 SUSPEND_GAP_S = 0.5
 """A loop iteration this much later than the previous one means the process was suspended."""
 REJOIN_GRACE_S = 5.0
@@ -107,6 +114,17 @@ STALE_PLAN_S = 1.0
 WAKE_MARGIN_S = 0.001
 """Wall time before the next plan slot's pose is due at which the robot wakes to wait for it."""
 MAX_NAP_S = 0.1
+CPU_TOKEN_WAIT_S = 0.05
+"""Longest wait for a CPU token (`RobotNode.sense_and_plan`) before planning without one."""
+
+
+class CpuTokens(Protocol):
+    """A counting semaphore shared by the robots of one host (e.g. multiprocessing's)."""
+
+    def acquire(self, block: bool = True, timeout: float | None = None) -> bool: ...
+
+    def release(self) -> None: ...
+
 """Longest single sleep: control and liveliness messages are read at least this often."""
 
 log = logging.getLogger("agent")
@@ -389,9 +407,10 @@ class RobotNode:
     """
 
     def __init__(self, session: zenoh.Session, options: AgentOptions, config: RunConfigMsg,
-                 stop: _StopFlag) -> None:
+                 stop: _StopFlag, cpu_tokens: CpuTokens | None = None) -> None:
         self.keys = RunKeys(options.run_id)
         self.options = options
+        self.cpu_tokens = cpu_tokens
         self.config = config
         self.robot_id = config.robot.id
         self.stop = stop
@@ -407,7 +426,8 @@ class RobotNode:
         self.tick_wall_s = 1.0 / (config.world_rate_hz * config.time_scale)
         self.known_ids = frozenset(config.known_ids)
         self.counts = {"rejected": 0, "stale": 0, "skipped": 0, "plans": 0, "overruns": 0,
-                       "plan_errors": 0, "stale_plans": 0, "link_dropped": 0, "suspended": 0}
+                       "plan_errors": 0, "stale_plans": 0, "link_dropped": 0, "suspended": 0,
+                       "token_timeouts": 0}
         self.seq = 0
         self.last_rx_wall: float | None = None
         self.newest: PosesMsg | None = None
@@ -425,8 +445,19 @@ class RobotNode:
         self.pose_link: FaultyLink[PosesMsg] = FaultyLink(
             options.link, link_rng(options.fault_seed, LINK_POSES, self.robot_id))
 
-        self.pose_sub = session.declare_subscriber(self.keys.poses,
-                                                   zenoh.handlers.RingChannel(POSE_RING))
+        # Only the pose slot this robot plans on (a K-th of the stream, K = world ticks per
+        # control period), or every slot if its plan slots are not all on one of them.
+        self.pose_slot = plan_pose_slot(
+            period_s, phase_s, 1.0 / config.world_rate_hz,
+            pose_slot_count(config.world_rate_hz, config.control_rate_hz))
+        pose_key = (self.keys.poses_all if self.pose_slot is None
+                    else self.keys.poses_slot(self.pose_slot))
+        # The subscriber's callback only appends to a ring and sets an event (it runs on a
+        # Zenoh thread, under the GIL): the loop waits on the event instead of polling.
+        self.pose_ring: deque[tuple[float, zenoh.Sample]] = deque(maxlen=POSE_RING)
+        self.pose_arrived = threading.Event()
+        self.pose_sub = session.declare_subscriber(pose_key, self._on_pose)
+        log.info("robot %d: poses from %s", self.robot_id, pose_key)
         self.control_sub = session.declare_subscriber(self.keys.control)
         self.world_sub = session.liveliness().declare_subscriber(self.keys.alive_world,
                                                                  history=True)
@@ -435,6 +466,12 @@ class RobotNode:
             express=True)
         # Declared last: once the world sees it, every subscription above is in place.
         self.token = session.liveliness().declare_token(self.keys.alive_robot(self.robot_id))
+
+    def _on_pose(self, sample: zenoh.Sample) -> None:
+        """Zenoh callback: keep the sample and its arrival time (the ring drops the oldest),
+        wake the loop."""
+        self.pose_ring.append((time.monotonic(), sample))
+        self.pose_arrived.set()
 
     def _reject(self, what: str, exc: ProtocolError) -> None:
         self.counts["rejected"] += 1
@@ -497,25 +534,30 @@ class RobotNode:
         Returns:
             True if a pose newer than any observed before was released.
         """
+        self.pose_arrived.clear()  # before draining: a pose after the drain sets it again
         samples = []
-        while (sample := self.pose_sub.try_recv()) is not None:
-            samples.append(sample)
+        while self.pose_ring:
+            samples.append(self.pose_ring.popleft())
         newest: PosesMsg | None = None
-        for sample in reversed(samples):
+        arrived = 0.0
+        for rx_wall, sample in reversed(samples):
             try:
                 msg = PosesMsg.decode(sample.payload.to_bytes(), known_ids=self.known_ids)
             except ProtocolError as exc:
                 self._reject("pose message", exc)
                 continue
             if newest is None:
-                newest = msg
+                newest, arrived = msg, rx_wall
             else:
                 self.counts["skipped"] += 1
         if newest is not None:
-            now = time.monotonic()
-            self.last_rx_wall = now
+            # The pose's arrival, not the moment it was read: a robot that once read late
+            # would otherwise predict every next pose that much late and stay late (and
+            # its sim clock would run behind by as much).
+            self.last_rx_wall = arrived
             if newest.tick > self.clock_tick:
-                self.clock_tick, self.clock_stamp_s, self.clock_wall = newest.tick, newest.t_s, now
+                self.clock_tick, self.clock_stamp_s, self.clock_wall = (
+                    newest.tick, newest.t_s, arrived)
             self.pose_link.send(self.sim_now(), newest)
         fresh = False
         for msg in self.pose_link.receive(self.sim_now()):
@@ -559,32 +601,62 @@ class RobotNode:
         self.counts["plans"] += 1
         self.counts["overruns"] += self.schedule.planned(msg.t_s)
 
-    def _sleep(self) -> None:
-        """Sleep until just before the pose of the next plan slot is due, or until the pose
-        link releases its next pose, whichever is first.
+    def sense_and_plan(self) -> bool:
+        """`poll_poses`, then `plan_and_send` if a fresh pose came (and the world is seen),
+        holding one of the host's CPU tokens meanwhile if the robot has them.
 
-        The world publishes a pose every tick, but a robot needs one per plan slot: it
-        sleeps through the ticks in between (their poses wait in the ring) and wakes
-        `WAKE_MARGIN_S` before the slot's pose, predicted from the newest received pose's
-        stamp and arrival time at the world's pace.
+        With tokens (`agent.fleet` hands them out, one per core) at most that many robots
+        of a host compute at once and each runs its cycle to the end instead of being time-
+        sliced against every other runnable robot: when they want more CPU than there is,
+        the first in line are on time and the queue's tail is late, instead of all of
+        them late. A robot that gets no token within `CPU_TOKEN_WAIT_S` goes ahead
+        without one (counted as ``token_timeouts``): a lost token costs throughput, never
+        a stop.
+
+        Returns:
+            True if a pose newer than any observed before was released.
+        """
+        tokens = self.cpu_tokens
+        held = False
+        if tokens is not None and self.pose_ring:
+            held = tokens.acquire(timeout=CPU_TOKEN_WAIT_S)
+            if not held:
+                self.counts["token_timeouts"] += 1
+        try:
+            fresh = self.poll_poses()
+            if fresh and self.world_alive:  # never command a world we cannot see
+                self.plan_and_send()
+            return fresh
+        finally:
+            if held and tokens is not None:
+                tokens.release()
+
+    def _sleep(self) -> None:
+        """Wait for the next thing to do: the plan slot's pose, or the pose link's next release.
+
+        Until `WAKE_MARGIN_S` before the slot's pose is due (predicted from the newest
+        received pose's stamp and arrival time at the world's pace) the robot sleeps; one
+        subscribed to every slot (``poses/*``) so sleeps through the ticks in between, their
+        poses wait in the ring. From then on it waits on the subscriber's event: it wakes
+        when the pose arrives, however late, without polling (a loop that polled while the
+        world ran late burnt the CPU the world was short of). Control messages and
+        liveliness are read at least every `MAX_NAP_S`.
         """
         now = time.monotonic()
-        msg = self.newest
-        if self.last_rx_wall is None or msg is None:
-            time.sleep(IDLE_SLEEP_S)
-            return
-        ahead_s = max(0.0, (self.schedule.next_s or self.clock_stamp_s) - self.clock_stamp_s)
-        expected = self.last_rx_wall + max(ahead_s / self.config.time_scale, self.tick_wall_s)
-        due = expected - WAKE_MARGIN_S
+        wait_s = MAX_NAP_S
         link_due_s = self.pose_link.next_due_s
         if link_due_s is not None:
-            due = min(due, now + (link_due_s - self.sim_now()) / self.config.time_scale)
-        if now < due:
-            time.sleep(min(due - now, MAX_NAP_S))
-        elif now - expected > 3.0 * self.tick_wall_s:
-            time.sleep(min(IDLE_SLEEP_S, self.tick_wall_s))  # poses late: back off
-        else:
-            time.sleep(MIN_SLEEP_S)
+            wait_s = min(wait_s,
+                         max(0.0, (link_due_s - self.sim_now()) / self.config.time_scale))
+        if self.last_rx_wall is not None and self.newest is not None:
+            ahead_s = max(0.0, (self.schedule.next_s or self.clock_stamp_s) - self.clock_stamp_s)
+            expected = self.last_rx_wall + max(ahead_s / self.config.time_scale,
+                                               self.tick_wall_s)
+            due = expected - WAKE_MARGIN_S
+            if now < due:
+                time.sleep(min(due - now, wait_s))
+                return
+        self.pose_arrived.wait(wait_s)
 
     def run(self, startup_deadline: float) -> tuple[str, int]:
         """The robot's loop; returns (reason, exit status).
@@ -606,12 +678,9 @@ class RobotNode:
                 self.poll_world()
                 if not self.world_seen and time.monotonic() > startup_deadline:
                     raise _Exit("world not seen before the startup deadline", EXIT_WORLD_LOST)
-                if self.poll_poses():
-                    if self.world_alive:  # never command a world we cannot see
-                        self.plan_and_send()
-                elif (self.last_rx_wall is not None
-                      and time.monotonic() - max(self.last_rx_wall, self.resumed_wall)
-                      > self.options.pose_timeout_s):
+                if (not self.sense_and_plan() and self.last_rx_wall is not None
+                        and time.monotonic() - max(self.last_rx_wall, self.resumed_wall)
+                        > self.options.pose_timeout_s):
                     raise _Exit(f"no poses for {self.options.pose_timeout_s:.1f} s",
                                 EXIT_WORLD_LOST)
                 self._sleep()
@@ -647,8 +716,12 @@ def close_session(session: zenoh.Session, timeout_s: float = CLOSE_TIMEOUT_S) ->
     return done.wait(timeout_s)
 
 
-def run_agent(options: AgentOptions) -> int:
+def run_agent(options: AgentOptions, on_ready: Callable[[], None] | None = None,
+              cpu_tokens: CpuTokens | None = None) -> int:
     """Run one robot process to its end; returns its exit status.
+
+    `on_ready` is called once the robot's liveliness token is declared (`agent.fleet` uses
+    it to start the next robot); `cpu_tokens`: see `RobotNode.sense_and_plan`.
 
     If the session cannot be closed in time (the router hangs), the process leaves with
     `os._exit` after logging: nothing is left to flush but stderr.
@@ -665,7 +738,9 @@ def run_agent(options: AgentOptions) -> int:
         try:
             session = open_session(options, stop, deadline)
             config = fetch_config(session, keys, options.robot_id, stop, deadline)
-            node = RobotNode(session, options, config, stop)
+            node = RobotNode(session, options, config, stop, cpu_tokens)
+            if on_ready is not None:
+                on_ready()
             reason, code = node.run(deadline)
             summary = node.summary()
         except _Exit as exc:
@@ -687,8 +762,9 @@ def run_agent(options: AgentOptions) -> int:
             signal.signal(signum, handler)
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Entry point of ``python -m agent``."""
+def main(argv: list[str] | None = None, on_ready: Callable[[], None] | None = None,
+         cpu_tokens: CpuTokens | None = None) -> int:
+    """Entry point of ``python -m agent`` (`on_ready`, `cpu_tokens`: see `run_agent`)."""
     logging.basicConfig(level=logging.INFO, stream=sys.stderr,
                         format="%(asctime)s agent %(levelname)s %(message)s")
-    return run_agent(parse_args(argv))
+    return run_agent(parse_args(argv), on_ready, cpu_tokens)

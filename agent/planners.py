@@ -67,8 +67,9 @@ class Planner(Protocol):
         ...
 
 
-def _arrived(observation: Observation) -> PlanResult | None:
-    """The stop result when the robot is at its goal, else None."""
+def arrived_result(observation: Observation) -> PlanResult | None:
+    """The stop result when the robot is at its goal, else None (ego state and goal only:
+    every planner returns it before looking at the others)."""
     ego = observation.ego
     gap = np.hypot(observation.goal_m[0] - ego.x_m, observation.goal_m[1] - ego.y_m)
     if gap > ARRIVAL_FRACTION * observation.goal_tolerance_m:
@@ -127,7 +128,7 @@ class ViaPointPlanner:
 
         clock = self._timer
         t0 = clock()
-        done = _arrived(observation)
+        done = arrived_result(observation)
         if done is not None:
             return replace(done, times=StageTimes(total_ms=(clock() - t0) * 1e3))
         from agent.threats import nearby_others
@@ -230,7 +231,7 @@ class OrcaPlanner:
         from agent.orca import OrcaController
 
         t0 = self._timer()
-        done = _arrived(observation)
+        done = arrived_result(observation)
         if done is not None:
             return replace(done, times=StageTimes(total_ms=(self._timer() - t0) * 1e3))
         controller = self._controllers.get(observation.limits)

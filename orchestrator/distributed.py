@@ -270,8 +270,9 @@ def collect_robot_exits(out_dir: Path) -> dict:
 def fleet_command(run_id: str, robot_ids: Sequence[int], endpoint: str, log_dir: Path, *,
                   startup_timeout_s: float = 30.0,
                   robot_endpoints: Mapping[int, str] | None = None,
-                  nice: int = 0) -> list[str]:
-    """Command line of one `agent.fleet` process that forks every robot process."""
+                  nice: int = 0, cpu_tokens: int | None = None) -> list[str]:
+    """Command line of one `agent.fleet` process that forks every robot process
+    (`cpu_tokens` None: the fleet's default, none)."""
     overrides = [arg for rid, ep in sorted((robot_endpoints or {}).items())
                  for arg in ("--connect-id", f"{int(rid)}={ep}")]
     return [
@@ -279,6 +280,7 @@ def fleet_command(run_id: str, robot_ids: Sequence[int], endpoint: str, log_dir:
         "--ids", ",".join(str(int(r)) for r in robot_ids), "--connect", endpoint,
         "--log-dir", str(Path(log_dir).resolve()),
         "--startup-timeout-s", repr(float(startup_timeout_s)), "--nice", str(int(nice)),
+        *(() if cpu_tokens is None else ("--cpu-tokens", str(int(cpu_tokens)))),
         *overrides,
     ]
 
@@ -336,6 +338,7 @@ def run_distributed(
     robot_endpoints: Mapping[int, str] | None = None,
     robot_launcher: str = "spawn",
     robot_nice: int = 0,
+    cpu_tokens: int | None = None,
 ) -> int:
     """Run one scenario as real processes; return the world's exit status.
 
@@ -358,6 +361,7 @@ def run_distributed(
             ``python -m agent.fleet`` that imports and warms up once and forks every robot
             process (faster start-up, less memory; its own log is ``fleet.log``).
         robot_nice: with ``"fork"``, robots run this much nicer than the world (>= 0).
+        cpu_tokens: with ``"fork"``, robots computing at once (None or 0: no tokens).
 
     Returns:
         The world's exit status: 0 if every robot arrived with no contact, 1 if not,
@@ -411,7 +415,8 @@ def run_distributed(
             robots.append(spawn_logged(
                 fleet_command(run_id, robot_ids, endpoint, out_dir,
                               startup_timeout_s=startup_timeout_s,
-                              robot_endpoints=robot_endpoints, nice=robot_nice),
+                              robot_endpoints=robot_endpoints, nice=robot_nice,
+                              cpu_tokens=cpu_tokens),
                 out_dir / "fleet.log"))
         else:
             current = {rid: spawn_robot(rid) for rid in robot_ids}

@@ -316,6 +316,7 @@ def run_one(n: int, args: argparse.Namespace, out_root: Path) -> dict[str, Any]:
         "setup": args.family, "scenario": scenario.name, "planner": planner, "seed": args.seed,
         "mode": "distributed", "agents": n, "time_scale": args.time_scale,
         "hosts": list(args.hosts), "launcher": args.launcher, "robot_nice": args.robot_nice,
+        "cpu_tokens": args.cpu_tokens,
         "argv": list(args.argv),
     })
     port = int(free_tcp_endpoint().rsplit(":", 1)[1])
@@ -334,7 +335,7 @@ def run_one(n: int, args: argparse.Namespace, out_root: Path) -> dict[str, Any]:
                                  endpoint=endpoint, robot_endpoints=connect,
                                  startup_timeout_s=args.startup_timeout_s,
                                  robot_launcher=args.launcher,
-                                 robot_nice=args.robot_nice)
+                                 robot_nice=args.robot_nice, cpu_tokens=args.cpu_tokens)
     finally:
         sampler.stop()
     wall_s = time.monotonic() - spawn_mono
@@ -579,6 +580,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--robot-nice", type=int, choices=range(0, 20), default=ROBOT_NICE,
                         metavar="N", help="with --launcher fork: robots run N steps nicer "
                         f"than the world (default {ROBOT_NICE})")
+    parser.add_argument("--cpu-tokens", type=int, default=None, metavar="N",
+                        help="with --launcher fork: robots computing at once (default: no "
+                             "tokens; see agent.fleet)")
     parser.add_argument("--startup-timeout-s", type=_positive, default=60.0,
                         help="deadline for every robot to be alive (default 60)")
     parser.add_argument("--out", type=Path, required=True, help="output directory")

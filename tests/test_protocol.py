@@ -27,6 +27,9 @@ from protocol import (
     ProtocolError,
     RunConfigMsg,
     RunKeys,
+    plan_pose_slot,
+    pose_slot_count,
+    pose_slot_of_tick,
     session_settings,
     validate_run_id,
 )
@@ -469,12 +472,51 @@ def test_rejects_bad_run_ids(run_id) -> None:
 
 def test_key_expressions_are_prefixed_by_run() -> None:
     a, b = RunKeys("run-a"), RunKeys("run-b")
-    keys_a = {a.poses, a.control, a.cmd(3), a.config(3), a.alive_world, a.alive_robot(3)}
-    keys_b = {b.poses, b.control, b.cmd(3), b.config(3), b.alive_world, b.alive_robot(3)}
+    keys_a = {a.poses_slot(0), a.control, a.cmd(3), a.config(3), a.alive_world, a.alive_robot(3)}
+    keys_b = {b.poses_slot(0), b.control, b.cmd(3), b.config(3), b.alive_world, b.alive_robot(3)}
     assert all(k.startswith("eifp/run-a/") for k in keys_a)
     assert not keys_a & keys_b
     assert a.cmd(3) == "eifp/run-a/cmd/3" and a.alive_robot(0) == "eifp/run-a/alive/robot/0"
     assert a.config_all == "eifp/run-a/config/*" and a.cmd_all == "eifp/run-a/cmd/*"
+
+
+def test_pose_slot_keys() -> None:
+    k = RunKeys("r1")
+    assert k.poses_slot(0) == "eifp/r1/poses/0" and k.poses_slot(4) == "eifp/r1/poses/4"
+    assert k.poses_all == "eifp/r1/poses/*"
+    for bad in (-1, protocol.MAX_POSE_SLOTS, 1.0, True, "1"):
+        with pytest.raises(ProtocolError, match="pose slot"):
+            k.poses_slot(bad)
+
+
+@pytest.mark.parametrize(("world_hz", "control_hz", "slots"), [
+    (50.0, 10.0, 5), (50.0, 5.0, 10), (50.0, 50.0, 1), (50.0, 20.0, 1), (50.0, 100.0, 1),
+    (60.0, 10.0, 6), (50.0, 10.000000001, 5), (50.0, 3.0, 1)])
+def test_pose_slot_count_is_whole_ticks_per_period(world_hz, control_hz, slots) -> None:
+    assert pose_slot_count(world_hz, control_hz) == slots
+
+
+def test_pose_slot_count_rejects_bad_rates() -> None:
+    for rates in ((0.0, 10.0), (50.0, -1.0), (math.inf, 10.0), (50.0, math.nan)):
+        with pytest.raises(ValueError):
+            pose_slot_count(*rates)
+
+
+def test_plan_pose_slot_matches_the_ticks_a_robot_plans_on() -> None:
+    tick_s, slots = 0.02, 5
+    for phase_ticks in range(12):
+        phase_s = phase_ticks * tick_s
+        slot = plan_pose_slot(0.1, phase_s, tick_s, slots)
+        assert slot == phase_ticks % 5
+        # Every plan time over many periods is a tick published on that slot.
+        for k in range(200):
+            tick = round((phase_s + k * 0.1) / tick_s)
+            assert pose_slot_of_tick(tick, slots) == slot
+    assert plan_pose_slot(0.2, 0.04, tick_s, slots) == 2      # 5 Hz: every other period
+    assert plan_pose_slot(0.05, 0.0, tick_s, slots) is None   # 20 Hz: 2.5 ticks apart
+    assert plan_pose_slot(0.04, 0.0, tick_s, slots) is None   # 25 Hz: cycles the slots
+    assert plan_pose_slot(0.1, 0.03, tick_s, slots) is None   # phase between ticks
+    assert plan_pose_slot(0.1, 0.0, tick_s, 1) == 0           # one slot: everything on 0
 
 
 def test_robot_id_parsed_from_keys() -> None:
@@ -494,6 +536,7 @@ def test_session_settings() -> None:
     router = session_settings(mode="router", listen=["tcp/127.0.0.1:7447"])
     assert router["mode"] == '"router"' and router["scouting/multicast/enabled"] == "false"
     assert router["transport/link/tx/lease"] == str(protocol.LINK_LEASE_MS)
+    assert router["transport/shared_memory/enabled"] == "false"
     assert "connect/endpoints" not in router
     client = session_settings(mode="client", connect=["tcp/127.0.0.1:1"], connect_timeout_ms=500)
     assert client["connect/endpoints"] == '["tcp/127.0.0.1:1"]'

@@ -14,7 +14,8 @@ Lifecycle:
    ``dt / time_scale`` of wall time. Each tick drains liveliness changes, configuration
    queries and commands (all read from handler channels, never in callbacks), applies the
    newest command per robot (zero-order hold, `WorldSim.set_command`), steps the world,
-   publishes one `PosesMsg` (DROP, express) and records the tick.
+   publishes one `PosesMsg` (DROP, express) on the tick's pose slot
+   (``poses/<tick mod K>``, `protocol.pose_slot_count`) and records the tick.
 4. The run ends when every robot has arrived (``all_arrived``), at the scenario's time limit
    (``time_limit``) or on SIGTERM/SIGINT (``signal``): publish an ``end`` `ControlMsg`, write
    the ``end`` event, give robots a moment (``--linger-s``) to leave, close everything.
@@ -62,6 +63,8 @@ from protocol import (
     ProtocolError,
     RunConfigMsg,
     RunKeys,
+    pose_slot_count,
+    pose_slot_of_tick,
     session_settings,
     validate_run_id,
 )
@@ -278,8 +281,14 @@ class WorldNode:
             self.keys.cmd_all, zenoh.handlers.RingChannel(max(1024, 32 * n)))
         self.alive_sub = session.liveliness().declare_subscriber(
             self.keys.alive_robot_all, history=True)
-        self.poses_pub = session.declare_publisher(
-            self.keys.poses, congestion_control=zenoh.CongestionControl.DROP, express=True)
+        # One publisher per pose slot: tick t goes out on poses/<t mod K>, so a robot that
+        # plans once a control period on a fixed tick receives only its slot's poses.
+        self.pose_slots = pose_slot_count(options.rate_hz, options.control_rate_hz)
+        self.poses_pubs = [
+            session.declare_publisher(self.keys.poses_slot(slot),
+                                      congestion_control=zenoh.CongestionControl.DROP,
+                                      express=True)
+            for slot in range(self.pose_slots)]
         # Start/end are rare and must arrive: reliable and blocking (a hung robot can hold
         # it up at most one transport lease, 1 s, before its link is closed).
         self.control_pub = session.declare_publisher(
@@ -407,8 +416,10 @@ class WorldNode:
         return False
 
     def publish_poses(self) -> None:
-        """One `PosesMsg` with the current ground truth (dropped, never blocking, if slow)."""
-        self.poses_pub.put(PosesMsg.from_snapshot(self.sim.snapshot()).encode())
+        """One `PosesMsg` with the current ground truth (dropped, never blocking, if slow),
+        on the pose slot of the current tick."""
+        pub = self.poses_pubs[pose_slot_of_tick(self.sim.tick, self.pose_slots)]
+        pub.put(PosesMsg.from_snapshot(self.sim.snapshot()).encode())
 
     def tick(self) -> None:
         """Apply commands, step the world by dt, publish and record."""

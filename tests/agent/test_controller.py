@@ -236,3 +236,39 @@ def test_controller_only_ever_accepts_newer_snapshots(latency, jitter, drop, dup
                 accepted.append(snap.tick)
     assert accepted == sorted(set(accepted))  # strictly increasing: no stale, no copies
     assert ctrl.rejected_stale == released - len(accepted)
+
+
+# --------------------------------------------------------------------------------------
+# plan(): a robot at its goal is not given the others' estimates
+# --------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("planner", PLANNER_NAMES)
+def test_a_robot_at_its_goal_stops_without_estimating_the_others(planner: str) -> None:
+    ctrl = RobotController(spec(planner, start=(20.0, 0.0, 0.0)), PlannerConfig(), TOL_M)
+    for k in range(3):
+        ctrl.observe(snap(0.1 * k, 5 * k, {0: (20.0, 0.0, 0.0), 1: (21.5, 0.0, math.pi)}))
+
+    def no_estimates(**kwargs):
+        raise AssertionError("others estimated for a robot at its goal")
+
+    ctrl.tracker.others = no_estimates  # type: ignore[method-assign]
+    result = ctrl.plan(0.2)
+    assert result.status == PlanStatus.ARRIVED and (result.v_mps, result.omega_radps) == (0, 0)
+    assert len(ctrl.last_observation.others) == 0
+
+
+@pytest.mark.parametrize("planner", PLANNER_NAMES)
+def test_a_robot_away_from_its_goal_plans_on_the_full_observation(planner: str) -> None:
+    ctrl = RobotController(spec(planner), PlannerConfig(), TOL_M)
+    for k in range(3):
+        ctrl.observe(snap(0.1 * k, 5 * k,
+                          {0: (0.1 * k, 0.0, 0.0), 1: (4.0 - 0.1 * k, 0.0, math.pi)}))
+    ctrl.command = (1.0, 0.1)
+    full = ctrl.observation(0.25)  # 50 ms after the newest pose: compensated
+    result = ctrl.plan(0.25)
+    seen = ctrl.last_observation
+    assert result.status != PlanStatus.ARRIVED
+    assert seen.ego == full.ego and seen.ego.x_m > 0.2
+    assert seen.others.ids.tolist() == full.others.ids.tolist() == [1]
+    for field in ("position_m", "velocity_mps", "linearity", "track_start_m", "radius_m"):
+        np.testing.assert_array_equal(getattr(seen.others, field), getattr(full.others, field))

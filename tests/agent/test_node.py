@@ -2,10 +2,20 @@
 
 from __future__ import annotations
 
+from collections import deque
+
+import numpy as np
 import pytest
 
 from agent.config import PlannerConfig
-from agent.node import AgentOptions, PlanSchedule, make_controller, parse_args, plan_phase_s
+from agent.node import (
+    AgentOptions,
+    PlanSchedule,
+    RobotNode,
+    make_controller,
+    parse_args,
+    plan_phase_s,
+)
 from protocol import RunConfigMsg
 from world.scenario import RobotSpec
 
@@ -189,3 +199,123 @@ print(json.dumps(sorted(sys.modules)))
     unneeded = {"yaml", "matplotlib", "PIL", "pyrvo", "agent.orca", "psutil"}
     assert not (modules & unneeded), modules & unneeded
     assert not any(m.startswith("orchestrator") for m in modules)
+
+
+class _Tokens:
+    """A CpuTokens stand-in that records what the robot did while holding one."""
+
+    def __init__(self, available: bool) -> None:
+        self.available = available
+        self.held = False
+        self.log: list[str] = []
+
+    def acquire(self, block: bool = True, timeout: float | None = None) -> bool:
+        assert timeout is not None and timeout > 0.0  # never an unbounded wait
+        self.held = self.available
+        self.log.append("acquire" if self.available else "timeout")
+        return self.available
+
+    def release(self) -> None:
+        assert self.held
+        self.held = False
+        self.log.append("release")
+
+
+def _node_with(tokens: _Tokens, *, ring: bool, fresh: bool = True) -> RobotNode:
+    """A RobotNode without a session: only what sense_and_plan touches."""
+    node = object.__new__(RobotNode)
+    node.cpu_tokens = tokens
+    node.pose_ring = deque(["sample"] if ring else [])
+    node.counts = {"token_timeouts": 0}
+    node.world_alive = True
+
+    def poll_poses() -> bool:
+        tokens.log.append(f"poll held={tokens.held}")
+        return fresh
+
+    def plan_and_send() -> None:
+        tokens.log.append(f"plan held={tokens.held}")
+
+    node.poll_poses = poll_poses  # type: ignore[method-assign]
+    node.plan_and_send = plan_and_send  # type: ignore[method-assign]
+    return node
+
+
+def test_a_robot_senses_and_plans_holding_a_cpu_token_and_gives_it_back() -> None:
+    tokens = _Tokens(available=True)
+    assert _node_with(tokens, ring=True).sense_and_plan() is True
+    assert tokens.log == ["acquire", "poll held=True", "plan held=True", "release"]
+
+
+def test_without_a_token_in_time_a_robot_plans_anyway_and_counts_it() -> None:
+    tokens = _Tokens(available=False)
+    node = _node_with(tokens, ring=True)
+    assert node.sense_and_plan() is True
+    assert tokens.log == ["timeout", "poll held=False", "plan held=False"]
+    assert node.counts["token_timeouts"] == 1
+
+
+def test_no_token_is_taken_without_a_pose_to_work_on() -> None:
+    tokens = _Tokens(available=True)
+    assert _node_with(tokens, ring=False, fresh=False).sense_and_plan() is False
+    assert tokens.log == ["poll held=False"]
+
+
+def test_the_token_is_given_back_when_planning_raises() -> None:
+    tokens = _Tokens(available=True)
+    node = _node_with(tokens, ring=True)
+
+    def boom() -> None:
+        raise RuntimeError("planner bug")
+
+    node.plan_and_send = boom  # type: ignore[method-assign]
+    with pytest.raises(RuntimeError):
+        node.sense_and_plan()
+    assert tokens.log[-1] == "release" and not tokens.held
+
+
+class _Payload:
+    def __init__(self, data: bytes) -> None:
+        self.data = data
+
+    def to_bytes(self) -> bytes:
+        return self.data
+
+
+class _Sample:
+    def __init__(self, data: bytes) -> None:
+        self.payload = _Payload(data)
+
+
+def test_the_robot_times_the_next_pose_from_when_the_last_one_arrived_not_when_read() -> None:
+    import threading
+    import time
+    from types import SimpleNamespace
+
+    from agent.controller import RobotController
+    from agent.link import FaultyLink, LinkFaults
+    from protocol import PosesMsg
+
+    spec = RobotSpec(0, (0.0, 0.0, 0.0), (10.0, 0.0))
+    node = object.__new__(RobotNode)
+    node.robot_id = 0
+    node.pose_arrived = threading.Event()
+    node.pose_ring = deque(maxlen=2)
+    node.known_ids = frozenset({0, 1})
+    node.counts = {k: 0 for k in ("rejected", "skipped", "stale", "link_dropped")}
+    node.last_rx_wall = None
+    node.clock_tick, node.clock_stamp_s, node.clock_wall = -1, 0.0, 0.0
+    node.config = SimpleNamespace(time_scale=1.0)
+    node.pose_link = FaultyLink(LinkFaults(), None)
+    node.controller = RobotController(spec, PlannerConfig(), 0.25)
+    node.newest = None
+    pose = PosesMsg(t_s=0.2, tick=10, robot_ids=[0, 1], robot_pose=[[0, 0, 0], [5, 0, 3.1]],
+                    robot_radius_m=[0.5, 0.5], obstacle_ids=[], obstacle_xy_m=np.zeros((0, 2)),
+                    obstacle_radius_m=[])
+    arrived = time.monotonic() - 0.03  # it arrived 30 ms ago; the robot reads it only now
+    node.pose_ring.append((arrived, _Sample(pose.encode())))
+    node.pose_arrived.set()
+    assert node.poll_poses() is True
+    assert not node.pose_arrived.is_set() and not node.pose_ring
+    assert node.last_rx_wall == arrived and node.clock_wall == arrived
+    assert node.sim_now() == pytest.approx(0.2 + 0.03, abs=0.01)  # the pose is 30 ms old

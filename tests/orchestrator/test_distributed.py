@@ -52,6 +52,9 @@ def test_fleet_command_passes_ids_and_per_robot_endpoints(tmp_path: Path) -> Non
     args = build_parser().parse_args(cmd[3:])
     assert args.ids == [0, 1, 2] and args.connect == "tcp/127.0.0.1:9"
     assert args.connect_id == [(2, "tcp/127.0.0.2:9")] and args.log_dir == tmp_path.resolve()
+    assert args.cpu_tokens == 0 and args.max_starting >= 1  # the fleet's defaults
+    tokens = fleet_command("r1", [0], "tcp/127.0.0.1:9", tmp_path, cpu_tokens=2)
+    assert build_parser().parse_args(tokens[3:]).cpu_tokens == 2
     for bad in (["--ids", "1,1"], ["--ids", "-1"], ["--ids", "0", "--connect-id", "x"]):
         with pytest.raises(SystemExit):
             build_parser().parse_args(["--run", "r", "--connect", "c", "--log-dir", "d", *bad])

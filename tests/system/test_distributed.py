@@ -231,7 +231,7 @@ def test_killed_robot_is_detected_and_avoided(tmp_path: Path, launch) -> None:
     run.start(scenario, [0, 1], time_scale=1.0)
     keys = RunKeys(run.run_id)
     with client_session(run.endpoint) as session:
-        poses = session.declare_subscriber(keys.poses, zenoh.handlers.RingChannel(1))
+        poses = session.declare_subscriber(keys.poses_all, zenoh.handlers.RingChannel(1))
         deadline = time.monotonic() + STARTUP_S + RUN_S
         while True:
             sample = poses.try_recv()
@@ -355,8 +355,10 @@ def test_rogue_publisher_is_rejected_and_counted(tmp_path: Path, launch) -> None
     sent_cmds = 0
     with client_session(run.endpoint) as session:
         wait_for_event(run.out_dir, lambda e: e["kind"] == "start", STARTUP_S, run.world)
-        poses = session.declare_subscriber(keys.poses, zenoh.handlers.RingChannel(1))
-        rogue_poses = session.declare_publisher(keys.poses)
+        # Robot 0's pose slot (robots subscribe to theirs only); the garbage goes to every
+        # slot, once per period, right after robot 0's pose.
+        poses = session.declare_subscriber(keys.poses_slot(0), zenoh.handlers.RingChannel(1))
+        rogue_poses = session.declare_publisher(keys.poses_all)
         rogue_cmds = {rid: session.declare_publisher(keys.cmd(rid)) for rid in (0, 1, 7)}
         for pub in (rogue_poses, *rogue_cmds.values()):
             wait_matching(pub)

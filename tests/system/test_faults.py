@@ -157,14 +157,14 @@ def test_ten_thousand_malformed_messages_are_counted_and_survived(tmp_path: Path
     sent_poses = 0
     with client_session(endpoint) as session:
         wait_for_event(out, lambda e: e["kind"] == "start", STARTUP_S)
-        poses = session.declare_subscriber(keys.poses, zenoh.handlers.RingChannel(1))
+        poses = session.declare_subscriber(keys.poses_all, zenoh.handlers.RingChannel(1))
         # Reliable and blocking: nothing of ours may be dropped on the way, so the world's
         # count can be compared exactly.
         pubs = {k: session.declare_publisher(
                     k, congestion_control=zenoh.CongestionControl.BLOCK,
                     reliability=zenoh.Reliability.RELIABLE)
                 for k in (keys.cmd(0), keys.cmd(1), keys.cmd(7), f"{keys.prefix}/cmd/abc")}
-        pose_pub = session.declare_publisher(keys.poses)
+        pose_pub = session.declare_publisher(keys.poses_all)  # every robot's pose slot
         for pub in (*pubs.values(), pose_pub):
             wait_matching(pub)
         real = None

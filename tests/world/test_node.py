@@ -159,11 +159,14 @@ def test_commands_applied_stale_dropped_garbage_rejected(rig: Rig) -> None:
 
 
 def test_tick_publishes_poses(rig: Rig) -> None:
-    poses = rig.client.declare_subscriber(rig.keys.poses)
-    until(lambda: rig.node.poses_pub.matching_status.matching, lambda: None, "pose subscriber")
+    poses = rig.client.declare_subscriber(rig.keys.poses_all)
+    assert rig.node.pose_slots == 5  # 50 Hz world, 10 Hz control
+    pub = rig.node.poses_pubs[1]
+    until(lambda: pub.matching_status.matching, lambda: None, "pose subscriber")
     rig.node.tick()
     got: list = []
     until(lambda: bool(got), lambda: got.extend(filter(None, [poses.try_recv()])), "poses")
+    assert str(got[0].key_expr) == rig.keys.poses_slot(1)  # tick 1 on slot 1 mod 5
     msg = PosesMsg.decode(got[0].payload.to_bytes(), known_ids={0, 4, -1})
     assert msg.tick == 1 and msg.t_s == pytest.approx(0.02)
     assert msg.robot_ids.tolist() == [0, 4] and msg.obstacle_ids.tolist() == [-1]
