@@ -26,6 +26,7 @@ non-deterministic output and never influence a decision.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import replace
@@ -67,12 +68,17 @@ class Planner(Protocol):
         ...
 
 
+def at_goal(x_m: float, y_m: float, goal_m: np.ndarray, goal_tolerance_m: float) -> bool:
+    """Whether a robot at (x, y) is parked: within `ARRIVAL_FRACTION` of the tolerance."""
+    gap = math.hypot(float(goal_m[0]) - x_m, float(goal_m[1]) - y_m)
+    return gap <= ARRIVAL_FRACTION * goal_tolerance_m
+
+
 def arrived_result(observation: Observation) -> PlanResult | None:
     """The stop result when the robot is at its goal, else None (ego state and goal only:
     every planner returns it before looking at the others)."""
     ego = observation.ego
-    gap = np.hypot(observation.goal_m[0] - ego.x_m, observation.goal_m[1] - ego.y_m)
-    if gap > ARRIVAL_FRACTION * observation.goal_tolerance_m:
+    if not at_goal(ego.x_m, ego.y_m, observation.goal_m, observation.goal_tolerance_m):
         return None
     here = np.array([[ego.x_m, ego.y_m], observation.goal_m])
     return PlanResult(v_mps=0.0, omega_radps=0.0, status=PlanStatus.ARRIVED, waypoints_m=here)
