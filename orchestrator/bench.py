@@ -300,7 +300,8 @@ def _planners(text: str) -> list[str]:
     return names
 
 
-def _robots(text: str) -> list[int]:
+def robot_counts(text: str) -> list[int]:
+    """argparse type of a comma-separated list of robot counts, each >= 2 (bench, scale)."""
     try:
         counts = [int(x) for x in text.split(",") if x.strip()]
     except ValueError:
@@ -327,7 +328,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "crowd size: N robots converging on the centre of a circle.")
     parser.add_argument("--planner", type=_planners, required=True,
                         help="a planner, a comma-separated list, or 'all'")
-    parser.add_argument("--robots", type=_robots, required=True,
+    parser.add_argument("--robots", type=robot_counts, required=True,
                         help="robot count, or a comma-separated list (e.g. 2,8,16,32,64)")
     parser.add_argument("--cycles", type=_positive_int, default=DEFAULT_CYCLES,
                         help=f"planning cycles to time per row (default {DEFAULT_CYCLES})")

@@ -58,6 +58,7 @@ from typing import Any
 import psutil
 
 from agent.config import PLANNER_NAMES
+from orchestrator.bench import robot_counts
 
 SAMPLE_PERIOD_S = 0.5
 MEMORY_EVERY = 10
@@ -533,16 +534,6 @@ def plot_scale(rows: Sequence[dict[str, Any]], path: Path) -> Path:
 # CLI
 # --------------------------------------------------------------------------------------
 
-def _counts(text: str) -> list[int]:
-    try:
-        counts = [int(x) for x in text.split(",") if x.strip()]
-    except ValueError:
-        counts = []
-    if not counts or min(counts) < 2:
-        raise argparse.ArgumentTypeError(f"expected robot counts >= 2 (e.g. 16,32), got {text!r}")
-    return counts
-
-
 def _hosts(text: str) -> list[str]:
     hosts = [x.strip() for x in text.split(",") if x.strip()]
     if not hosts:
@@ -562,7 +553,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="orchestrator scale",
         description="Real-time distributed runs of N robot processes: timing, CPU, memory, "
                     "start-up, safety per N.")
-    parser.add_argument("--agents", type=_counts, required=True,
+    parser.add_argument("--agents", type=robot_counts, required=True,
                         help="robot counts, comma-separated (e.g. 16,32,64,128)")
     parser.add_argument("--family", choices=FAMILIES, default=DEFAULT_FAMILY,
                         help=f"scenario family (default {DEFAULT_FAMILY})")
