@@ -76,6 +76,7 @@ from typing import TYPE_CHECKING, Protocol
 import numpy as np
 import zenoh
 
+from agent import argtypes
 from agent.link import LINK_POSES, FaultyLink, LinkFaults, link_rng
 from protocol import (
     CommandMsg,
@@ -87,7 +88,6 @@ from protocol import (
     plan_pose_slot,
     pose_slot_count,
     session_settings,
-    validate_run_id,
 )
 
 if TYPE_CHECKING:
@@ -162,34 +162,6 @@ class AgentOptions:
     compensate_latency: bool = True
 
 
-def _positive(text: str) -> float:
-    value = float(text)
-    if not (math.isfinite(value) and value > 0.0):
-        raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}")
-    return value
-
-
-def _run_id(text: str) -> str:
-    try:
-        return validate_run_id(text)
-    except ProtocolError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from exc
-
-
-def _non_negative(text: str) -> float:
-    value = float(text)
-    if not (math.isfinite(value) and value >= 0.0):
-        raise argparse.ArgumentTypeError(f"must be a number >= 0, got {text!r}")
-    return value
-
-
-def _probability(text: str) -> float:
-    value = _non_negative(text)
-    if value > 1.0:
-        raise argparse.ArgumentTypeError(f"must be a probability in [0, 1], got {text!r}")
-    return value
-
-
 def _robot_id(text: str) -> int:
     value = int(text)
     if value < 0:
@@ -200,29 +172,30 @@ def _robot_id(text: str) -> int:
 def parse_args(argv: list[str] | None = None) -> AgentOptions:
     """Parse ``python -m agent`` arguments."""
     parser = argparse.ArgumentParser(prog="python -m agent", description=__doc__.split("\n")[0])
-    parser.add_argument("--run", required=True, type=_run_id, help="run id")
+    parser.add_argument("--run", required=True, type=argtypes.run_id, help="run id")
     parser.add_argument("--id", required=True, type=_robot_id, help="robot id")
     parser.add_argument("--connect", required=True, help="router endpoint (tcp/HOST:PORT)")
-    parser.add_argument("--control-rate-hz", type=_positive, default=None,
+    parser.add_argument("--control-rate-hz", type=argtypes.positive, default=None,
                         help="planning rate [1/sim s] (default: as served by the world, 10)")
-    parser.add_argument("--startup-timeout-s", type=_positive, default=30.0,
+    parser.add_argument("--startup-timeout-s", type=argtypes.positive, default=30.0,
                         help="wall deadline to connect and get the configuration")
-    parser.add_argument("--pose-timeout-s", type=_positive, default=5.0,
+    parser.add_argument("--pose-timeout-s", type=argtypes.positive, default=5.0,
                         help="wall time without poses after which the world is gone")
     faults = parser.add_argument_group("fault injection (sim time; see agent.link)")
-    faults.add_argument("--latency-ms", type=_non_negative, default=0.0,
+    faults.add_argument("--latency-ms", type=argtypes.non_negative, default=0.0,
                         help="pose link: fixed delay [ms]")
-    faults.add_argument("--jitter-ms", type=_non_negative, default=0.0,
+    faults.add_argument("--jitter-ms", type=argtypes.non_negative, default=0.0,
                         help="pose link: uniform jitter half-width [ms]")
-    faults.add_argument("--drop", type=_probability, default=0.0, help="pose loss probability")
-    faults.add_argument("--dup", type=_probability, default=0.0,
+    faults.add_argument("--drop", type=argtypes.probability, default=0.0,
+                        help="pose loss probability")
+    faults.add_argument("--dup", type=argtypes.probability, default=0.0,
                         help="pose duplication probability")
-    faults.add_argument("--reorder", type=_probability, default=0.0,
+    faults.add_argument("--reorder", type=argtypes.probability, default=0.0,
                         help="probability a pose is held back (overtaken by later ones)")
     faults.add_argument("--fault-seed", type=int, default=0, help="seeds the pose link")
-    faults.add_argument("--control-phase-s", type=_non_negative, default=0.0,
+    faults.add_argument("--control-phase-s", type=argtypes.non_negative, default=0.0,
                         help="offset of the planning slots [sim s]")
-    faults.add_argument("--plan-delay-ms", type=_non_negative, default=0.0,
+    faults.add_argument("--plan-delay-ms", type=argtypes.non_negative, default=0.0,
                         help="added planning delay [sim ms] (a CPU-starved robot)")
     faults.add_argument("--no-latency-compensation", action="store_true",
                         help="plan on the poses as stamped (no forward prediction by age)")

@@ -55,6 +55,7 @@ from types import FrameType
 
 import zenoh
 
+from agent import argtypes
 from agent.link import LINK_COMMANDS, FaultyLink, LinkFaults, link_rng
 from protocol import (
     CommandMsg,
@@ -66,7 +67,6 @@ from protocol import (
     pose_slot_count,
     pose_slot_of_tick,
     session_settings,
-    validate_run_id,
 )
 from world.dynamics import WorldSim
 from world.recorder import RunRecorder
@@ -126,63 +126,37 @@ class WorldOptions:
     fault_seed: int = 0
 
 
-def _positive(text: str) -> float:
-    value = float(text)
-    if not (math.isfinite(value) and value > 0.0):
-        raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}")
-    return value
-
-
-def _non_negative(text: str) -> float:
-    value = float(text)
-    if not (math.isfinite(value) and value >= 0.0):
-        raise argparse.ArgumentTypeError(f"must be a number >= 0, got {text!r}")
-    return value
-
-
-def _probability(text: str) -> float:
-    value = _non_negative(text)
-    if value > 1.0:
-        raise argparse.ArgumentTypeError(f"must be a probability in [0, 1], got {text!r}")
-    return value
-
-
-def _run_id(text: str) -> str:
-    try:
-        return validate_run_id(text)
-    except ProtocolError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from exc
-
-
 def parse_args(argv: list[str] | None = None) -> WorldOptions:
     """Parse ``python -m world`` arguments."""
     parser = argparse.ArgumentParser(prog="python -m world", description=__doc__.split("\n")[0])
-    parser.add_argument("--run", required=True, type=_run_id, help="run id")
+    parser.add_argument("--run", required=True, type=argtypes.run_id, help="run id")
     parser.add_argument("--scenario", required=True, type=Path, help="scenario YAML file")
     where = parser.add_mutually_exclusive_group()
     where.add_argument("--listen",
                        help=f"router endpoint to listen on (default {DEFAULT_ENDPOINT})")
     where.add_argument("--connect", help="join an existing router at this endpoint, as a client")
-    parser.add_argument("--rate-hz", type=_positive, default=50.0, help="tick rate [1/sim s]")
-    parser.add_argument("--time-scale", type=_positive, default=1.0,
+    parser.add_argument("--rate-hz", type=argtypes.positive, default=50.0,
+                        help="tick rate [1/sim s]")
+    parser.add_argument("--time-scale", type=argtypes.positive, default=1.0,
                         help="sim seconds per wall second")
     parser.add_argument("--out", type=Path, default=None, help="run directory (runs/<run>)")
-    parser.add_argument("--cmd-timeout-s", type=_positive, default=0.5,
+    parser.add_argument("--cmd-timeout-s", type=argtypes.positive, default=0.5,
                         help="a robot without a command for this long (sim) brakes")
-    parser.add_argument("--wait-robots-s", type=_positive, default=30.0,
+    parser.add_argument("--wait-robots-s", type=argtypes.positive, default=30.0,
                         help="wall deadline for every robot to be alive")
-    parser.add_argument("--control-rate-hz", type=_positive, default=10.0,
+    parser.add_argument("--control-rate-hz", type=argtypes.positive, default=10.0,
                         help="planning rate served to the robots [1/sim s]")
     parser.add_argument("--linger-s", type=float, default=3.0,
                         help="wall time to wait for robots to leave after the end")
     faults = parser.add_argument_group("fault injection on the command links (sim time)")
-    faults.add_argument("--latency-ms", type=_non_negative, default=0.0, help="fixed delay [ms]")
-    faults.add_argument("--jitter-ms", type=_non_negative, default=0.0,
+    faults.add_argument("--latency-ms", type=argtypes.non_negative, default=0.0,
+                        help="fixed delay [ms]")
+    faults.add_argument("--jitter-ms", type=argtypes.non_negative, default=0.0,
                         help="uniform jitter half-width [ms]")
-    faults.add_argument("--drop", type=_probability, default=0.0, help="loss probability")
-    faults.add_argument("--dup", type=_probability, default=0.0,
+    faults.add_argument("--drop", type=argtypes.probability, default=0.0, help="loss probability")
+    faults.add_argument("--dup", type=argtypes.probability, default=0.0,
                         help="duplication probability")
-    faults.add_argument("--reorder", type=_probability, default=0.0,
+    faults.add_argument("--reorder", type=argtypes.probability, default=0.0,
                         help="probability a command is held back (overtaken)")
     faults.add_argument("--fault-seed", type=int, default=0, help="seeds the command links")
     args = parser.parse_args(argv)
