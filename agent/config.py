@@ -55,6 +55,11 @@ class MpcConfig:
             latency (F, link seeds 4, 7, 8: contacts at 200, none at 1000).
         eps_abs: OSQP absolute tolerance.
         eps_rel: OSQP relative tolerance.
+        braking_guard: the command's speed is capped so the robot can still stop its own
+            approach to every disc it faces before the gap falls below `braking_margin_m`,
+            given the pose age and one control period of reaction (`agent.safety`; not in
+            the paper: the soft half-planes can trade a stopped neighbour's gap away).
+        braking_margin_m: gap the braking guard keeps.
     """
 
     horizon_steps: int = 20
@@ -72,6 +77,8 @@ class MpcConfig:
     max_iter: int = 1000
     eps_abs: float = 1.0e-3
     eps_rel: float = 1.0e-3
+    braking_guard: bool = True
+    braking_margin_m: float = 0.05
 
 
 @dataclass(frozen=True)

@@ -171,6 +171,8 @@ class ViaPointPlanner:
             v, omega, iterations = res.v_mps, res.omega_radps, res.iterations
             if res.status != PlanStatus.OK:
                 status = res.status
+            if mpc_cfg.braking_guard and len(observation.others):
+                v = self._braking_guard(observation, v, omega)
         else:
             v, omega = track_reference(
                 ego.x_m, ego.y_m, ego.heading_rad, ref.x_m, ref.y_m,
@@ -192,6 +194,25 @@ class ViaPointPlanner:
             resolved_id=via.resolved_id, threats=via.threats, times=times,
             solver_iterations=int(iterations),
         )
+
+    def _braking_guard(self, observation: Observation, v_mps: float, omega_radps: float) -> float:
+        """`v_mps` capped by `agent.safety.braking_speed_limit`, braking no harder than the
+        rate limit allows (a cap below reach gives the hardest braking)."""
+        from agent.safety import braking_speed_limit, heading_sweep_rad
+
+        ego, limits, others = observation.ego, observation.limits, observation.others
+        reaction_s = observation.pose_age_s + self.control_period_s
+        v_safe = braking_speed_limit(
+            (ego.x_m, ego.y_m), ego.heading_rad, observation.radius_m,
+            others.position_m, others.velocity_mps, others.radius_m,
+            reaction_s=reaction_s, decel_mps2=limits.accel_max_mps2,
+            margin_m=self.config.mpc.braking_margin_m,
+            sweep_rad=heading_sweep_rad(omega_radps, reaction_s),
+        )
+        if v_mps <= v_safe:
+            return v_mps
+        hardest = ego.v_mps - limits.accel_max_mps2 * self.control_period_s
+        return max(v_safe, hardest, limits.v_min_mps)
 
     def _predictions(self, observation: Observation,
                      t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

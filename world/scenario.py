@@ -23,7 +23,8 @@ File format (YAML, SI units: metres, seconds, radians)::
       #                              heading_gain, orca_time_horizon
       mpc:                       # MpcConfig, same rule: horizon_steps, dt, q_position,
         horizon_steps: 20        #   q_heading, q_terminal, r_v, r_omega, r_dv, r_domega,
-        dt: 0.1                  #   max_constraints, slack_weight, max_iter, eps_abs, eps_rel
+        dt: 0.1                  #   max_constraints, slack_weight, max_iter, eps_abs, eps_rel,
+      #                              braking_guard, braking_margin
     robots:                      # required, at least one
       - id: 0                    # required, int in [0, 2^31 - 1], unique
         start: [-18.0, 0.0, 0.0] # required, [x, y, theta]

@@ -122,7 +122,10 @@ def test_every_planner_and_mpc_field_is_settable(tmp_path):
     bools = {f.name for f in dataclasses.fields(PlannerConfig) if f.type in (bool, "bool")}
     defaults = {k: True if planner[k] in bools else 2 if k in ("max_neighbors", "max_depth")
                 else 0.7 for k in planner if k != "mpc"}
-    defaults["mpc"] = {k: 3 if k in ("horizon_steps", "max_constraints", "max_iter") else 0.05
+    mpc_bools = {f.name for f in dataclasses.fields(MpcConfig) if f.type in (bool, "bool")}
+    assert mpc_bools  # braking_guard: the bool branch below is exercised
+    defaults["mpc"] = {k: False if mpc[k] in mpc_bools
+                       else 3 if k in ("horizon_steps", "max_constraints", "max_iter") else 0.05
                        for k in mpc}
     s = scenario_from_dict({"name": "all", "time_limit": 5, "defaults": defaults,
                             "robots": [{"id": 0, "start": [0, 0, 0], "goal": [2, 0]}]}, "all")

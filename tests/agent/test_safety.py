@@ -1,0 +1,171 @@
+"""Braking guard (`agent.safety`): closed form, geometry, and the eIFP-MPC command it caps."""
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from agent.config import MpcConfig, PlannerConfig, RobotLimits
+from agent.planners import make_planner
+from agent.safety import braking_speed_limit, heading_sweep_rad
+from agent.types import EgoState, Observation, Others
+
+R = 0.5
+
+
+def limit(others_xy, others_v=None, *, heading=0.0, sweep=0.0, tau=0.1, decel=1.5,
+          margin=0.05):
+    pos = np.atleast_2d(np.asarray(others_xy, dtype=float))
+    vel = np.zeros_like(pos) if others_v is None else np.atleast_2d(np.asarray(others_v, float))
+    return braking_speed_limit((0.0, 0.0), heading, R, pos, vel, np.full(len(pos), R),
+                               reaction_s=tau, decel_mps2=decel, margin_m=margin,
+                               sweep_rad=sweep)
+
+
+def test_disc_straight_ahead_matches_the_hand_computed_stopping_speed():
+    # gap 0.3 - margin 0.05 = 0.25 m of room; v tau + v^2 / (2 a) = 0.25 with a = 1.5,
+    # tau = 0.1: v = 1.5 (-0.1 + sqrt(0.01 + 0.5 / 1.5)) = 0.72892 m/s
+    v = limit([1.3, 0.0])
+    assert v == pytest.approx(1.5 * (-0.1 + math.sqrt(0.01 + 0.5 / 1.5)), rel=1e-12)
+    assert v == pytest.approx(0.72892, abs=1e-5)
+    # and from that speed the robot stops exactly at the margin
+    assert v * 0.1 + v * v / (2 * 1.5) == pytest.approx(0.25, rel=1e-12)
+
+
+def test_a_disc_at_an_angle_limits_less_than_one_straight_ahead():
+    ahead = limit([1.3, 0.0])
+    at_60 = limit([1.3 * math.cos(math.pi / 3), 1.3 * math.sin(math.pi / 3)])
+    # closing at v cos 60 deg: v/2 tau + v^2 / (4 a) = 0.25
+    expected = 1.5 * (-0.1 + math.sqrt(0.01 + 2 * 0.25 / (1.5 * 0.5)))
+    assert at_60 == pytest.approx(expected, rel=1e-12)
+    assert at_60 > ahead
+
+
+@pytest.mark.parametrize("xy", [[-1.3, 0.0], [0.0, 1.3], [0.0, -1.3], [-1.0, 0.9]])
+def test_discs_behind_or_beside_put_no_limit(xy):
+    assert limit(xy) == math.inf
+
+
+def test_no_others_no_limit():
+    assert limit(np.zeros((0, 2))) == math.inf
+
+
+def test_a_receding_disc_gives_room_and_an_approaching_one_takes_its_stop_out_of_it():
+    still = limit([2.0, 0.0])
+    receding = limit([2.0, 0.0], [1.0, 0.0])
+    approaching = limit([2.0, 0.0], [-0.8, 0.0])
+    assert receding > still > approaching
+    # room 0.95 + w^2 / (2 a) = 0.95 + 1 / 3
+    assert receding == pytest.approx(1.5 * (-0.1 + math.sqrt(0.01 + 2 * (0.95 + 1 / 3) / 1.5)))
+    # room 0.95 - (0.8 x 0.1 + 0.64 / 3): the other's own stop
+    room = 0.95 - (0.08 + 0.64 / 3.0)
+    assert approaching == pytest.approx(1.5 * (-0.1 + math.sqrt(0.01 + 2 * room / 1.5)))
+    # two that must stop within the same gap: nothing is left when its stop fills it
+    assert limit([2.0, 0.0], [-2.0, 0.0]) == 0.0
+
+
+def test_within_the_margin_and_facing_it_means_stop():
+    assert limit([1.02, 0.0]) == 0.0
+    assert limit([0.0, 0.0]) == 0.0  # on its centre
+
+
+def test_turning_towards_a_disc_counts_every_heading_swept_while_stopping():
+    beside = [0.0, 1.3]  # at +90 degrees
+    assert limit(beside) == math.inf
+    # a sweep of 0.75 rad towards it: the worst heading is 0.75 rad, cos(pi/2 - 0.75)
+    turning = limit(beside, sweep=0.75)
+    cos_a = math.cos(math.pi / 2 - 0.75)
+    assert turning == pytest.approx(1.5 * (-0.1 + math.sqrt(0.01 + 2 * 0.25 / (1.5 * cos_a))))
+    # turning away from it does not count
+    assert limit(beside, sweep=-0.75) == math.inf
+    # a sweep across its direction means facing it squarely
+    assert limit(beside, sweep=2.0) == pytest.approx(limit([1.3, 0.0]))
+    # straight behind, at exactly -pi or +pi: a sweep past it either way faces it
+    for sweep in (-3.2, 3.2):
+        assert limit([0.0, -1.3], heading=math.pi / 2, sweep=sweep) == pytest.approx(
+            limit([1.3, 0.0]))
+    # a sweep that stops short of it does not face it squarely
+    assert limit([0.0, -1.3], heading=math.pi / 2, sweep=-3.0) > limit([1.3, 0.0])
+
+
+def test_the_sweep_covers_the_reaction_time_and_at_most_half_a_turn():
+    assert heading_sweep_rad(1.5, 0.2) == pytest.approx(0.3)
+    assert heading_sweep_rad(-1.0, 0.3) == pytest.approx(-0.3)
+    assert heading_sweep_rad(12.0, 0.5) == pytest.approx(math.pi)
+    assert heading_sweep_rad(-12.0, 0.5) == pytest.approx(-math.pi)
+
+
+def test_the_nearest_constraint_wins():
+    both = limit([[1.3, 0.0], [3.0, 0.0]])
+    assert both == pytest.approx(limit([1.3, 0.0]))
+
+
+def test_longer_reaction_means_slower():
+    assert limit([2.0, 0.0], tau=0.3) < limit([2.0, 0.0], tau=0.1) < limit([2.0, 0.0], tau=0.0)
+
+
+@pytest.mark.parametrize("kwargs", [{"decel": 0.0}, {"tau": -0.1}, {"margin": -0.01}])
+def test_bad_parameters_are_rejected(kwargs):
+    with pytest.raises(ValueError):
+        limit([1.3, 0.0], **kwargs)
+
+
+@given(
+    gap=st.floats(0.0, 5.0),
+    angle=st.floats(-1.5, 1.5),
+    tau=st.floats(0.0, 0.5),
+    decel=st.floats(0.2, 5.0),
+    w=st.floats(-2.0, 2.0),
+)
+def test_the_limit_is_the_speed_that_stops_the_approach_exactly(gap, angle, tau, decel, w):
+    d = 2 * R + 0.05 + gap
+    u = np.array([math.cos(angle), math.sin(angle)])
+    v = limit(d * u, w * u, tau=tau, decel=decel)
+    other_stop = -w * tau + w * w / (2 * decel) if w < 0 else -w * w / (2 * decel)
+    room = gap - other_stop
+    cos_a = math.cos(angle)
+    assert math.isfinite(v) and v >= 0.0
+    if room <= 1e-9:  # none left (up to the rounding of d - r - r_j - margin)
+        assert v == pytest.approx(0.0, abs=1e-4)
+        return
+    travelled = v * cos_a * tau + v * v * cos_a / (2 * decel)
+    assert travelled == pytest.approx(room, rel=1e-6, abs=1e-9)
+
+
+def _observation(ahead_m: float, pose_age_s: float) -> Observation:
+    """A robot at full speed towards its goal, a stopped robot `ahead_m` ahead on the way."""
+    ego = EgoState(x_m=0.0, y_m=0.0, heading_rad=0.0, v_mps=1.1, omega_radps=0.0)
+    xy = np.array([[ahead_m, 0.0]])
+    others = Others(ids=np.array([7]), position_m=xy, velocity_mps=np.zeros((1, 2)),
+                    radius_m=np.array([R]), linearity=np.ones(1), track_start_m=xy,
+                    is_robot=np.ones(1, dtype=bool))
+    return Observation(robot_id=1, ego=ego, goal_m=np.array([20.0, 0.0]), radius_m=R,
+                       limits=RobotLimits(), others=others, pose_age_s=pose_age_s)
+
+
+def _config(margin_m: float, guard: bool = True) -> PlannerConfig:
+    return PlannerConfig(mpc=replace(MpcConfig(), braking_guard=guard, braking_margin_m=margin_m))
+
+
+def test_eifp_mpc_speed_is_capped_by_the_guard_and_braking_stays_within_the_rate_limit():
+    # The other is 3.5 m ahead: far outside the MPC's half-planes, which let it keep 1.1 m/s.
+    # A guard margin of 2.0 m leaves 0.5 m of room: v_safe = 1.5 (-0.2 + sqrt(0.04 + 1 / 1.5))
+    obs = _observation(3.5, pose_age_s=0.1)
+    free = make_planner("eifp-mpc", _config(2.0, guard=False)).plan(obs, 0.0)
+    assert free.v_mps > 1.09
+    capped = make_planner("eifp-mpc", _config(2.0)).plan(obs, 0.0)
+    assert capped.v_mps == pytest.approx(1.5 * (-0.2 + math.sqrt(0.04 + 1.0 / 1.5)), rel=1e-9)
+    # 0.2 m of room asks for v_safe = 0.53 m/s, below one period of braking: the hardest
+    # braking the rate limit allows (1.1 - 1.5 x 0.1), not a jump
+    hard = make_planner("eifp-mpc", _config(2.3)).plan(obs, 0.0)
+    assert hard.v_mps == pytest.approx(1.1 - 0.15, abs=1e-9)
+
+
+def test_the_guard_leaves_a_robot_alone_that_faces_away():
+    obs = _observation(-2.2, pose_age_s=0.1)  # the other is behind
+    a = make_planner("eifp-mpc", _config(2.0)).plan(obs, 0.0)
+    b = make_planner("eifp-mpc", _config(2.0, guard=False)).plan(obs, 0.0)
+    assert a.v_mps == b.v_mps
