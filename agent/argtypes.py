@@ -1,4 +1,5 @@
-"""argparse types shared by the process entry points (`python -m agent`, `python -m world`).
+"""argparse types shared by the process entry points (`python -m agent`, `python -m world`,
+`orchestrator compose`).
 
 Each raises `argparse.ArgumentTypeError`, so a bad flag is a usage error (exit status 2)
 naming the flag and the value.

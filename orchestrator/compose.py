@@ -22,7 +22,6 @@ from __future__ import annotations
 import argparse
 import datetime as dt
 import logging
-import math
 import signal
 import sys
 import time
@@ -31,6 +30,7 @@ from pathlib import Path
 from types import FrameType
 from typing import TYPE_CHECKING
 
+from agent.argtypes import positive, run_id
 from world.scenario import Scenario, ScenarioError, dump_scenario
 
 EXIT_OK = 0
@@ -327,22 +327,6 @@ def await_and_report(options: SetupOptions, connect: str, startup_timeout_s: flo
 # command line
 # --------------------------------------------------------------------------------------
 
-def _positive(text: str) -> float:
-    value = float(text)
-    if not (math.isfinite(value) and value > 0.0):
-        raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}")
-    return value
-
-
-def _run_id(text: str) -> str:
-    from protocol import ProtocolError, validate_run_id
-
-    try:
-        return validate_run_id(text)
-    except ProtocolError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from exc
-
-
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="orchestrator compose",
@@ -356,7 +340,7 @@ def build_parser() -> argparse.ArgumentParser:
     common.add_argument("--seed", type=int, default=0, help="seeds the random family")
     common.add_argument("--robots", type=int,
                         help="robot services in the compose file; the scenario must match")
-    common.add_argument("--run", required=True, type=_run_id, help="run id")
+    common.add_argument("--run", required=True, type=run_id, help="run id")
     common.add_argument("--runs-dir", type=Path, default=DEFAULT_RUNS_DIR,
                         help=f"the shared volume (default {DEFAULT_RUNS_DIR})")
     sub = parser.add_subparsers(dest="step", required=True)
@@ -366,9 +350,9 @@ def build_parser() -> argparse.ArgumentParser:
                        help="wait for the robots and the run's end, then write the report")
     p.add_argument("--connect", default=DEFAULT_CONNECT,
                    help=f"the world's router (default {DEFAULT_CONNECT})")
-    p.add_argument("--startup-timeout-s", type=_positive, default=300.0,
+    p.add_argument("--startup-timeout-s", type=positive, default=300.0,
                    help="wall deadline for the world to come up")
-    p.add_argument("--time-scale", type=_positive, default=1.0,
+    p.add_argument("--time-scale", type=positive, default=1.0,
                    help="the world's sim seconds per wall second (sizes the wait)")
     return parser
 
