@@ -11,7 +11,9 @@
   paper: with stale poses (`Observation.pose_age_s` > 0, i.e. a delayed link) each
   half-plane keeps `LATENCY_CLEARANCE_FACTOR` x age x |v_j - v_r| more clearance, the
   distance the pair can close before a command planned now takes effect; with fresh poses
-  (an undisturbed lockstep run) nothing changes.
+  (an undisturbed lockstep run) nothing changes. Last, the braking guard
+  (`agent.safety`, `MpcConfig.braking_guard`) caps the command's speed so the robot can
+  still stop its own approach to every disc it faces.
 - `orca`: ORCA through `pyrvo` (`agent.orca`) plus a heading controller.
 
 Every planner stops (status ARRIVED) once its centre is within half the goal tolerance of
@@ -207,7 +209,7 @@ class ViaPointPlanner:
             others.position_m, others.velocity_mps, others.radius_m,
             reaction_s=reaction_s, decel_mps2=limits.accel_max_mps2,
             margin_m=self.config.mpc.braking_margin_m,
-            sweep_rad=heading_sweep_rad(omega_radps, reaction_s),
+            sweep_rad=heading_sweep_rad(omega_radps, reaction_s), up_to_mps=v_mps,
         )
         if v_mps <= v_safe:
             return v_mps

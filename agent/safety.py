@@ -54,6 +54,7 @@ def braking_speed_limit(
     decel_mps2: float,
     margin_m: float,
     sweep_rad: float = 0.0,
+    up_to_mps: float = math.inf,
 ) -> float:
     """The largest forward speed from which the robot can still stop its approach in time.
 
@@ -66,34 +67,41 @@ def braking_speed_limit(
         reaction_s: tau, how long the command acts before a braking one can (>= 0).
         decel_mps2: the robot's braking deceleration (> 0).
         margin_m: gap kept at the end of the braking (>= 0).
-
-        sweep_rad: how far the heading turns (signed) while the robot reacts and stops;
+        sweep_rad: how far the heading turns (signed) while the robot reacts;
             0 checks the heading now only.
+        up_to_mps: the speed the caller asks about: a disc whose room allows it even when
+            faced squarely is skipped before any trigonometry (the planning cycle's cheap
+            path), so the result is exact where it is below `up_to_mps`.
 
     Returns:
         v_safe in m/s (0 when a disc it faces is already within the margin); `math.inf`
-        when no disc limits the speed.
+        when no disc limits the speed (to `up_to_mps`).
     """
     if decel_mps2 <= 0.0 or reaction_s < 0.0 or margin_m < 0.0:
         raise ValueError("decel_mps2 > 0, reaction_s >= 0 and margin_m >= 0 required")
     x, y = float(position_m[0]), float(position_m[1])
     limit = math.inf
-    pos, vel, rad = others_position_m.tolist(), others_velocity_mps.tolist(), others_radius_m
+    # room that lets up_to_mps through even straight at the disc (cos a = 1)
+    enough = up_to_mps * reaction_s + up_to_mps * up_to_mps / (2.0 * decel_mps2)
+    pos, vel = others_position_m.tolist(), others_velocity_mps.tolist()
+    rad = others_radius_m.tolist()
     for j, (ox, oy) in enumerate(pos):
         dx, dy = ox - x, oy - y
         dist = math.hypot(dx, dy)
         if dist < 1e-9:
             return 0.0  # on its centre: no direction to trust
         ux, uy = dx / dist, dy / dist
-        cos_a = _worst_cos(math.atan2(dy, dx) - heading_rad, sweep_rad)
-        if cos_a <= 1e-9:  # not faced (cos of a right angle rounds to 6e-17)
-            continue
         w = vel[j][0] * ux + vel[j][1] * uy  # the other's speed away from the robot
         if w >= 0.0:
             share = -w * w / (2.0 * decel_mps2)  # it can brake too: more room
         else:
             share = -w * reaction_s + w * w / (2.0 * decel_mps2)  # its own stop
-        room = dist - radius_m - float(rad[j]) - margin_m - share
+        room = dist - radius_m - rad[j] - margin_m - share
+        if room >= enough and room > 0.0:
+            continue  # cannot limit below up_to_mps
+        cos_a = _worst_cos(math.atan2(dy, dx) - heading_rad, sweep_rad)
+        if cos_a <= 1e-9:  # not faced (cos of a right angle rounds to 6e-17)
+            continue
         if room <= 0.0:
             return 0.0
         v_safe = decel_mps2 * (

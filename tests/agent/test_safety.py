@@ -103,6 +103,19 @@ def test_the_nearest_constraint_wins():
     assert both == pytest.approx(limit([1.3, 0.0]))
 
 
+@given(x=st.floats(-4.0, 4.0), y=st.floats(-4.0, 4.0), w=st.floats(-1.5, 1.5),
+       up_to=st.floats(0.0, 2.0), sweep=st.floats(-1.0, 1.0))
+def test_asking_up_to_a_speed_gives_the_same_answer_below_it(x, y, w, up_to, sweep):
+    pos = np.array([[x, y], [x + 1.5, y - 0.7]])
+    vel = np.array([[w, 0.0], [0.0, -w]])
+    exact = braking_speed_limit((0.0, 0.0), 0.3, R, pos, vel, np.full(2, R), reaction_s=0.2,
+                                decel_mps2=1.5, margin_m=0.05, sweep_rad=sweep)
+    quick = braking_speed_limit((0.0, 0.0), 0.3, R, pos, vel, np.full(2, R), reaction_s=0.2,
+                                decel_mps2=1.5, margin_m=0.05, sweep_rad=sweep, up_to_mps=up_to)
+    assert min(quick, up_to) == pytest.approx(min(exact, up_to), rel=1e-12, abs=1e-12)
+    assert quick >= exact
+
+
 def test_longer_reaction_means_slower():
     assert limit([2.0, 0.0], tau=0.3) < limit([2.0, 0.0], tau=0.1) < limit([2.0, 0.0], tau=0.0)
 
