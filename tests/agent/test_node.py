@@ -319,3 +319,82 @@ def test_the_robot_times_the_next_pose_from_when_the_last_one_arrived_not_when_r
     assert not node.pose_arrived.is_set() and not node.pose_ring
     assert node.last_rx_wall == arrived and node.clock_wall == arrived
     assert node.sim_now() == pytest.approx(0.2 + 0.03, abs=0.01)  # the pose is 30 ms old
+
+
+class _Liveliness:
+    """A world-liveliness subscriber whose samples the test queues."""
+
+    def __init__(self) -> None:
+        self.queue: deque = deque()
+
+    def try_recv(self):
+        return self.queue.popleft() if self.queue else None
+
+
+def _world_watcher(monkeypatch, clock: list[float]) -> tuple[RobotNode, _Liveliness]:
+    import agent.node
+
+    monkeypatch.setattr(agent.node.time, "monotonic", lambda: clock[0])
+    node = object.__new__(RobotNode)
+    node.robot_id = 0
+    node.world_sub = _Liveliness()
+    node.world_alive = node.world_seen = True
+    node.world_gone_wall = None
+    node.world_grace_s = agent.node.WORLD_BLIP_GRACE_S
+    node.resumed_wall = -float("inf")
+    node.poll_control = lambda: None
+    return node, node.world_sub
+
+
+def _token(kind_name: str):
+    from types import SimpleNamespace
+
+    import zenoh
+
+    return SimpleNamespace(kind=getattr(zenoh.SampleKind, kind_name))
+
+
+def test_a_world_token_that_blinks_back_within_the_grace_keeps_the_robot(monkeypatch) -> None:
+    from agent.node import WORLD_BLIP_GRACE_S
+
+    clock = [100.0]
+    node, sub = _world_watcher(monkeypatch, clock)
+    sub.queue.append(_token("DELETE"))
+    node.poll_world()  # gone: no exit yet, and no command meanwhile
+    assert node.world_alive is False
+    clock[0] += 0.8 * WORLD_BLIP_GRACE_S
+    node.poll_world()
+    sub.queue.append(_token("PUT"))
+    node.poll_world()
+    assert node.world_alive is True and node.world_gone_wall is None
+    clock[0] += 10.0
+    node.poll_world()  # long after: nothing pending, nothing raised
+
+
+def test_a_world_token_gone_for_longer_than_the_grace_ends_the_robot(monkeypatch) -> None:
+    from agent.node import EXIT_WORLD_LOST, WORLD_BLIP_GRACE_S, _Exit
+
+    clock = [100.0]
+    node, sub = _world_watcher(monkeypatch, clock)
+    sub.queue.append(_token("DELETE"))
+    node.poll_world()
+    clock[0] += 1.01 * WORLD_BLIP_GRACE_S
+    with pytest.raises(_Exit) as gone:
+        node.poll_world()
+    assert gone.value.code == EXIT_WORLD_LOST
+    assert gone.value.reason == "world lost (liveliness token gone)"
+
+
+def test_after_its_own_suspension_a_robot_waits_the_longer_rejoin_grace(monkeypatch) -> None:
+    from agent.node import REJOIN_GRACE_S, WORLD_BLIP_GRACE_S, _Exit
+
+    clock = [100.0]
+    node, sub = _world_watcher(monkeypatch, clock)
+    node.resumed_wall = 99.5  # its loop just came back from a stall
+    sub.queue.append(_token("DELETE"))
+    node.poll_world()
+    clock[0] += 2.0 * WORLD_BLIP_GRACE_S
+    node.poll_world()  # still waiting
+    clock[0] = 100.0 + 1.01 * REJOIN_GRACE_S
+    with pytest.raises(_Exit, match="not back within"):
+        node.poll_world()
