@@ -231,7 +231,11 @@ def legs_threats(
     v_r, t_cap = [], []
     for a, b, t0 in zip(starts, ends, start_times_s):
         length = abs(b - a)
-        v_r.append((b - a) * (speed_mps / length) if length > 0.0 else 0j)
+        # unit direction first, per component: speed / length overflows for a denormal
+        # leg, and so does numpy's complex division (0 * inf = NaN)
+        d = b - a
+        v_r.append(complex(d.real / length, d.imag / length) * speed_mps
+                   if length > 0.0 else 0j)
         t_cap.append(min(length / speed_mps, horizon_s - t0))
     r = position - np.array(starts)[:, None]  # (L, K), then advanced to t0
     r += np.array(start_times_s)[:, None] * velocity

@@ -10,6 +10,7 @@ from hypothesis import strategies as st
 from agent.threats import (
     assess_threats,
     leg_threats,
+    legs_threats,
     nearby_others,
     rank_threats,
     tcpa_dcpa,
@@ -249,3 +250,17 @@ def test_nearby_others_returns_the_same_object_when_nothing_is_dropped():
     o = others([[1, 0], [2, 0]], [[0, 0]] * 2)
     assert nearby_others(np.zeros(2), o, 10.0, 5) is o
     assert len(nearby_others(np.zeros(2), Others.empty(), 10.0, 5)) == 0
+
+
+def test_a_denormal_leg_gives_no_nan_and_no_warning():
+    # Found by hypothesis in tests/agent/test_ifp.py: a goal 2.2e-313 m away made
+    # speed / length overflow, and (b - a) * inf put 0 * inf = NaN into the relative velocity.
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        hit, tcpa = legs_threats(
+            np.array([0j]), np.array([2.2250738585e-313j]), np.array([0.0]), 1.1,
+            np.array([1.0 + 0j]), np.array([0j]), np.array([1.3]), 8.0)
+    assert np.isfinite(tcpa).all()
+    assert hit.shape == (1, 1)
