@@ -173,4 +173,5 @@ def _advance(others: Others, age_s: float) -> Others:
         linearity=others.linearity,
         track_start_m=others.track_start_m,
         is_robot=others.is_robot,
+        heading_rad=others.heading_rad,  # a heading's drift over the age is not predicted
     )

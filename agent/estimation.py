@@ -7,7 +7,9 @@ poses it observed and estimates, per other disc,
 - linearity w_j of Eq. (14) (our choice, the paper leaves it open): the straightness index
   |p_last - p_first| / (path length over the window), in [0, 1]; 1 for a straight track,
   lower for a turning or dithering one, 0 for a disc that has not moved (< 1 cm);
-- s_j, the ghost path's start: the oldest position inside the window.
+- s_j, the ghost path's start: the oldest position inside the window;
+- heading: the latest observed one (the pose carries it), used by the braking guard for
+  the direction a robot can speed up in (`agent.safety.unseen_speed_up_mps`).
 All neighbours are handled at once with arrays of shape (H samples, n discs).
 """
 
@@ -44,6 +46,7 @@ class NeighborTracker:
         self._col: dict[int, int] = {}
         self._ids = np.zeros(0, dtype=np.int64)
         self._radius = np.zeros(0)
+        self._heading = np.zeros(0)  # the latest observed heading per column
         self._t = np.full(self.max_samples, -np.inf)
         self._pos = np.zeros((self.max_samples, 0, 2))
         self._seen = np.zeros((self.max_samples, 0), dtype=bool)
@@ -62,6 +65,7 @@ class NeighborTracker:
         extra = len(new_ids)
         self._ids = np.concatenate([self._ids, np.array(new_ids, dtype=np.int64)])
         self._radius = np.concatenate([self._radius, np.zeros(extra)])
+        self._heading = np.concatenate([self._heading, np.zeros(extra)])
         self._pos = np.concatenate([self._pos, np.zeros((self.max_samples, extra, 2))], axis=1)
         self._seen = np.concatenate(
             [self._seen, np.zeros((self.max_samples, extra), dtype=bool)], axis=1
@@ -90,6 +94,7 @@ class NeighborTracker:
         self._seen[r, cols] = True
         self._pos[r, cols] = snapshot.pose[mask, :2]
         self._radius[cols] = snapshot.radius_m[mask]
+        self._heading[cols] = snapshot.pose[mask, 2]
         self._latest = self._seen[r].copy()
 
     def others(self, near_m: np.ndarray | None = None, within_m: float = np.inf) -> Others:
@@ -135,6 +140,7 @@ class NeighborTracker:
             linearity=np.minimum(linearity, 1.0),  # >= 0 already
             track_start_m=start,
             is_robot=ids >= 0,
+            heading_rad=self._heading[cols],
         )
 
     @staticmethod

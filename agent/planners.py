@@ -200,16 +200,24 @@ class ViaPointPlanner:
     def _braking_guard(self, observation: Observation, v_mps: float, omega_radps: float) -> float:
         """`v_mps` capped by `agent.safety.braking_speed_limit`, braking no harder than the
         rate limit allows (a cap below reach gives the hardest braking)."""
-        from agent.safety import braking_speed_limit, heading_sweep_rad
+        from agent.safety import braking_speed_limit, heading_sweep_rad, unseen_speed_up_mps
 
         ego, limits, others = observation.ego, observation.limits, observation.others
         reaction_s = observation.pose_age_s + self.control_period_s
+        # how much an other robot's velocity estimate may trail its velocity now
+        lag_s = 0.5 * self.config.estimation_window_s + observation.pose_age_s
+        unseen_dv = unseen_speed_up_mps(
+            (ego.x_m, ego.y_m), others.position_m, others.heading_rad, others.is_robot,
+            accel_mps2=limits.accel_max_mps2, turn_rate_radps=limits.omega_max_radps,
+            lag_s=lag_s, others_speed_mps=np.hypot(*others.velocity_mps.T),
+            v_max_mps=limits.v_max_mps)
         v_safe = braking_speed_limit(
             (ego.x_m, ego.y_m), ego.heading_rad, observation.radius_m,
             others.position_m, others.velocity_mps, others.radius_m,
             reaction_s=reaction_s, decel_mps2=limits.accel_max_mps2,
             margin_m=self.config.mpc.braking_margin_m,
             sweep_rad=heading_sweep_rad(omega_radps, reaction_s), up_to_mps=v_mps,
+            unseen_dv_mps=unseen_dv,
         )
         if v_mps <= v_safe:
             return v_mps

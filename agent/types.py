@@ -103,6 +103,8 @@ class Others:
         linearity: (K,) w_j in [0, 1], how straight the observed history is (Eq. 14).
         track_start_m: (K, 2) s_j, the oldest position of the observed window (ghost path start).
         is_robot: (K,) bool, False for scenario obstacles.
+        heading_rad: (K,) the observed headings (the world publishes full poses); None
+            means unknown (NaN: whoever reads it must assume any heading).
     """
 
     ids: np.ndarray
@@ -112,6 +114,7 @@ class Others:
     linearity: np.ndarray
     track_start_m: np.ndarray
     is_robot: np.ndarray
+    heading_rad: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         ids = np.asarray(self.ids, dtype=np.int64).reshape(-1)
@@ -131,6 +134,9 @@ class Others:
             self, "track_start_m", _as_array("track_start_m", self.track_start_m, (k, 2))
         )
         object.__setattr__(self, "is_robot", np.asarray(self.is_robot, dtype=bool).reshape(k))
+        heading = (np.full(k, np.nan) if self.heading_rad is None
+                   else _as_array("heading_rad", self.heading_rad, (k,)))
+        object.__setattr__(self, "heading_rad", heading)
 
     def __len__(self) -> int:
         return int(self.ids.shape[0])
@@ -147,12 +153,13 @@ class Others:
             linearity=np.zeros(0),
             track_start_m=z2,
             is_robot=np.zeros(0, dtype=bool),
+            heading_rad=np.zeros(0),
         )
 
     @classmethod
     def trusted(cls, ids: np.ndarray, position_m: np.ndarray, velocity_mps: np.ndarray,
                 radius_m: np.ndarray, linearity: np.ndarray, track_start_m: np.ndarray,
-                is_robot: np.ndarray) -> Others:
+                is_robot: np.ndarray, heading_rad: np.ndarray | None = None) -> Others:
         """Build from arrays derived from already validated ones, skipping validation.
 
         For the hot path only (subsets, time shifts, estimates from validated snapshots);
@@ -164,6 +171,9 @@ class Others:
                             ("linearity", linearity), ("track_start_m", track_start_m),
                             ("is_robot", is_robot)):
             object.__setattr__(obj, name, value)
+        if heading_rad is None:
+            heading_rad = np.full(ids.shape[0], np.nan)
+        object.__setattr__(obj, "heading_rad", heading_rad)
         return obj
 
     def subset(self, index: np.ndarray) -> Others:
@@ -176,6 +186,7 @@ class Others:
             linearity=self.linearity[index],
             track_start_m=self.track_start_m[index],
             is_robot=self.is_robot[index],
+            heading_rad=self.heading_rad[index],
         )
 
 

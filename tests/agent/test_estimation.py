@@ -116,3 +116,16 @@ def test_a_disc_missing_from_one_sample_is_fitted_on_the_samples_it_was_in():
     assert o.ids.tolist() == [1, 2]
     np.testing.assert_allclose(o.velocity_mps, [[1.0, 0.0], [0.0, 2.0]], atol=1e-9)
     assert o.linearity.tolist() == pytest.approx([1.0, 1.0])
+
+
+def test_the_latest_observed_heading_is_reported_and_follows_subsets():
+    tr = NeighborTracker(own_id=0)
+    rows = [(0, 0.0, 0.0, 0.0), (1, 2.0, 0.0, 0.5), (2, 4.0, 1.0, -2.0)]
+    for k, turn in enumerate((0.0, 0.1)):
+        tr.update(PoseSnapshot(stamp_s=0.1 * k, tick=k, ids=[r[0] for r in rows],
+                               pose=[[r[1], r[2], r[3] + turn] for r in rows],
+                               radius_m=[0.5] * 3))
+    o = tr.others()
+    np.testing.assert_allclose(o.heading_rad, [0.6, -1.9])
+    np.testing.assert_allclose(o.subset(np.array([1])).heading_rad, [-1.9])
+    np.testing.assert_allclose(tr.others(near_m=np.zeros(2), within_m=3.0).heading_rad, [0.6])

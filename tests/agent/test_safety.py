@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 from agent.config import MpcConfig, PlannerConfig, RobotLimits
 from agent.planners import make_planner
-from agent.safety import braking_speed_limit, heading_sweep_rad
+from agent.safety import braking_speed_limit, heading_sweep_rad, unseen_speed_up_mps
 from agent.types import EgoState, Observation, Others
 
 R = 0.5
@@ -148,13 +148,87 @@ def test_the_limit_is_the_speed_that_stops_the_approach_exactly(gap, angle, tau,
     assert travelled == pytest.approx(room, rel=1e-6, abs=1e-9)
 
 
-def _observation(ahead_m: float, pose_age_s: float) -> Observation:
-    """A robot at full speed towards its goal, a stopped robot `ahead_m` ahead on the way."""
+def test_an_unseen_speed_up_counts_as_that_much_more_approach():
+    # a still disc that may already close at 0.5 m/s is limited as one seen closing at 0.5
+    assert braking_speed_limit((0.0, 0.0), 0.0, R, np.array([[2.0, 0.0]]), np.zeros((1, 2)),
+                               np.array([R]), reaction_s=0.1, decel_mps2=1.5, margin_m=0.05,
+                               unseen_dv_mps=0.5) == pytest.approx(limit([2.0, 0.0], [-0.5, 0.0]))
+    # a receding one keeps the part of its speed the lag cannot have undone
+    assert braking_speed_limit((0.0, 0.0), 0.0, R, np.array([[2.0, 0.0]]), np.array([[1.0, 0.0]]),
+                               np.array([R]), reaction_s=0.1, decel_mps2=1.5, margin_m=0.05,
+                               unseen_dv_mps=0.4) == pytest.approx(limit([2.0, 0.0], [0.6, 0.0]))
+    # per disc: only the first of two may have sped up
+    pos = np.array([[2.0, 0.0], [0.0, 2.0]])
+    per_disc = braking_speed_limit((0.0, 0.0), 0.0, R, pos, np.zeros((2, 2)), np.full(2, R),
+                                   reaction_s=0.1, decel_mps2=1.5, margin_m=0.05,
+                                   unseen_dv_mps=np.array([0.5, 0.0]))
+    assert per_disc == pytest.approx(limit([2.0, 0.0], [-0.5, 0.0]))
+
+
+@pytest.mark.parametrize("bad", [-0.1, math.nan, math.inf])
+def test_a_bad_unseen_speed_up_is_rejected(bad):
+    with pytest.raises(ValueError, match="unseen_dv_mps"):
+        braking_speed_limit((0.0, 0.0), 0.0, R, np.array([[2.0, 0.0]]), np.zeros((1, 2)),
+                            np.array([R]), reaction_s=0.1, decel_mps2=1.5, margin_m=0.05,
+                            unseen_dv_mps=bad)
+
+
+def speed_up(others_xy, heading, is_robot=True, turn=0.0, lag=0.2):
+    return unseen_speed_up_mps((0.0, 0.0), np.atleast_2d(np.asarray(others_xy, float)),
+                               np.atleast_1d(np.asarray(heading, float)),
+                               np.atleast_1d(is_robot), accel_mps2=1.5,
+                               turn_rate_radps=turn, lag_s=lag)
+
+
+def test_a_robot_can_have_sped_up_only_along_its_heading():
+    # 2 m ahead; facing the robot: the whole a lag = 0.3 m/s towards it
+    assert speed_up([2.0, 0.0], math.pi) == pytest.approx([0.3])
+    assert speed_up([2.0, 0.0], -math.pi) == pytest.approx([0.3])
+    # facing away or across: none
+    assert speed_up([2.0, 0.0], 0.0) == pytest.approx([0.0])
+    assert speed_up([2.0, 0.0], math.pi / 2) == pytest.approx([0.0], abs=1e-12)
+    # at 60 degrees off: the component towards the robot
+    assert speed_up([2.0, 0.0], math.pi - math.pi / 3) == pytest.approx([0.15])
+    # it may have turned by omega lag: 0.5 rad of a 1.0 rad offset
+    assert speed_up([2.0, 0.0], math.pi - 1.0, turn=2.5) == pytest.approx([0.3 * math.cos(0.5)])
+    assert speed_up([2.0, 0.0], math.pi + 0.4, turn=2.5) == pytest.approx([0.3])
+    # unknown heading: any; scenario obstacles: none (constant velocity)
+    assert speed_up([2.0, 0.0], math.nan) == pytest.approx([0.3])
+    assert speed_up([2.0, 0.0], math.pi, is_robot=False) == pytest.approx([0.0])
+    assert speed_up(np.zeros((0, 2)), np.zeros(0), np.zeros(0, bool)).shape == (0,)
+
+
+def test_no_robot_speeds_up_past_v_max():
+    ahead = np.array([[2.0, 0.0], [2.0, 1.0], [2.0, -1.0]])
+    up = unseen_speed_up_mps((0.0, 0.0), ahead, np.full(3, math.pi), np.ones(3, bool),
+                             accel_mps2=1.5, turn_rate_radps=0.0, lag_s=0.2,
+                             others_speed_mps=np.array([1.1, 0.95, 0.0]), v_max_mps=1.1)
+    facing = [1.0, math.cos(math.atan2(1.0, 2.0)), math.cos(math.atan2(1.0, 2.0))]
+    assert up == pytest.approx([0.0, 0.15 * facing[1], 0.3 * facing[2]])
+    # faster than v_max as estimated (noise): none, not negative
+    assert unseen_speed_up_mps((0.0, 0.0), ahead[:1], np.full(1, math.pi), np.ones(1, bool),
+                               accel_mps2=1.5, turn_rate_radps=0.0, lag_s=0.2,
+                               others_speed_mps=np.array([1.3]), v_max_mps=1.1) == [0.0]
+
+
+@pytest.mark.parametrize("kwargs", [{"accel_mps2": 0.0}, {"turn_rate_radps": -1.0},
+                                    {"lag_s": -0.1}])
+def test_bad_speed_up_parameters_are_rejected(kwargs):
+    args = {"accel_mps2": 1.5, "turn_rate_radps": 1.5, "lag_s": 0.2} | kwargs
+    with pytest.raises(ValueError):
+        unseen_speed_up_mps((0.0, 0.0), np.ones((1, 2)), np.zeros(1), np.ones(1, bool), **args)
+
+
+def _observation(ahead_m: float, pose_age_s: float, is_robot: bool = False,
+                 heading_rad: float | None = None) -> Observation:
+    """A robot at full speed towards its goal, a still disc `ahead_m` ahead on the way: a
+    scenario obstacle (moves as seen) or a robot at rest (may have set off unseen)."""
     ego = EgoState(x_m=0.0, y_m=0.0, heading_rad=0.0, v_mps=1.1, omega_radps=0.0)
     xy = np.array([[ahead_m, 0.0]])
-    others = Others(ids=np.array([7]), position_m=xy, velocity_mps=np.zeros((1, 2)),
-                    radius_m=np.array([R]), linearity=np.ones(1), track_start_m=xy,
-                    is_robot=np.ones(1, dtype=bool))
+    others = Others(ids=np.array([7 if is_robot else -1]), position_m=xy,
+                    velocity_mps=np.zeros((1, 2)), radius_m=np.array([R]), linearity=np.ones(1),
+                    track_start_m=xy, is_robot=np.array([is_robot]),
+                    heading_rad=None if heading_rad is None else np.array([heading_rad]))
     return Observation(robot_id=1, ego=ego, goal_m=np.array([20.0, 0.0]), radius_m=R,
                        limits=RobotLimits(), others=others, pose_age_s=pose_age_s)
 
@@ -175,6 +249,28 @@ def test_eifp_mpc_speed_is_capped_by_the_guard_and_braking_stays_within_the_rate
     # braking the rate limit allows (1.1 - 1.5 x 0.1), not a jump
     hard = make_planner("eifp-mpc", _config(2.3)).plan(obs, 0.0)
     assert hard.v_mps == pytest.approx(1.1 - 0.15, abs=1e-9)
+
+
+def test_a_robot_at_rest_may_have_set_off_since_its_estimate():
+    # The same still disc, but a robot: its estimate (a 0.5 s least-squares slope) lags by
+    # 0.25 s and the pose is 0.1 s old, so it may close at 1.5 x 0.35 = 0.525 m/s by now.
+    # Margin 1.8 m: room 0.7 - (0.525 x 0.2 + 0.525^2 / 3) = 0.503125 m, v_safe 0.965 m/s
+    # (above one period of braking, 0.95); the obstacle's 0.7 m allow 1.18 m/s.
+    obs = _observation(3.5, pose_age_s=0.1, is_robot=True)
+    capped = make_planner("eifp-mpc", _config(1.8)).plan(obs, 0.0)
+    room = 0.7 - (0.525 * 0.2 + 0.525**2 / 3.0)
+    assert capped.v_mps == pytest.approx(1.5 * (-0.2 + math.sqrt(0.04 + 2 * room / 1.5)),
+                                         rel=1e-9)
+    obstacle = make_planner("eifp-mpc", _config(1.8)).plan(_observation(3.5, 0.1), 0.0)
+    assert capped.v_mps < obstacle.v_mps - 0.1
+    # seen facing the robot, the same; seen facing away (it cannot have turned round in
+    # 0.35 s at 1.5 rad/s), as an obstacle
+    facing = make_planner("eifp-mpc", _config(1.8)).plan(
+        _observation(3.5, 0.1, is_robot=True, heading_rad=math.pi), 0.0)
+    assert facing.v_mps == pytest.approx(capped.v_mps, rel=1e-12)
+    away = make_planner("eifp-mpc", _config(1.8)).plan(
+        _observation(3.5, 0.1, is_robot=True, heading_rad=0.0), 0.0)
+    assert away.v_mps == pytest.approx(obstacle.v_mps, rel=1e-12)
 
 
 def test_the_guard_leaves_a_robot_alone_that_faces_away():

@@ -181,24 +181,24 @@ def test_latency_aware_half_planes_keep_setup_d_clear_at_150_ms(tmp_path, monkey
 
 
 def test_braking_guard_keeps_setup_g_clear_at_100_ms_with_loss(tmp_path):
-    # 100 ms +- 30 ms on both links of setup G with 10 % loss, link seed 3: without the
-    # guard a robot squeezed between a stopped neighbour and an approaching one accelerates
-    # into the stopped one (measured min gap -0.21 m), with it the run keeps clear (+0.12 m).
-    from dataclasses import replace
+    # 100 ms +- 30 ms on both links of setup G with 10 % loss, link seed 3. On the machine
+    # of stop 12 the run without the guard touched (-0.21 m: a robot squeezed between a
+    # stopped neighbour and an approaching one accelerated into the stopped one) and the
+    # guarded one kept clear (+0.12 m). A run at this level is chaotic: on the machine of
+    # stop 13 (another CPU, a fresh install of numpy 2.4.6 / scipy 1.17.1 / osqp 1.1.3) the
+    # same code's unguarded run kept clear too (+0.07 m), so only the guarded run is
+    # asserted here (+0.10 m with the unseen speed-up term). The cap itself is tested step
+    # by step in tests/agent/test_safety.py.
 
     from orchestrator.families import resolve
 
     scenario = resolve("setup_g", agents=None, seed=3, start_jitter_m=0.0, planner=None)
     faults = build_plan(latency_ms=100, jitter_ms=30, drop=0.1, seed=3)
-    gaps = {}
-    for guard in (False, True):
-        cfg = scenario.planner_config
-        cfg = replace(cfg, mpc=replace(cfg.mpc, braking_guard=guard))
-        out = run_lockstep(replace(scenario, planner_config=cfg), tmp_path / str(guard),
-                           faults=faults)
-        gaps[guard] = (out.metrics.contacts, out.metrics.min_gap_m)
-    assert gaps[False][0] > 0 and gaps[False][1] < 0.0, gaps
-    assert gaps[True][0] == 0 and gaps[True][1] > 0.05, gaps
+    cfg = scenario.planner_config
+    assert cfg.mpc.braking_guard  # on by default
+    out = run_lockstep(scenario, tmp_path / "run", faults=faults)
+    assert out.metrics.contacts == 0 and out.metrics.min_gap_m > 0.05, out.metrics.min_gap_m
+    assert out.metrics.success
 
 
 def test_killed_robot_is_avoided_where_it_stopped(tmp_path):
