@@ -37,6 +37,7 @@ from typing import Protocol
 import numpy as np
 
 from agent.config import PLANNER_NAMES, PlannerConfig
+from agent.safety import braking_speed_limit, heading_sweep_rad, unseen_speed_up_mps
 from agent.types import Observation, PlanResult, PlanStatus, Side, StageTimes
 
 Timer = Callable[[], float]
@@ -199,26 +200,34 @@ class ViaPointPlanner:
 
     def _braking_guard(self, observation: Observation, v_mps: float, omega_radps: float) -> float:
         """`v_mps` capped by `agent.safety.braking_speed_limit`, braking no harder than the
-        rate limit allows (a cap below reach gives the hardest braking)."""
-        from agent.safety import braking_speed_limit, heading_sweep_rad, unseen_speed_up_mps
+        rate limit allows (a cap below reach gives the hardest braking).
 
+        Two passes with one result: first with every other's unseen speed-up at its bound
+        `accel_max x lag` (a scalar: no per-disc trigonometry); the speed limit falls as the
+        speed-up grows, so when that pass lets `v_mps` through, the exact one would too. Only
+        a command the bound limits pays for `unseen_speed_up_mps`."""
         ego, limits, others = observation.ego, observation.limits, observation.others
         reaction_s = observation.pose_age_s + self.control_period_s
         # how much an other robot's velocity estimate may trail its velocity now
         lag_s = 0.5 * self.config.estimation_window_s + observation.pose_age_s
-        unseen_dv = unseen_speed_up_mps(
+
+        def limit(unseen_dv: np.ndarray | float) -> float:
+            return braking_speed_limit(
+                (ego.x_m, ego.y_m), ego.heading_rad, observation.radius_m,
+                others.position_m, others.velocity_mps, others.radius_m,
+                reaction_s=reaction_s, decel_mps2=limits.accel_max_mps2,
+                margin_m=self.config.mpc.braking_margin_m,
+                sweep_rad=heading_sweep_rad(omega_radps, reaction_s), up_to_mps=v_mps,
+                unseen_dv_mps=unseen_dv,
+            )
+
+        if v_mps <= limit(limits.accel_max_mps2 * lag_s):
+            return v_mps
+        v_safe = limit(unseen_speed_up_mps(
             (ego.x_m, ego.y_m), others.position_m, others.heading_rad, others.is_robot,
             accel_mps2=limits.accel_max_mps2, turn_rate_radps=limits.omega_max_radps,
             lag_s=lag_s, others_speed_mps=np.hypot(*others.velocity_mps.T),
-            v_max_mps=limits.v_max_mps)
-        v_safe = braking_speed_limit(
-            (ego.x_m, ego.y_m), ego.heading_rad, observation.radius_m,
-            others.position_m, others.velocity_mps, others.radius_m,
-            reaction_s=reaction_s, decel_mps2=limits.accel_max_mps2,
-            margin_m=self.config.mpc.braking_margin_m,
-            sweep_rad=heading_sweep_rad(omega_radps, reaction_s), up_to_mps=v_mps,
-            unseen_dv_mps=unseen_dv,
-        )
+            v_max_mps=limits.v_max_mps))
         if v_mps <= v_safe:
             return v_mps
         hardest = ego.v_mps - limits.accel_max_mps2 * self.control_period_s

@@ -5,7 +5,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from agent.config import MpcConfig, PlannerConfig, RobotLimits
@@ -278,3 +278,48 @@ def test_the_guard_leaves_a_robot_alone_that_faces_away():
     a = make_planner("eifp-mpc", _config(2.0)).plan(obs, 0.0)
     b = make_planner("eifp-mpc", _config(2.0, guard=False)).plan(obs, 0.0)
     assert a.v_mps == b.v_mps
+
+
+def _one_pass_guard(planner, obs: Observation, v_mps: float, omega_radps: float) -> float:
+    """The guard as the module docstring defines it: the exact unseen speed-ups, one pass."""
+    ego, limits, others = obs.ego, obs.limits, obs.others
+    reaction_s = obs.pose_age_s + planner.control_period_s
+    lag_s = 0.5 * planner.config.estimation_window_s + obs.pose_age_s
+    unseen = unseen_speed_up_mps(
+        (ego.x_m, ego.y_m), others.position_m, others.heading_rad, others.is_robot,
+        accel_mps2=limits.accel_max_mps2, turn_rate_radps=limits.omega_max_radps, lag_s=lag_s,
+        others_speed_mps=np.hypot(*others.velocity_mps.T), v_max_mps=limits.v_max_mps)
+    v_safe = braking_speed_limit(
+        (ego.x_m, ego.y_m), ego.heading_rad, obs.radius_m, others.position_m,
+        others.velocity_mps, others.radius_m, reaction_s=reaction_s,
+        decel_mps2=limits.accel_max_mps2, margin_m=planner.config.mpc.braking_margin_m,
+        sweep_rad=heading_sweep_rad(omega_radps, reaction_s), unseen_dv_mps=unseen)
+    if v_mps <= v_safe:
+        return v_mps
+    return max(v_safe, ego.v_mps - limits.accel_max_mps2 * planner.control_period_s,
+               limits.v_min_mps)
+
+
+@settings(max_examples=300, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), k=st.integers(1, 10),
+       pose_age_s=st.sampled_from([0.0, 0.05, 0.13, 0.4]),
+       v_mps=st.floats(0.0, 1.1), omega_radps=st.floats(-1.5, 1.5))
+def test_the_guards_cheap_first_pass_never_changes_its_result(seed, k, pose_age_s, v_mps,
+                                                              omega_radps):
+    # The guard first tries every unseen speed-up at its bound and pays for the exact ones
+    # only when that limits the command: the result must be the one-pass result, exactly.
+    rng = np.random.default_rng(seed)
+    xy = rng.uniform(-4.0, 4.0, (k, 2))
+    # headings unknown (None: any heading) in a fifth of the crowds
+    heading = rng.uniform(-math.pi, math.pi, k) if rng.random() > 0.2 else None
+    others = Others(ids=np.arange(k) + 10, position_m=xy,
+                    velocity_mps=rng.uniform(-0.8, 0.8, (k, 2)),
+                    radius_m=np.full(k, R), linearity=np.ones(k), track_start_m=xy,
+                    is_robot=rng.random(k) < 0.8, heading_rad=heading)
+    ego = EgoState(x_m=0.0, y_m=0.0, heading_rad=float(rng.uniform(-math.pi, math.pi)),
+                   v_mps=float(rng.uniform(0.0, 1.1)), omega_radps=0.0)
+    obs = Observation(robot_id=1, ego=ego, goal_m=np.array([20.0, 0.0]), radius_m=R,
+                      limits=RobotLimits(), others=others, pose_age_s=pose_age_s)
+    planner = make_planner("eifp-mpc", _config(0.1))
+    assert planner._braking_guard(obs, v_mps, omega_radps) == \
+        _one_pass_guard(planner, obs, v_mps, omega_radps)
