@@ -383,10 +383,29 @@ def _fault_plan(args: argparse.Namespace, scenario: Scenario) -> Any:
         plan.check([r.id for r in scenario.robots])
     except FaultSpecError as exc:
         raise BadInput(str(exc)) from None
+    _check_rates(plan, args.mode)
+    return plan if plan.active else None
+
+
+def _check_rates(plan: Any, mode: str) -> None:
     for rid, timing in plan.timing.items():
         hz = timing.control_rate_hz
-        if args.mode == "lockstep" and hz is not None and abs(50.0 / hz - round(50.0 / hz)) > 1e-9:
+        if mode == "lockstep" and hz is not None and abs(50.0 / hz - round(50.0 / hz)) > 1e-9:
             raise BadInput(f"--robot-rate {rid}:{hz:g}: in lockstep the rate must divide 50 Hz")
+
+
+def _robot_faults(args: argparse.Namespace, scenario: Scenario) -> Any:
+    """The robot (timing and process) faults of the flags, for every run of a stress sweep;
+    None when there are none."""
+    from orchestrator.faults import FaultSpecError, build_plan
+
+    try:
+        plan = build_plan(slow=args.slow_robot, rates=args.robot_rate, kill=args.kill_robot,
+                          stop=args.stop_robot, restart=args.restart_robot)
+        plan.check([r.id for r in scenario.robots])
+    except FaultSpecError as exc:
+        raise BadInput(str(exc)) from None
+    _check_rates(plan, args.mode)
     return plan if plan.active else None
 
 
@@ -410,8 +429,9 @@ def cmd_stress(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise BadInput(str(exc)) from None
     for planner in planners:  # fail before starting
-        resolve(args.setup, agents=args.agents, seed=0, start_jitter_m=args.start_jitter_m,
-                planner=planner)
+        scenario = resolve(args.setup, agents=args.agents, seed=0,
+                           start_jitter_m=args.start_jitter_m, planner=planner)
+    robot_faults = _robot_faults(args, scenario)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     keys = list(sweep)
@@ -424,7 +444,7 @@ def cmd_stress(args: argparse.Namespace) -> int:
             setup=args.setup, planner=planner, seed=seed, level=tuple(level.items()),
             links=links, mode=args.mode, out_dir=str(out / name), agents=args.agents,
             start_jitter_m=args.start_jitter_m, time_scale=args.time_scale or 1.0,
-            compensate_latency=not args.no_latency_compensation))
+            compensate_latency=not args.no_latency_compensation, robot_faults=robot_faults))
     print(f"stress: {len(jobs)} runs ({args.mode}), {args.jobs} at a time, into {out}",
           file=sys.stderr)
     t0 = time.monotonic()
@@ -439,7 +459,7 @@ def cmd_stress(args: argparse.Namespace) -> int:
     rows = stress.run_jobs(jobs, args.jobs, on_done)
     table = stress.aggregate(rows, keys)
     env = stress.envelope(table, keys)
-    header = ["setup", "planner", *keys, "runs", "success_rate", "contacts",
+    header = ["setup", "planner", *keys, "runs", "success_rate", "arrived_frac", "contacts",
               "runs_with_contact", "min_gap_m", "time_ratio_mean"]
     print(f"\n{args.setup}, {args.mode}, jitter = {args.jitter_frac:g} x latency unless set, "
           f"seeds 0..{args.seeds - 1}")
@@ -578,7 +598,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--start-jitter-m", type=float, default=0.0)
     p.add_argument("--time-scale", type=float, default=None)
     p.add_argument("--out", required=True)
-    _add_link_args(p)
+    _add_fault_args(p)
     p.set_defaults(func=cmd_stress)
 
     p = sub.add_parser("sweep", help="many runs: setups x planners x seeds")

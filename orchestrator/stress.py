@@ -16,6 +16,13 @@ envelope) and the printed table: per planner and level, the success rate, the co
 The *envelope* of a planner, per swept key: the largest value v such that every level with
 that key <= v (the other keys at their smallest swept value) had zero contacts in every
 seed. None: contacts already at the smallest value.
+
+Robot faults (``--kill-robot``, ``--stop-robot``, ``--restart-robot``, ``--slow-robot``,
+``--robot-rate``, as for ``orchestrator run``) apply unchanged to every run of the sweep:
+``orchestrator stress setup_g --kill-robot 0@28 --sweep latency_ms=0,100 --drop 0.1``
+measures whether a crashed robot is avoided at each link level. A killed robot never
+arrives, so such runs end at the time limit and do not succeed; read their contacts and the
+arrived fraction (``arrived_frac``: robots arrived over robots, summed over the seeds).
 """
 
 from __future__ import annotations
@@ -34,6 +41,7 @@ from pathlib import Path
 from typing import Any
 
 from agent.link import LinkFaults
+from orchestrator.faults import FaultPlan
 
 SWEEP_KEYS = ("latency_ms", "jitter_ms", "drop", "dup", "reorder")
 
@@ -101,6 +109,7 @@ class StressJob:
     start_jitter_m: float = 0.0
     time_scale: float = 1.0
     compensate_latency: bool = True
+    robot_faults: FaultPlan | None = None  # its timing and process faults (links: `links`)
 
 
 def run_job(job: StressJob) -> dict[str, Any]:
@@ -108,7 +117,6 @@ def run_job(job: StressJob) -> dict[str, Any]:
     import json
 
     from orchestrator.families import resolve
-    from orchestrator.faults import FaultPlan
     from orchestrator.rundir import metrics_from_run_dir, write_metrics
 
     t0 = time.monotonic()
@@ -117,8 +125,8 @@ def run_job(job: StressJob) -> dict[str, Any]:
     try:
         scenario = resolve(job.setup, agents=job.agents, seed=job.seed,
                            start_jitter_m=job.start_jitter_m, planner=job.planner)
-        plan = FaultPlan(links=job.links, seed=job.seed,
-                         compensate_latency=job.compensate_latency)
+        plan = replace(job.robot_faults or FaultPlan(), links=job.links, seed=job.seed,
+                       compensate_latency=job.compensate_latency)
         out = Path(job.out_dir)
         if job.mode == "lockstep":
             from orchestrator.lockstep import run_lockstep
@@ -195,6 +203,8 @@ def aggregate(rows: Sequence[dict[str, Any]], keys: Sequence[str]) -> list[dict[
             "success_rate": (sum(bool(r.get("success")) for r in ok) / len(ok)) if ok else None,
             "contacts": sum(int(r.get("contacts") or 0) for r in ok),
             "runs_with_contact": sum(1 for r in ok if (r.get("contacts") or 0) > 0),
+            "arrived_frac": (sum(int(r.get("arrived") or 0) for r in ok)
+                             / max(1, sum(int(r.get("robots") or 0) for r in ok))) if ok else None,
             "min_gap_m": _min([r.get("min_gap_m") for r in ok]),
             "time_ratio_mean": _mean([r.get("time_ratio_mean") for r in ok]),
             "ego_error_m_mean": _mean([r.get("ego_error_m_mean") for r in ok]),

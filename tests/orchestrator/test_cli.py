@@ -247,7 +247,31 @@ def test_stress_writes_table_rows_and_envelope(tmp_path, capsys):
     assert faults["faults"]["seed"] == 1
 
 
+def test_stress_applies_robot_faults_to_every_run(tmp_path, capsys):
+    # setup A, robot 1 killed at 8 s (head-on, 9 m before they meet): every run of the
+    # sweep has the kill; robot 0 arrives past the stopped robot, without contact.
+    out = tmp_path / "stress"
+    rc = main(["stress", "setup_a", "--sweep", "latency_ms=0,50", "--planners", "eifp-mpc",
+               "--seeds", "1", "--kill-robot", "1@8", "--out", str(out)])
+    assert rc == 0
+    content = json.loads((out / "stress.json").read_text())
+    assert len(content["rows"]) == 2
+    for row in content["rows"]:
+        events = [json.loads(x) for x in
+                  (out / row["dir"] / "events.jsonl").read_text().splitlines()]
+        lost = [e for e in events if e["kind"] == "robot_lost"]
+        assert [(e["robot"], e["t"]) for e in lost] == [(1, pytest.approx(8.0, abs=0.03))]
+        assert [e["robot"] for e in events if e["kind"] == "arrived"] == [0]
+        assert events[0]["faults"]["process"][0]["kind"] == "kill"
+        assert row["contacts"] == 0 and row["success"] is False and row["arrived"] == 1
+    assert [t["arrived_frac"] for t in content["table"]] == [0.5, 0.5]
+    assert "arrived_frac" in capsys.readouterr().out
+
+
 @pytest.mark.parametrize("argv, message", [
+    (["--kill-robot", "9@3"], "no robot 9"),
+    (["--stop-robot", "0@3"], "expected I@T:DUR"),
+    (["--robot-rate", "0:15"], "must divide 50 Hz"),
     (["--sweep", "speed=1,2"], "KEY one of"),
     (["--sweep", "drop=0,3"], "drop"),
     (["--sweep", "latency_ms=a"], "numbers"),
