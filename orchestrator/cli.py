@@ -423,7 +423,8 @@ def cmd_stress(args: argparse.Namespace) -> int:
     if args.seeds < 1 or args.jobs < 1:
         raise BadInput("--seeds and --jobs must be >= 1")
     try:
-        sweep = stress.parse_sweep(args.sweep or ["latency_ms=0"])
+        # no --sweep: one level, the base faults as given (--latency-ms is not overridden)
+        sweep = stress.parse_sweep(args.sweep or [f"latency_ms={args.latency_ms!r}"])
         base = LinkFaults(latency_ms=args.latency_ms, jitter_ms=args.jitter_ms, drop=args.drop,
                           dup=args.dup, reorder=args.reorder)
     except ValueError as exc:

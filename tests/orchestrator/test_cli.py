@@ -268,6 +268,20 @@ def test_stress_applies_robot_faults_to_every_run(tmp_path, capsys):
     assert "arrived_frac" in capsys.readouterr().out
 
 
+def test_stress_without_a_sweep_runs_the_base_faults_as_given(tmp_path):
+    # No --sweep: one level at --latency-ms (it used to be swept at 0 ms, silently).
+    out = tmp_path / "stress"
+    rc = main(["stress", "setup_a", "--planners", "ifp", "--seeds", "1", "--latency-ms", "100",
+               "--jitter-ms", "30", "--drop", "0.1", "--out", str(out)])
+    assert rc == 0
+    (row,) = json.loads((out / "stress.json").read_text())["rows"]
+    assert row["latency_ms"] == 100.0
+    start = json.loads((out / row["dir"] / "events.jsonl").read_text().splitlines()[0])
+    assert start["faults"]["links"] == pytest.approx(
+        {"latency_ms": 100.0, "jitter_ms": 30.0, "drop": 0.1, "dup": 0.0, "reorder": 0.0,
+         "reorder_delay_ms": 50.0})
+
+
 @pytest.mark.parametrize("argv, message", [
     (["--kill-robot", "9@3"], "no robot 9"),
     (["--stop-robot", "0@3"], "expected I@T:DUR"),
