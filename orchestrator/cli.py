@@ -370,42 +370,26 @@ def _add_fault_args(p: argparse.ArgumentParser) -> None:
                    help="SIGKILL robot I at T and start it again with the same id")
 
 
-def _fault_plan(args: argparse.Namespace, scenario: Scenario) -> Any:
-    """The run's `FaultPlan`, or None when no fault flag is given."""
+def _fault_plan(args: argparse.Namespace, scenario: Scenario, *, links: bool = True) -> Any:
+    """The `FaultPlan` of the fault flags, checked against `scenario` (robot ids, lockstep
+    rates), or None when no fault flag is given. `links=False` leaves the link flags and
+    the seed out: `stress` sets those per level and run, the robot faults apply to all."""
     from orchestrator.faults import FaultSpecError, build_plan
 
-    try:
-        plan = build_plan(
-            latency_ms=args.latency_ms, jitter_ms=args.jitter_ms, drop=args.drop, dup=args.dup,
-            reorder=args.reorder, seed=args.seed, slow=args.slow_robot, rates=args.robot_rate,
-            kill=args.kill_robot, stop=args.stop_robot, restart=args.restart_robot,
-            compensate_latency=not args.no_latency_compensation)
-        plan.check([r.id for r in scenario.robots])
-    except FaultSpecError as exc:
-        raise BadInput(str(exc)) from None
-    _check_rates(plan, args.mode)
-    return plan if plan.active else None
-
-
-def _check_rates(plan: Any, mode: str) -> None:
-    for rid, timing in plan.timing.items():
-        hz = timing.control_rate_hz
-        if mode == "lockstep" and hz is not None and abs(50.0 / hz - round(50.0 / hz)) > 1e-9:
-            raise BadInput(f"--robot-rate {rid}:{hz:g}: in lockstep the rate must divide 50 Hz")
-
-
-def _robot_faults(args: argparse.Namespace, scenario: Scenario) -> Any:
-    """The robot (timing and process) faults of the flags, for every run of a stress sweep;
-    None when there are none."""
-    from orchestrator.faults import FaultSpecError, build_plan
-
+    link_flags = dict(
+        latency_ms=args.latency_ms, jitter_ms=args.jitter_ms, drop=args.drop, dup=args.dup,
+        reorder=args.reorder, seed=args.seed,
+        compensate_latency=not args.no_latency_compensation) if links else {}
     try:
         plan = build_plan(slow=args.slow_robot, rates=args.robot_rate, kill=args.kill_robot,
-                          stop=args.stop_robot, restart=args.restart_robot)
+                          stop=args.stop_robot, restart=args.restart_robot, **link_flags)
         plan.check([r.id for r in scenario.robots])
     except FaultSpecError as exc:
         raise BadInput(str(exc)) from None
-    _check_rates(plan, args.mode)
+    for rid, timing in plan.timing.items():
+        hz = timing.control_rate_hz
+        if args.mode == "lockstep" and hz is not None and abs(50.0 / hz - round(50.0 / hz)) > 1e-9:
+            raise BadInput(f"--robot-rate {rid}:{hz:g}: in lockstep the rate must divide 50 Hz")
     return plan if plan.active else None
 
 
@@ -423,16 +407,16 @@ def cmd_stress(args: argparse.Namespace) -> int:
     if args.seeds < 1 or args.jobs < 1:
         raise BadInput("--seeds and --jobs must be >= 1")
     try:
-        # no --sweep: one level, the base faults as given (--latency-ms is not overridden)
-        sweep = stress.parse_sweep(args.sweep or [f"latency_ms={args.latency_ms!r}"])
         base = LinkFaults(latency_ms=args.latency_ms, jitter_ms=args.jitter_ms, drop=args.drop,
                           dup=args.dup, reorder=args.reorder)
+        # no --sweep: one level, the base faults as given (--latency-ms is not overridden)
+        sweep = stress.parse_sweep(args.sweep or [f"latency_ms={args.latency_ms!r}"])
     except ValueError as exc:
         raise BadInput(str(exc)) from None
     for planner in planners:  # fail before starting
         scenario = resolve(args.setup, agents=args.agents, seed=0,
                            start_jitter_m=args.start_jitter_m, planner=planner)
-    robot_faults = _robot_faults(args, scenario)
+    robot_faults = _fault_plan(args, scenario, links=False)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     keys = list(sweep)

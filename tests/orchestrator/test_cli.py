@@ -286,6 +286,7 @@ def test_stress_without_a_sweep_runs_the_base_faults_as_given(tmp_path):
     (["--kill-robot", "9@3"], "no robot 9"),
     (["--stop-robot", "0@3"], "expected I@T:DUR"),
     (["--robot-rate", "0:15"], "must divide 50 Hz"),
+    (["--latency-ms", "-5"], "error: latency_ms: must be"),  # not a --sweep never given
     (["--sweep", "speed=1,2"], "KEY one of"),
     (["--sweep", "drop=0,3"], "drop"),
     (["--sweep", "latency_ms=a"], "numbers"),
