@@ -110,10 +110,12 @@ def braking_speed_limit(
     enough = up_to_mps * reaction_s + up_to_mps * up_to_mps / (2.0 * decel_mps2)
     pos, vel = others_position_m.tolist(), others_velocity_mps.tolist()
     rad = others_radius_m.tolist()
-    unseen = np.broadcast_to(np.asarray(unseen_dv_mps, dtype=float), (len(pos),))
-    if np.any(unseen < 0.0) or not np.all(np.isfinite(unseen)):
+    if isinstance(unseen_dv_mps, float | int):  # the guard's first pass: no numpy here
+        unseen = [float(unseen_dv_mps)] * len(pos)
+    else:
+        unseen = np.broadcast_to(np.asarray(unseen_dv_mps, dtype=float), (len(pos),)).tolist()
+    if not all(0.0 <= u < math.inf for u in unseen):  # NaN fails this too
         raise ValueError("unseen_dv_mps must be finite and >= 0")
-    unseen = unseen.tolist()
     for j, (ox, oy) in enumerate(pos):
         dx, dy = ox - x, oy - y
         dist = math.hypot(dx, dy)

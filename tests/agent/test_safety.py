@@ -166,11 +166,12 @@ def test_an_unseen_speed_up_counts_as_that_much_more_approach():
 
 
 @pytest.mark.parametrize("bad", [-0.1, math.nan, math.inf])
-def test_a_bad_unseen_speed_up_is_rejected(bad):
+@pytest.mark.parametrize("as_array", [False, True])
+def test_a_bad_unseen_speed_up_is_rejected(bad, as_array):
     with pytest.raises(ValueError, match="unseen_dv_mps"):
         braking_speed_limit((0.0, 0.0), 0.0, R, np.array([[2.0, 0.0]]), np.zeros((1, 2)),
                             np.array([R]), reaction_s=0.1, decel_mps2=1.5, margin_m=0.05,
-                            unseen_dv_mps=bad)
+                            unseen_dv_mps=np.array([bad]) if as_array else bad)
 
 
 def speed_up(others_xy, heading, is_robot=True, turn=0.0, lag=0.2):
