@@ -43,8 +43,8 @@ from agent.config import PLANNER_NAMES, PlannerConfig
 from agent.types import PlanStatus, PoseSnapshot, Side
 from world.scenario import RobotSpec
 
-SCHEMA_VERSION = 1
-"""Bumped on any incompatible change of a message schema."""
+SCHEMA_VERSION = 2
+"""Bumped on any incompatible change of a message schema (2: `CommandMsg` gained ``hold``)."""
 
 KEY_ROOT = "eifp"
 MAX_MESSAGE_BYTES = 1 << 20
@@ -58,6 +58,8 @@ MAX_COORD_M = 1.0e6
 MAX_RADIUS_M = 1.0e3
 MAX_SPEED = 1.0e3
 """|v| [m/s] and |omega| [rad/s] larger than this are treated as garbage."""
+MAX_HOLD_S = 60.0
+"""Longest a command may ask to be held [s]."""
 MAX_REASON_CHARS = 256
 MAX_SEQ = 2**63 - 1
 MAX_RUN_ID_CHARS = 64
@@ -627,7 +629,8 @@ class CommandMsg:
     """Robot -> world: one velocity command.
 
     Wire body: ``robot`` (int), ``seq`` (int), ``pose_stamp`` (float), ``v``, ``omega``,
-    ``plan_ms`` (float), ``status`` (str), ``side`` (-1|0|1), ``resolved`` (int or nil).
+    ``plan_ms`` (float), ``status`` (str), ``side`` (-1|0|1), ``resolved`` (int or nil),
+    ``hold`` (float or nil).
 
     Args:
         robot_id: sender (must match the key's id; checked by `decode(expected_robot_id=)`).
@@ -638,6 +641,10 @@ class CommandMsg:
         status: a `agent.types.PlanStatus` value.
         side: a `agent.types.Side` value.
         resolved_id: id of the threat the chosen via-point resolves, or None.
+        hold_s: how long (sim s, in (0, `MAX_HOLD_S`]) the world may apply this command
+            if no newer one arrives; after that it brakes the robot (a command is good for
+            the period it was planned for, not until a lost link's time-out). None: until
+            the world's own command time-out.
     """
 
     robot_id: int
@@ -649,6 +656,7 @@ class CommandMsg:
     status: str
     side: int = 0
     resolved_id: int | None = None
+    hold_s: float | None = None
 
     TYPE: typing.ClassVar[str] = "cmd"
 
@@ -668,6 +676,8 @@ class CommandMsg:
         if self.resolved_id is not None:
             set_(self, "resolved_id",
                  _int(self.resolved_id, "cmd.resolved", MIN_OBSTACLE_ID, MAX_ROBOT_ID))
+        if self.hold_s is not None:
+            set_(self, "hold_s", _float(self.hold_s, "cmd.hold", 0.0, MAX_HOLD_S, lo_open=True))
 
     def encode(self) -> bytes:
         """Serialise to msgpack."""
@@ -681,6 +691,7 @@ class CommandMsg:
             "status": self.status,
             "side": self.side,
             "resolved": self.resolved_id,
+            "hold": self.hold_s,
         })
 
     @classmethod
@@ -694,6 +705,7 @@ class CommandMsg:
         """
         body = _open_envelope(data, cls.TYPE, (
             "robot", "seq", "pose_stamp", "v", "omega", "plan_ms", "status", "side", "resolved",
+            "hold",
         ))
         msg = cls(
             robot_id=body["robot"],
@@ -705,6 +717,7 @@ class CommandMsg:
             status=body["status"],
             side=body["side"],
             resolved_id=body["resolved"],
+            hold_s=body["hold"],
         )
         if known_ids is not None and msg.robot_id not in known_ids:
             raise ProtocolError(f"cmd.robot: unknown robot id {msg.robot_id}")

@@ -120,6 +120,11 @@ class PlannerConfig:
             default: in lockstep trials it lowered setup D's oscillations (2 -> 0.25-1) but
             raised setup G's (6.8 -> 8.1 per robot, mean over 6 seeds).
         estimation_window_s: history length used to estimate others' velocity and linearity.
+        command_hold_periods: each command tells the world to apply it for at most this
+            many control periods (`protocol.CommandMsg.hold_s`); a command that is not
+            followed in time (lost or late on the link) then gives way to braking instead
+            of acting until the world's time-out. 1.5: one period plus half a period of
+            jitter between two commands before the world brakes (not in the paper).
         lookahead_s: how far ahead on the reference the tracking law aims.
         heading_gain: proportional gain of the tracking law on heading error [1/s].
         orca_time_horizon_s: ORCA's time horizon for other agents.
@@ -145,6 +150,7 @@ class PlannerConfig:
     primary_hysteresis: bool = False
     stand_on_emergency_s: float = 2.0
     estimation_window_s: float = 0.5
+    command_hold_periods: float = 1.5
     lookahead_s: float = 0.6
     heading_gain: float = 2.5
     orca_time_horizon_s: float = 4.0

@@ -42,6 +42,10 @@ class RobotController:
         compensate_latency: forward-predict by the snapshot's age before planning.
         control_period_s: the robot's planning period; the planner's rate limits (and
             ORCA's time step) use it.
+
+    Attributes:
+        command_hold_s: how long the world may apply one of this robot's commands before
+            it brakes (`PlannerConfig.command_hold_periods` periods); sent with each command.
     """
 
     def __init__(self, spec: RobotSpec, config: PlannerConfig, goal_tolerance_m: float,
@@ -54,6 +58,10 @@ class RobotController:
         self.goal_tolerance_m = float(goal_tolerance_m)
         self.compensate_latency = compensate_latency
         self.control_period_s = float(control_period_s)
+        if not config.command_hold_periods > 0.0:
+            raise ValueError("command_hold_periods must be positive, got "
+                             f"{config.command_hold_periods!r}")
+        self.command_hold_s = config.command_hold_periods * self.control_period_s
         self.planner = make_planner(spec.planner, config, control_period_s=self.control_period_s)
         self.tracker = NeighborTracker(spec.id, config.estimation_window_s)
         self.snapshot: PoseSnapshot | None = None

@@ -581,6 +581,7 @@ class RobotNode:
             robot_id=self.robot_id, seq=self.seq, pose_stamp_s=msg.t_s, v_mps=result.v_mps,
             omega_radps=result.omega_radps, plan_ms=max(0.0, result.times.total_ms),
             status=result.status, side=int(result.side), resolved_id=result.resolved_id,
+            hold_s=self.controller.command_hold_s,
         ).encode())
         self.seq += 1
         self.counts["plans"] += 1

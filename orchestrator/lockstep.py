@@ -159,7 +159,8 @@ def run_lockstep(scenario: Scenario, out_dir: Path, *, world_rate_hz: float = 50
                     ctrl.observe(snapshot)
                     results.append(ctrl.plan(world.t_s))
                 for k, (ctrl, res) in enumerate(zip(controllers, results)):
-                    world.set_command(ctrl.spec.id, res.v_mps, res.omega_radps)
+                    world.set_command(ctrl.spec.id, res.v_mps, res.omega_radps,
+                                      ctrl.command_hold_s)
                     rec.record_command(world.t_s, ctrl.spec.id, seq[k], snapshot.stamp_s,
                                        res.v_mps, res.omega_radps, res.times.total_ms,
                                        str(res.status.value), side=int(res.side),
@@ -342,7 +343,7 @@ def _run_faulty(scenario: Scenario, out_dir: Path, world_rate_hz: float,
                         stale_cmds += 1
                         continue
                     last_seq[rid] = seq
-                    world.set_command(rid, res.v_mps, res.omega_radps)
+                    world.set_command(rid, res.v_mps, res.omega_radps, r.ctrl.command_hold_s)
                     rec.record_command(t, rid, seq, stamp, res.v_mps, res.omega_radps,
                                        res.times.total_ms, str(res.status.value),
                                        side=int(res.side), resolved=res.resolved_id)
@@ -360,7 +361,8 @@ def _run_faulty(scenario: Scenario, out_dir: Path, world_rate_hz: float,
                   min_gap_m=round(world.min_gap_m, 6) if math.isfinite(world.min_gap_m)
                   else None,
                   lost=sorted(r.spec.id for r in robots if r.state == "down"),
-                  cmd_timeouts=world.timeout_count, stale=stale_cmds,
+                  cmd_timeouts=world.timeout_count,
+                  cmd_hold_expiries=world.hold_expiry_count, stale=stale_cmds,
                   stale_poses=sum(r.ctrl.rejected_stale for r in robots),
                   pose_link=links, cmd_link=cmd_links,
                   ego_error_m_mean=round(ego_err_sum / plans, 6) if plans else None,

@@ -3,8 +3,12 @@
 The world integrates every robot's unicycle (Eq. 1) with the latest command held constant
 over a tick (zero-order hold). It integrates the arc exactly rather than with the Euler
 step of Eq. (1): the ground truth should not share the robots' model error. Commands are
-clamped to the robot's limits; a robot whose command is older than `cmd_timeout_s`, or
-whose process is offline, brakes at its maximum deceleration with zero turn rate.
+clamped to the robot's limits; a robot whose command is older than its hold (the
+`hold_s` the robot sent with it: the period it was planned for) or than `cmd_timeout_s`,
+or whose process is offline, brakes at its maximum deceleration with zero turn rate. The
+hold is what keeps a lost command from acting longer than its sender assumed (the braking
+guard, `agent.safety`, assumes a command acts for about one period); the time-out is the
+world's own bound, for a robot that stopped sending.
 No I/O, no clock: time advances only through `step(dt_s)`.
 """
 
@@ -174,6 +178,8 @@ class WorldSim:
             `GAP_REACH_M` (inf while no two discs came that close; the run's metrics
             compute the exact minimum from the trajectory).
         timeout_count: number of command time-outs so far.
+        hold_expiry_count: number of commands that outlived their hold (the robot braked
+            until a newer one came).
     """
 
     def __init__(self, scenario: Scenario, *, cmd_timeout_s: float = 0.5) -> None:
@@ -202,6 +208,8 @@ class WorldSim:
         self.tick = 0
         self.command = np.zeros((n, 2))
         self.command_time_s = np.full(n, -np.inf)
+        self.command_hold_s = np.full(n, np.inf)
+        self._expired = np.zeros(n, dtype=bool)
         self.applied = np.zeros((n, 2))
         self.arrived = np.zeros(n, dtype=bool)
         self.arrival_time_s = np.full(n, np.nan)
@@ -211,6 +219,7 @@ class WorldSim:
         self._in_contact: set[tuple[int, int]] = set()
         self.contact_count = 0
         self.timeout_count = 0
+        self.hold_expiry_count = 0
         self.min_gap_m = np.inf
         self._all_ids = np.concatenate([self.robot_ids, self.obstacle_ids])
         self._all_radius = np.concatenate([self.radius_m, self.obstacle_radius_m])
@@ -220,15 +229,21 @@ class WorldSim:
         """Row of `robot_id` in the state arrays; KeyError for an unknown id."""
         return self._index[int(robot_id)]
 
-    def set_command(self, robot_id: int, v_mps: float, omega_radps: float) -> None:
-        """Hold (v, omega), clamped to the robot's limits, from now until the next command."""
+    def set_command(self, robot_id: int, v_mps: float, omega_radps: float,
+                    hold_s: float | None = None) -> None:
+        """Hold (v, omega), clamped to the robot's limits, from now until the next command,
+        for at most `hold_s` (None: until the time-out); then the robot brakes."""
         k = self.index_of(robot_id)
         v = float(np.clip(v_mps, self.v_min_mps[k], self.v_max_mps[k]))
         w = float(np.clip(omega_radps, -self.omega_max_radps[k], self.omega_max_radps[k]))
         if not (np.isfinite(v) and np.isfinite(w)):
             raise ValueError(f"robot {robot_id}: non-finite command")
+        if hold_s is not None and not hold_s > 0.0:  # NaN fails this too
+            raise ValueError(f"robot {robot_id}: hold_s must be positive, got {hold_s!r}")
         self.command[k] = (v, w)
         self.command_time_s[k] = self.t_s
+        self.command_hold_s[k] = np.inf if hold_s is None else float(hold_s)
+        self._expired[k] = False
         self._had_command[k] = True
 
     def set_offline(self, robot_id: int, offline: bool) -> None:
@@ -252,10 +267,15 @@ class WorldSim:
         self._stale = stale
         timeouts = tuple(int(i) for i in self.robot_ids[went_stale])
         self.timeout_count += len(timeouts)
+        # held for the ticks that start less than hold_s after the command (1e-9: rounding)
+        expired = (self.t_s - self.command_time_s) >= self.command_hold_s - 1e-9
+        self.hold_expiry_count += int(np.count_nonzero(expired & ~self._expired & ~stale
+                                                       & ~self.offline))
+        self._expired = expired
 
         v_cmd = self.command[:, 0].copy()
         w_cmd = self.command[:, 1].copy()
-        braking = stale | self.offline
+        braking = stale | expired | self.offline
         # Braking: decelerate at the robot's limit towards v = 0, no turning.
         v_brake = np.maximum(self.applied[:, 0] - self.decel_mps2 * dt_s, 0.0)
         v = np.where(braking, v_brake, v_cmd)

@@ -364,7 +364,7 @@ class WorldNode:
             self.counts["stale"] += 1
             return
         self.last_seq[rid] = msg.seq
-        self.sim.set_command(rid, msg.v_mps, msg.omega_radps)
+        self.sim.set_command(rid, msg.v_mps, msg.omega_radps, msg.hold_s)
         self.counts["commands"] += 1
         self.recorder.record_command(
             self.sim.t_s, rid, msg.seq, msg.pose_stamp_s, msg.v_mps, msg.omega_radps,
@@ -448,7 +448,8 @@ class WorldNode:
             arrived=arrived, contacts=self.sim.contact_count, ticks=self.sim.tick,
             min_gap_m=round(self.sim.min_gap_m, 6) if math.isfinite(self.sim.min_gap_m)
             else None,
-            lost=sorted(self.lost), cmd_timeouts=self.sim.timeout_count, **self.counts,
+            lost=sorted(self.lost), cmd_timeouts=self.sim.timeout_count,
+            cmd_hold_expiries=self.sim.hold_expiry_count, **self.counts,
             rejected_by_key=self.rejected_by_key, rejected_by_reason=self.rejected_by_reason,
             cmd_link={k: sum(getattr(link.counts, k) for link in self.cmd_links.values())
                       for k in ("dropped", "duplicated", "reordered")},
