@@ -55,7 +55,7 @@ def make_poses(n: int = 3, m: int = 2, t_s: float = 1.25, tick: int = 62) -> Pos
 
 def make_command(**overrides: object) -> CommandMsg:
     fields = dict(robot_id=2, seq=17, pose_stamp_s=3.2, v_mps=0.9, omega_radps=-0.4,
-                  plan_ms=4.5, status="ok", side=1, resolved_id=5)
+                  plan_ms=4.5, status="ok", side=1, resolved_id=5, hold_s=0.15)
     fields.update(overrides)
     return CommandMsg(**fields)
 
@@ -144,6 +144,9 @@ def test_command_round_trip() -> None:
     back = CommandMsg.decode(msg.encode(), known_ids={0, 1, 2}, expected_robot_id=2)
     assert back == msg
     assert back.status == "escape" and back.side == -1 and back.resolved_id is None
+    assert back.hold_s == 0.15
+    no_hold = make_command(hold_s=None)
+    assert CommandMsg.decode(no_hold.encode()).hold_s is None
 
 
 def test_command_round_trip_every_status_and_side() -> None:
@@ -234,6 +237,8 @@ def test_accepts_bytearray_and_memoryview() -> None:
     ("seq", "17"), ("seq", 1.5), ("seq", True), ("v", "fast"), ("v", None), ("status", 3),
     ("side", 2), ("side", 0.0), ("robot", -1), ("seq", -1), ("plan_ms", -1.0),
     ("status", "bogus"), ("resolved", "x"), ("pose_stamp", [1.0]), ("v", 1e9),
+    ("hold", 0.0), ("hold", -0.1), ("hold", 61.0), ("hold", float("nan")), ("hold", True),
+    ("hold", "0.1"),
 ])
 def test_command_rejects_wrong_type_or_range(key, value) -> None:
     body = raw(make_command())
@@ -672,7 +677,7 @@ hostile = (st.floats(allow_nan=True, allow_infinity=True) | st.integers(-(2**63)
 
 @FUZZ
 @given(field=st.sampled_from(["robot", "seq", "pose_stamp", "v", "omega", "plan_ms", "status",
-                              "side", "resolved"]), value=hostile,
+                              "side", "resolved", "hold"]), value=hostile,
        key_id=st.integers(0, 5))
 def test_fuzz_command_fields_with_hostile_values(field: str, value: object,
                                                  key_id: int) -> None:
@@ -685,6 +690,7 @@ def test_fuzz_command_fields_with_hostile_values(field: str, value: object,
     assert msg.robot_id == key_id and msg.robot_id in {0, 1, 2}
     assert all(math.isfinite(x) for x in (msg.pose_stamp_s, msg.v_mps, msg.omega_radps,
                                           msg.plan_ms))
+    assert msg.hold_s is None or 0.0 < msg.hold_s <= 60.0
     assert msg.seq >= 0 and msg.status in {s.value for s in PlanStatus}
 
 

@@ -4,8 +4,9 @@ The world integrates every robot's unicycle (Eq. 1) with the latest command held
 over a tick (zero-order hold). It integrates the arc exactly rather than with the Euler
 step of Eq. (1): the ground truth should not share the robots' model error. Commands are
 clamped to the robot's limits; a robot whose command is older than its hold (the
-`hold_s` the robot sent with it: the period it was planned for) or than `cmd_timeout_s`,
-or whose process is offline, brakes at its maximum deceleration with zero turn rate. The
+`hold_s` the robot sent with it: the period it was planned for) brakes at its maximum
+deceleration along the commanded arc; one whose command is older than `cmd_timeout_s`, or
+whose process is offline, brakes at its maximum deceleration with zero turn rate. The
 hold is what keeps a lost command from acting longer than its sender assumed (the braking
 guard, `agent.safety`, assumes a command acts for about one period); the time-out is the
 world's own bound, for a robot that stopped sending.
@@ -275,11 +276,18 @@ class WorldSim:
 
         v_cmd = self.command[:, 0].copy()
         w_cmd = self.command[:, 1].copy()
-        braking = stale | expired | self.offline
-        # Braking: decelerate at the robot's limit towards v = 0, no turning.
+        stopping = stale | self.offline
+        braking = stopping | expired
+        # Braking: decelerate at the robot's limit towards v = 0. A command past its hold
+        # brakes along its own arc (constant curvature omega / v: the robot stays on the
+        # path it was steering, the turn of an avoidance manoeuvre is not cut short); a
+        # timed-out or offline robot stops turning.
         v_brake = np.maximum(self.applied[:, 0] - self.decel_mps2 * dt_s, 0.0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            scale = np.where(v_cmd > 0.0, v_brake / v_cmd, 0.0)
+        w_brake = np.where(stopping, 0.0, w_cmd * np.clip(scale, 0.0, 1.0))
         v = np.where(braking, v_brake, v_cmd)
-        w = np.where(braking, 0.0, w_cmd)
+        w = np.where(braking, w_brake, w_cmd)
         self.applied = np.stack([v, w], axis=1)
         self.pose = integrate_unicycle(self.pose, v, w, dt_s)
         self.t_s += dt_s

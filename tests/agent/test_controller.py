@@ -180,6 +180,14 @@ def test_control_period_must_be_positive_and_finite(period_s: float) -> None:
         RobotController(spec(), PlannerConfig(), TOL_M, control_period_s=period_s)
 
 
+def test_command_hold_is_a_number_of_periods_and_must_be_positive() -> None:
+    ctrl = RobotController(spec(), PlannerConfig(), TOL_M, control_period_s=0.2)
+    assert ctrl.command_hold_s == pytest.approx(0.3)  # 1.5 periods by default
+    for bad in (0.0, -1.0, math.nan):
+        with pytest.raises(ValueError, match="command_hold_periods"):
+            RobotController(spec(), PlannerConfig(command_hold_periods=bad), TOL_M)
+
+
 @pytest.mark.parametrize("planner", PLANNER_NAMES)
 def test_every_planner_plans_a_finite_command_within_limits(planner: str) -> None:
     # The robot drives at 0.8 m/s towards its goal; three others converge on its path and

@@ -123,6 +123,33 @@ def test_link_latency_is_the_measured_command_latency(tmp_path):
     assert 120.0 <= out.metrics.latency_ms_p50 <= 140.0
 
 
+def test_lost_commands_give_way_to_braking_after_their_hold(tmp_path):
+    # Half of all messages lost: a command not followed within 1.5 periods brakes the robot
+    # (the end event counts it); a hold of 100 periods (longer than the 0.5 s time-out)
+    # turns that off, and the robot keeps driving on its last command instead.
+    import dataclasses
+
+    def run(hold_periods: float, name: str) -> tuple[dict, list[float]]:
+        lanes = two_lanes()
+        scenario = dataclasses.replace(lanes, planner_config=PlannerConfig(
+            command_hold_periods=hold_periods))
+        out = run_lockstep(scenario, tmp_path / name, faults=build_plan(drop=0.5, seed=1))
+        assert out.success, out.metrics
+        end = events_of(tmp_path / name)[-1]
+        rows = (tmp_path / name / "trajectory.csv").read_text().splitlines()
+        header = rows[0].split(",")
+        v = [float(r.split(",")[header.index("v")]) for r in rows[1:]
+             if r.split(",")[header.index("robot")] == "0"]
+        return end, v
+
+    short, v_short = run(1.5, "short")
+    long_, v_long = run(100.0, "long")
+    assert short["cmd_hold_expiries"] > 0 and long_["cmd_hold_expiries"] == 0
+    # braking ticks show as a speed below the previous tick's while cruising
+    dips = sum(1 for a, b in zip(v_short, v_short[1:]) if 0.3 < b < a - 0.02)
+    assert dips > 0 and dips > sum(1 for a, b in zip(v_long, v_long[1:]) if 0.3 < b < a - 0.02)
+
+
 def test_faulty_runs_are_repeatable_per_seed(tmp_path):
     def traj(seed, name):
         run_lockstep(crossing(), tmp_path / name,

@@ -88,6 +88,39 @@ def test_stale_command_brakes_to_stop_and_is_counted_once():
     assert sim.applied[0, 1] == 0.0
 
 
+def test_command_outliving_its_hold_brakes_until_a_newer_one_comes():
+    lim = RobotLimits(v_max_mps=1.0, accel_max_mps2=2.0)
+    sim = WorldSim(make_scenario([RobotSpec(0, (0, 0, 0), (50, 0), limits=lim)]),
+                   cmd_timeout_s=0.5)
+    sim.set_command(0, 1.0, 0.3, hold_s=0.1)
+    applied = []
+    for _ in range(8):  # 0.16 s, no new command
+        ev = sim.step(0.02)
+        assert ev.timeouts == ()  # braking on the hold is not a time-out
+        applied.append(tuple(sim.applied[0]))
+    # held for the five ticks that start within 0.1 s, then braking at 2 m/s^2 along the
+    # commanded arc (curvature 0.3 / 1.0 kept)
+    assert applied[:5] == [(1.0, 0.3)] * 5
+    np.testing.assert_allclose(applied[5:], [(0.96, 0.288), (0.92, 0.276), (0.88, 0.264)])
+    assert sim.hold_expiry_count == 1 and sim.timeout_count == 0
+    sim.set_command(0, 0.9, -0.2, hold_s=0.1)  # a newer command applies at once
+    sim.step(0.02)
+    np.testing.assert_allclose(sim.applied[0], [0.9, -0.2])
+    for _ in range(10):
+        sim.step(0.02)
+    assert sim.hold_expiry_count == 2  # counted once per command
+
+
+def test_command_without_hold_lasts_until_the_time_out():
+    sim = WorldSim(make_scenario([RobotSpec(0, (0, 0, 0), (50, 0))]), cmd_timeout_s=0.5)
+    sim.set_command(0, 1.0, 0.0)
+    for _ in range(25):  # 0.5 s
+        sim.step(0.02)
+    assert sim.applied[0, 0] == 1.0 and sim.hold_expiry_count == 0
+    sim.step(0.02)
+    assert sim.applied[0, 0] < 1.0 and sim.timeout_count == 1
+
+
 def test_offline_robot_stops_and_stays_visible():
     robots = [RobotSpec(0, (0, 0, 0), (50, 0)), RobotSpec(1, (0, 5, 0), (50, 5))]
     sim = WorldSim(make_scenario(robots))
@@ -194,3 +227,6 @@ def test_bad_inputs_raise():
         sim.step(0.0)
     with pytest.raises(ValueError):
         sim.set_command(0, float("nan"), 0.0)
+    for hold in (0.0, -0.1, float("nan")):
+        with pytest.raises(ValueError, match="hold_s"):
+            sim.set_command(0, 1.0, 0.0, hold_s=hold)
