@@ -33,7 +33,15 @@ v_min = 0), which may have turned by omega_max lag meanwhile, and never past v_m
 
     unseen_dv = min(a_max lag, v_max - |v_j|) max(0, cos(max(0, d - omega_max lag))),
 
-d the angle between the other's observed heading and the direction from it to the robot.
+d the angle between the other's observed heading and the direction from it to the robot;
+and one heading away from the robot may have braked as late (a leader the robot follows:
+its estimate still shows the speed it had), which closes the gap by
+
+    unseen_dv_brake = min(a_max lag, |v_j|) max(0, -cos d),
+
+no turn allowed for (a leader that turns away recedes less, but from a robot crossing at
+a right angle it would count every passer-by as braking towards it); the larger of the
+two counts.
 The others' limits are taken as the robot's own (a fleet of like robots; a robot cannot
 sense another's limits); an unknown heading counts as facing the robot; scenario obstacles
 move at constant velocity (0). So the term matters for robots at rest or slow that face
@@ -45,7 +53,10 @@ and at any speed kept those 40 clear but made the crowds brake for every robot c
 them (without faults, F 3.9 -> 6.7 and G 7.4 -> 9.3 oscillations per robot, seeds 0-9);
 the same along the heading but without the v_max bound, worse still (F 8.2: head-on
 cohorts already at v_max braked for a speed-up they cannot make); the pose age alone as
-the lag left G link seed 4 touching (-4 cm).
+the lag left G link seed 4 touching (-4 cm). The braking term came with the command hold
+(`world.dynamics`): in distributed mode at 100 +- 30 ms with 10 % loss, a follower drove
+into a leader that had braked and turned while its slope still showed 0.7 m/s (setup G
+seed 1, -5.8 cm; with the term, 0 of 6 seeds touch; see the README for the variants tried).
 
 The largest safe speed solves v cos a tau + v^2 cos a / (2 decel) = R:
 
@@ -170,7 +181,9 @@ def unseen_speed_up_mps(
         v_max_mps: their largest speed.
 
     Returns:
-        (K,) unseen_dv in m/s, in [0, min(accel_mps2 lag_s, v_max - speed)].
+        (K,) unseen_dv in m/s, in [0, accel_mps2 lag_s]: the larger of a speed-up towards
+        the robot (at most to v_max) and, with `others_speed_mps`, a braking of one
+        heading away from it (at most to rest).
     """
     if not (accel_mps2 > 0.0 and turn_rate_radps >= 0.0 and lag_s >= 0.0):
         raise ValueError("accel_mps2 > 0, turn_rate_radps >= 0 and lag_s >= 0 required")
@@ -179,10 +192,16 @@ def unseen_speed_up_mps(
     off = np.abs(np.remainder(bearing - others_heading_rad + np.pi, 2.0 * np.pi) - np.pi)
     facing = np.cos(np.maximum(off - turn_rate_radps * lag_s, 0.0))
     facing = np.where(np.isnan(facing), 1.0, np.maximum(facing, 0.0))
-    dv = np.full(len(others_position_m), accel_mps2 * lag_s)
+    bound = accel_mps2 * lag_s
+    dv = np.full(len(others_position_m), bound)
     if others_speed_mps is not None:
         dv = np.clip(v_max_mps - others_speed_mps, 0.0, dv)
-    return np.where(is_robot, dv * facing, 0.0)
+    closing = dv * facing
+    if others_speed_mps is not None:
+        # one heading away from the robot may have braked since: as much closer, down to rest
+        away = np.where(np.isnan(off), 0.0, np.maximum(-np.cos(off), 0.0))
+        closing = np.maximum(closing, np.minimum(bound, others_speed_mps) * away)
+    return np.where(is_robot, closing, 0.0)
 
 
 def heading_sweep_rad(omega_radps: float, reaction_s: float) -> float:

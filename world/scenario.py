@@ -158,8 +158,8 @@ _UNIT_SUFFIXES = ("_radps2", "_radps", "_mps2", "_mps", "_m", "_s")
 _POSITIVE_FIELDS = frozenset({
     "v_max_mps", "omega_max_radps", "accel_max_mps2", "alpha_max_radps2",
     "d_thresh_m", "t_max_s", "sensing_radius_m", "max_neighbors", "max_depth",
-    "estimation_window_s", "command_hold_periods", "lookahead_s", "heading_gain", "orca_time_horizon_s",
-    "horizon_steps", "dt_s", "max_iter",
+    "estimation_window_s", "command_hold_periods", "lookahead_s", "heading_gain",
+    "orca_time_horizon_s", "horizon_steps", "dt_s", "max_iter",
 })
 _SIGNED_FIELDS = frozenset({"v_min_mps"})
 

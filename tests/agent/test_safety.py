@@ -212,6 +212,22 @@ def test_no_robot_speeds_up_past_v_max():
                                others_speed_mps=np.array([1.3]), v_max_mps=1.1) == [0.0]
 
 
+def test_a_leader_heading_away_may_have_braked_down_to_rest():
+    # Others 2 m ahead, seen at 1.0, 1.0, 0.2 and 1.0 m/s; a lag of 0.2 s at 1.5 m/s^2.
+    ahead = np.array([[2.0, 0.0], [2.0, 0.0], [2.0, 0.0], [2.0, 0.0]])
+    heading = np.array([0.0, math.pi / 3, 0.0, math.pi / 2])  # away, 60 deg off, away, across
+    up = unseen_speed_up_mps((0.0, 0.0), ahead, heading, np.ones(4, bool), accel_mps2=1.5,
+                             turn_rate_radps=1.5, lag_s=0.2,
+                             others_speed_mps=np.array([1.0, 1.0, 0.2, 1.0]), v_max_mps=1.1)
+    # straight away: the whole a lag = 0.3 m/s closer; at 60 degrees its component; a slow
+    # one at most its speed; one crossing at a right angle does not brake towards the
+    # robot, it may only have sped up by the 0.1 m/s left to v_max, turned 0.3 rad its way
+    crossing = 0.1 * math.cos(math.pi / 2 - 1.5 * 0.2)
+    assert up == pytest.approx([0.3, 0.15, 0.2, crossing])
+    # without the speeds the braking term is not known: the speed-up along the heading only
+    assert speed_up([2.0, 0.0], 0.0) == pytest.approx([0.0])
+
+
 @pytest.mark.parametrize("kwargs", [{"accel_mps2": 0.0}, {"turn_rate_radps": -1.0},
                                     {"lag_s": -0.1}])
 def test_bad_speed_up_parameters_are_rejected(kwargs):
