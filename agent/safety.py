@@ -56,7 +56,9 @@ cohorts already at v_max braked for a speed-up they cannot make); the pose age a
 the lag left G link seed 4 touching (-4 cm). The braking term came with the command hold
 (`world.dynamics`): in distributed mode at 100 +- 30 ms with 10 % loss, a follower drove
 into a leader that had braked and turned while its slope still showed 0.7 m/s (setup G
-seed 1, -5.8 cm; with the term, 0 of 6 seeds touch; see the README for the variants tried).
+seed 1, -5.8 cm; with the term seeds 0-5 kept clear, but of seeds 0-9 seed 7 touched,
+1.1 cm: two robots turning towards each other at speed, which neither term covers; see the
+README for the variants tried).
 
 The largest safe speed solves v cos a tau + v^2 cos a / (2 decel) = R:
 

@@ -282,12 +282,14 @@ class WorldSim:
         # brakes along its own arc (constant curvature omega / v: the robot stays on the
         # path it was steering, the turn of an avoidance manoeuvre is not cut short); a
         # timed-out or offline robot stops turning.
-        v_brake = np.maximum(self.applied[:, 0] - self.decel_mps2 * dt_s, 0.0)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            scale = np.where(v_cmd > 0.0, v_brake / v_cmd, 0.0)
-        w_brake = np.where(stopping, 0.0, w_cmd * np.clip(scale, 0.0, 1.0))
-        v = np.where(braking, v_brake, v_cmd)
-        w = np.where(braking, w_brake, w_cmd)
+        if braking.any():  # most ticks nobody brakes: then the commands apply as they are
+            v_brake = np.maximum(self.applied[:, 0] - self.decel_mps2 * dt_s, 0.0)
+            scale = np.divide(v_brake, v_cmd, out=np.zeros_like(v_cmd), where=v_cmd > 0.0)
+            w_brake = np.where(stopping, 0.0, w_cmd * np.clip(scale, 0.0, 1.0))
+            v = np.where(braking, v_brake, v_cmd)
+            w = np.where(braking, w_brake, w_cmd)
+        else:
+            v, w = v_cmd, w_cmd
         self.applied = np.stack([v, w], axis=1)
         self.pose = integrate_unicycle(self.pose, v, w, dt_s)
         self.t_s += dt_s
