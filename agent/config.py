@@ -6,9 +6,48 @@ Scenario files name these fields without the unit suffix (`d_safety` -> `d_safet
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from dataclasses import dataclass, field
 
 PLANNER_NAMES: tuple[str, ...] = ("eifp-mpc", "eifp", "ifp", "orca")
+
+POSITIVE_FIELDS = frozenset({
+    "v_max_mps", "omega_max_radps", "accel_max_mps2", "alpha_max_radps2",
+    "d_thresh_m", "t_max_s", "sensing_radius_m", "max_neighbors", "max_depth",
+    "estimation_window_s", "command_hold_periods", "lookahead_s", "heading_gain",
+    "orca_time_horizon_s", "horizon_steps", "dt_s", "max_iter",
+})
+"""Numeric config fields that must be > 0 (by field name, over the three classes)."""
+SIGNED_FIELDS = frozenset({"v_min_mps"})
+"""Numeric config fields of any sign (`v_min_mps < 0`: the robot may reverse). Every other
+numeric field must be >= 0 (weights, margins, caps); None stays allowed where typed."""
+
+
+def field_range_error(name: str, value: object) -> str | None:
+    """What is wrong with `value` for the numeric config field `name`, or None.
+
+    The one set of range rules for configurations: the scenario loader reports it with the
+    file and key (`world.scenario`), the wire loader as a `ProtocolError` (`protocol`), and
+    the dataclasses below refuse to be built with a value it rejects.
+    """
+    if value is None or isinstance(value, bool) or not isinstance(value, int | float):
+        return None  # not numeric: the loaders check types
+    if not math.isfinite(value):
+        return f"expected a finite number, got {value!r}"
+    if name in POSITIVE_FIELDS and value <= 0:
+        return f"must be > 0, got {value!r}"
+    if name not in POSITIVE_FIELDS and name not in SIGNED_FIELDS and value < 0:
+        return f"must be >= 0, got {value!r}"
+    return None
+
+
+def _check_ranges(config: object) -> None:
+    """Raise `ValueError` naming the first numeric field of `config` out of its range."""
+    for f in dataclasses.fields(config):  # type: ignore[arg-type]
+        problem = field_range_error(f.name, getattr(config, f.name))
+        if problem is not None:
+            raise ValueError(f"{f.name}: {problem}")
 
 
 @dataclass(frozen=True)
@@ -21,6 +60,9 @@ class RobotLimits:
         omega_max_radps: largest |turn rate|.
         accel_max_mps2: largest |dv/dt| a planner may command.
         alpha_max_radps2: largest |d omega/dt| a planner may command.
+
+    Raises:
+        ValueError: a field out of range (`field_range_error`), or v_min_mps > v_max_mps.
     """
 
     v_max_mps: float = 1.1
@@ -28,6 +70,12 @@ class RobotLimits:
     omega_max_radps: float = 1.5
     accel_max_mps2: float = 1.5
     alpha_max_radps2: float = 6.0
+
+    def __post_init__(self) -> None:
+        _check_ranges(self)
+        if self.v_min_mps > self.v_max_mps:
+            raise ValueError(
+                f"v_min_mps: must be <= v_max_mps ({self.v_max_mps!r}), got {self.v_min_mps!r}")
 
 
 @dataclass(frozen=True)
@@ -60,6 +108,9 @@ class MpcConfig:
             given the pose age and one control period of reaction (`agent.safety`; not in
             the paper: the soft half-planes can trade a stopped neighbour's gap away).
         braking_margin_m: gap the braking guard keeps.
+
+    Raises:
+        ValueError: a field out of range (`field_range_error`).
     """
 
     horizon_steps: int = 20
@@ -79,6 +130,9 @@ class MpcConfig:
     eps_rel: float = 1.0e-3
     braking_guard: bool = True
     braking_margin_m: float = 0.05
+
+    def __post_init__(self) -> None:
+        _check_ranges(self)
 
 
 @dataclass(frozen=True)
@@ -129,6 +183,9 @@ class PlannerConfig:
         heading_gain: proportional gain of the tracking law on heading error [1/s].
         orca_time_horizon_s: ORCA's time horizon for other agents.
         mpc: the MPC tracker's parameters (eIFP-MPC only).
+
+    Raises:
+        ValueError: a field out of range (`field_range_error`).
     """
 
     d_safety_m: float = 0.3
@@ -155,6 +212,9 @@ class PlannerConfig:
     heading_gain: float = 2.5
     orca_time_horizon_s: float = 4.0
     mpc: MpcConfig = field(default_factory=MpcConfig)
+
+    def __post_init__(self) -> None:
+        _check_ranges(self)
 
     def dcpa_threshold_m(self, robot_radius_m: float) -> float:
         """D_thresh of Eq. (5): configured, or 5 * r_robot + d_safety."""

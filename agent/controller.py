@@ -58,9 +58,6 @@ class RobotController:
         self.goal_tolerance_m = float(goal_tolerance_m)
         self.compensate_latency = compensate_latency
         self.control_period_s = float(control_period_s)
-        if not config.command_hold_periods > 0.0:
-            raise ValueError("command_hold_periods must be positive, got "
-                             f"{config.command_hold_periods!r}")
         self.command_hold_s = config.command_hold_periods * self.control_period_s
         self.planner = make_planner(spec.planner, config, control_period_s=self.control_period_s)
         self.tracker = NeighborTracker(spec.id, config.estimation_window_s)

@@ -45,7 +45,6 @@ Choices the paper leaves open (documented here, tested in tests/agent/test_ifp.p
 
 from __future__ import annotations
 
-import functools
 import itertools
 import math
 from collections.abc import Callable
@@ -156,8 +155,9 @@ def validate_inputs(observation: Observation, config: PlannerConfig) -> None:
     """Raise `ValueError` on non-finite or meaningless planning inputs.
 
     `Observation`, `EgoState` and `Others` reject non-finite values when constructed, so
-    their arrays are not scanned again here; this checks the scalars the planner reads
-    and the configuration fields it uses, which nothing else validates.
+    their arrays are not scanned again here; this checks the scalars the planner reads.
+    `PlannerConfig` refuses out-of-range and non-finite fields when it is built
+    (`agent.config.field_range_error`), so the configuration needs no check here.
     """
     ego = observation.ego
     require_finite(
@@ -173,27 +173,6 @@ def validate_inputs(observation: Observation, config: PlannerConfig) -> None:
     )
     if not observation.limits.v_max_mps > 0.0:
         raise ValueError("limits.v_max_mps: must be positive")
-    _validate_config(config, float(observation.radius_m))
-
-
-@functools.lru_cache(maxsize=64)
-def _validate_config(config: PlannerConfig, radius_m: float) -> None:
-    """The configuration half of `validate_inputs`; a frozen config is checked once."""
-    require_finite(
-        "config",
-        config.d_safety_m,
-        config.dcpa_threshold_m(radius_m),
-        config.t_max_s,
-        config.sensing_radius_m,
-        config.w_length,
-        config.w_distance,
-        config.w_angle,
-        config.ghost_horizon_s,
-        config.side_hysteresis,
-        0.0 if config.ghost_clearance_m is None else config.ghost_clearance_m,
-    )
-    if config.max_depth < 1:
-        raise ValueError("config.max_depth: must be at least 1")
 
 
 def plan_ifp(

@@ -422,6 +422,29 @@ def test_rejects_non_map_top_level() -> None:
             PosesMsg.decode(pack(obj))
 
 
+@pytest.mark.parametrize(("path", "value", "message"), [
+    (("planner", "command_hold_periods"), -1.0, "command_hold_periods: must be > 0"),
+    (("planner", "sensing_radius_m"), 0.0, "sensing_radius_m: must be > 0"),
+    (("planner", "w_angle"), -0.3, "w_angle: must be >= 0"),
+    (("planner", "max_neighbors"), 0, "max_neighbors: must be > 0"),
+    (("planner", "mpc", "max_iter"), 0, "mpc: max_iter: must be > 0"),
+    (("planner", "mpc", "slack_weight"), -1.0, "slack_weight: must be >= 0"),
+    (("robot", "limits", "accel_max_mps2"), 0.0, "accel_max_mps2: must be > 0"),
+    (("robot", "limits", "v_min_mps"), 2.0, "v_min_mps: must be <= v_max_mps"),
+])
+def test_config_rejects_out_of_range_fields_by_name(path, value, message) -> None:
+    # Typed right but out of range: the robot would fail later, inside its controller or
+    # planner (e.g. a hold of -1 periods); the wire loader names the field instead.
+    body = raw(make_config())
+    node = body
+    for p in path[:-1]:
+        node = node[p]
+    node[path[-1]] = value
+    with pytest.raises(ProtocolError, match=message) as caught:
+        RunConfigMsg.decode(pack(body))
+    assert str(caught.value).startswith("config." + path[0])
+
+
 def test_control_rejects_unknown_kind() -> None:
     body = raw(ControlMsg("start", 0.0))
     body["kind"] = "pause"

@@ -66,7 +66,14 @@ from typing import Any
 
 import numpy as np
 
-from agent.config import PLANNER_NAMES, MpcConfig, PlannerConfig, RobotLimits
+from agent.config import (
+    PLANNER_NAMES,
+    POSITIVE_FIELDS,
+    SIGNED_FIELDS,
+    MpcConfig,
+    PlannerConfig,
+    RobotLimits,
+)
 
 
 class ScenarioError(ValueError):
@@ -153,15 +160,8 @@ MAX_ROBOT_ID = 2**31 - 1
 
 _UNIT_SUFFIXES = ("_radps2", "_radps", "_mps2", "_mps", "_m", "_s")
 
-# Fields that must be strictly positive (by dataclass field name); every other number
-# must be >= 0, except `v_min_mps`, which may be negative (reversing) but not above v_max.
-_POSITIVE_FIELDS = frozenset({
-    "v_max_mps", "omega_max_radps", "accel_max_mps2", "alpha_max_radps2",
-    "d_thresh_m", "t_max_s", "sensing_radius_m", "max_neighbors", "max_depth",
-    "estimation_window_s", "command_hold_periods", "lookahead_s", "heading_gain",
-    "orca_time_horizon_s", "horizon_steps", "dt_s", "max_iter",
-})
-_SIGNED_FIELDS = frozenset({"v_min_mps"})
+# Range rules of the config fields: agent.config (POSITIVE_FIELDS must be > 0, SIGNED_FIELDS
+# any sign, every other number >= 0); `v_min` may be negative (reversing) but not above v_max.
 
 _TOP_KEYS = ("name", "description", "time_limit", "goal_tolerance", "defaults", "robots",
              "obstacles")
@@ -298,8 +298,8 @@ def _field_value(ctx: _Ctx, path: str, field_name: str, typ: Any, value: object)
         if value is None:
             return None
         (typ,) = (a for a in args if a is not type(None))
-    lower = ("positive" if field_name in _POSITIVE_FIELDS
-             else "none" if field_name in _SIGNED_FIELDS else "nonneg")
+    lower = ("positive" if field_name in POSITIVE_FIELDS
+             else "none" if field_name in SIGNED_FIELDS else "nonneg")
     if typ is bool:
         if not isinstance(value, bool):
             raise ctx.error(path, f"expected true or false, {_got(value)}")
@@ -321,10 +321,22 @@ def _config_kwargs(ctx: _Ctx, path: str, data: Mapping[str, Any], cls: type,
     return out
 
 
-def _check_limits(ctx: _Ctx, path: str, limits: RobotLimits) -> None:
-    if limits.v_min_mps > limits.v_max_mps:
-        raise ctx.error(_join(path, "v_min"),
-                        f"must be <= v_max ({limits.v_max_mps!r}), got {limits.v_min_mps!r}")
+def _check_limits(ctx: _Ctx, path: str, limits: RobotLimits | dict[str, Any]) -> None:
+    """v_min <= v_max, on built limits or on the keyword arguments of `RobotLimits`."""
+    get = limits.get if isinstance(limits, dict) else lambda name, _d: getattr(limits, name)
+    v_min = get("v_min_mps", RobotLimits.v_min_mps)
+    v_max = get("v_max_mps", RobotLimits.v_max_mps)
+    if v_min > v_max:
+        raise ctx.error(_join(path, "v_min"), f"must be <= v_max ({v_max!r}), got {v_min!r}")
+
+
+def _limits(ctx: _Ctx, path: str, base: RobotLimits | None, data: Mapping[str, Any]
+            ) -> RobotLimits:
+    """`base` (None: the defaults) with the RobotLimits keys of `data`, checked first."""
+    kwargs = dataclasses.asdict(base) if base is not None else {}
+    kwargs.update(_config_kwargs(ctx, path, data, RobotLimits))
+    _check_limits(ctx, path, kwargs)
+    return RobotLimits(**kwargs)
 
 
 def scenario_from_dict(data: object, source: str = "<scenario>") -> Scenario:
@@ -357,8 +369,7 @@ def scenario_from_dict(data: object, source: str = "<scenario>") -> Scenario:
                                defaults.get("radius", DEFAULT_RADIUS_M), lower="positive")
     default_planner = _planner_name(ctx, "defaults.planner",
                                     defaults.get("planner", DEFAULT_PLANNER))
-    default_limits = RobotLimits(**_config_kwargs(ctx, "defaults", defaults, RobotLimits))
-    _check_limits(ctx, "defaults", default_limits)
+    default_limits = _limits(ctx, "defaults", None, defaults)
     planner_kwargs = _config_kwargs(ctx, "defaults", defaults, PlannerConfig, skip=("mpc",))
     if defaults.get("mpc") is not None:
         mpc = _mapping(ctx, "defaults.mpc", defaults["mpc"], tuple(_key_map(MpcConfig)))
@@ -376,9 +387,7 @@ def scenario_from_dict(data: object, source: str = "<scenario>") -> Scenario:
     for k, item in enumerate(robots_raw):
         path = _join("robots", k)
         r = _mapping(ctx, path, item, robot_keys, _ROBOT_REQUIRED)
-        limits = dataclasses.replace(default_limits,
-                                     **_config_kwargs(ctx, path, r, RobotLimits))
-        _check_limits(ctx, path, limits)
+        limits = _limits(ctx, path, default_limits, r)
         robots.append(RobotSpec(
             id=_integer(ctx, _join(path, "id"), r["id"], minimum=0, maximum=MAX_ROBOT_ID),
             start=_vector(ctx, _join(path, "start"), r["start"], ("x", "y", "theta")),
