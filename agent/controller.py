@@ -179,4 +179,6 @@ def _advance(others: Others, age_s: float) -> Others:
         track_start_m=others.track_start_m,
         is_robot=others.is_robot,
         heading_rad=others.heading_rad,  # a heading's drift over the age is not predicted
+        recent_speed_mps=others.recent_speed_mps,
+        recent_interval_s=others.recent_interval_s,
     )

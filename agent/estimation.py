@@ -9,7 +9,11 @@ poses it observed and estimates, per other disc,
   lower for a turning or dithering one, 0 for a disc that has not moved (< 1 cm);
 - s_j, the ghost path's start: the oldest position inside the window;
 - heading: the latest observed one (the pose carries it), used by the braking guard for
-  the direction a robot can speed up in (`agent.safety.unseen_speed_up_mps`).
+  the direction a robot can speed up in (`agent.safety.unseen_speed_up_mps`);
+- recent speed: distance over time between the disc's two newest samples, with that
+  interval's length. The least-squares slope trails a speed change by about window / 2;
+  this one by half an interval (a sixth of the window or less), so the braking guard
+  reads from it how much of a speed change the slope does not show yet.
 All neighbours are handled at once with arrays of shape (H samples, n discs).
 """
 
@@ -121,14 +125,15 @@ class NeighborTracker:
         cols = sel.nonzero()[0]
         rows = order[in_window]
         seen = self._seen[rows][:, cols]  # (h, k)
+        tt = t[in_window] - t_now
         if seen.all():
             # Every disc in every sample of the window (the usual case: the world publishes
             # all discs each tick): one set of least-squares weights serves all columns.
-            velocity, start, linearity = self._estimate_dense(
-                self._pos[rows][:, cols], t[in_window] - t_now)
+            velocity, start, linearity = self._estimate_dense(self._pos[rows][:, cols], tt)
         else:
             velocity, start, linearity = self._estimate_sparse(
-                self._pos[rows][:, cols], seen, t[in_window] - t_now)
+                self._pos[rows][:, cols], seen, tt)
+        recent_speed, recent_interval = _recent_speed(self._pos[rows][:, cols], seen, tt)
         latest = self._pos[r][cols]
         ids = self._ids[cols]
         # Built from a validated snapshot (finite poses, radii) by finite arithmetic.
@@ -141,6 +146,8 @@ class NeighborTracker:
             track_start_m=start,
             is_robot=ids >= 0,
             heading_rad=self._heading[cols],
+            recent_speed_mps=recent_speed,
+            recent_interval_s=recent_interval,
         )
 
     @staticmethod
@@ -198,3 +205,33 @@ class NeighborTracker:
         chord = np.linalg.norm(pos[-1] - start, axis=1)
         linearity = np.where(path > _MIN_TRAVEL_M, chord / np.maximum(path, 1e-12), 0.0)
         return velocity, start, linearity
+
+
+def _recent_speed(pos: np.ndarray, use: np.ndarray, tt: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Speed between each disc's two newest samples in the window, and the interval.
+
+    Args:
+        pos: (h, k, 2) positions in the window, oldest first.
+        use: (h, k) whether disc j was seen in sample i; the last row is all True.
+        tt: (h,) sample times relative to the newest (<= 0).
+
+    Returns:
+        (k,) speed [m/s] and (k,) interval [s], both NaN for a disc seen once only.
+    """
+    k = pos.shape[1]
+    if pos.shape[0] < 2:
+        return np.full(k, np.nan), np.full(k, np.nan)
+    if use[-2].all():
+        # the usual case: every disc in the sample before the newest too
+        step = pos[-1] - pos[-2]
+        interval = np.full(k, tt[-1] - tt[-2])
+    else:
+        prev = np.where(use[:-1], np.arange(pos.shape[0] - 1)[:, None], -1).max(axis=0)
+        known = prev >= 0
+        prev_pos = pos[np.maximum(prev, 0), np.arange(k)]
+        step = np.where(known[:, None], pos[-1] - prev_pos, np.nan)
+        interval = np.where(known, tt[-1] - tt[np.maximum(prev, 0)], np.nan)
+    ok = interval > 1e-9  # NaN compares False
+    speed = np.where(ok, np.hypot(step[:, 0], step[:, 1]) / np.where(ok, interval, 1.0), np.nan)
+    return speed, np.where(ok, interval, np.nan)

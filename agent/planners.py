@@ -227,7 +227,8 @@ class ViaPointPlanner:
             (ego.x_m, ego.y_m), others.position_m, others.heading_rad, others.is_robot,
             accel_mps2=limits.accel_max_mps2, turn_rate_radps=limits.omega_max_radps,
             lag_s=lag_s, others_speed_mps=np.hypot(*others.velocity_mps.T),
-            v_max_mps=limits.v_max_mps))
+            v_max_mps=limits.v_max_mps, recent_speed_mps=others.recent_speed_mps,
+            recent_lag_s=0.5 * others.recent_interval_s + observation.pose_age_s))
         if v_mps <= v_safe:
             return v_mps
         hardest = ego.v_mps - limits.accel_max_mps2 * self.control_period_s

@@ -42,6 +42,15 @@ its estimate still shows the speed it had), which closes the gap by
 no turn allowed for (a leader that turns away recedes less, but from a robot crossing at
 a right angle it would count every passer-by as braking towards it); the larger of the
 two counts.
+Both bounds are blind: they assume the worst over the whole lag. But the poses show most
+of a speed change before the slope does: the speed between an other's two newest samples
+(`Others.recent_speed_mps`, over an interval of at most a third of the window) is only half
+an interval old. Where it is known, each term is the change it already shows (recent speed
+against the estimate) plus a_max over half the interval and the pose age, if that is less
+than the blind bound; so the term never grows, and a leader that keeps its speed no longer
+counts as braking for a quarter of a second. Measured (lockstep, 5 cm start jitter, seeds
+0-9, setup G): 9.6 -> 8.5 oscillations per robot without faults; at 100 +- 30 ms with 10 %
+loss F and G kept 0 of 20 runs with contact each (README, "The safety envelope").
 The others' limits are taken as the robot's own (a fleet of like robots; a robot cannot
 sense another's limits); an unknown heading counts as facing the robot; scenario obstacles
 move at constant velocity (0). So the term matters for robots at rest or slow that face
@@ -167,6 +176,8 @@ def unseen_speed_up_mps(
     lag_s: float,
     others_speed_mps: np.ndarray | None = None,
     v_max_mps: float = math.inf,
+    recent_speed_mps: np.ndarray | None = None,
+    recent_lag_s: np.ndarray | None = None,
 ) -> np.ndarray:
     """How much faster than its estimate each other may be closing on the robot by now.
 
@@ -181,11 +192,17 @@ def unseen_speed_up_mps(
         others_speed_mps: (K,) their estimated speeds; with `v_max_mps`, a robot cannot
             have sped up past v_max (None: no bound).
         v_max_mps: their largest speed.
+        recent_speed_mps: (K,) with `others_speed_mps`: each one's speed over the newest
+            interval of its observed history (NaN: unknown), which shows most of a speed
+            change the estimate trails; None: not used.
+        recent_lag_s: (K,) how old that speed is: half the interval plus the pose age.
 
     Returns:
         (K,) unseen_dv in m/s, in [0, accel_mps2 lag_s]: the larger of a speed-up towards
         the robot (at most to v_max) and, with `others_speed_mps`, a braking of one
-        heading away from it (at most to rest).
+        heading away from it (at most to rest). Where a recent speed is known, each is
+        the change already seen (recent speed against the estimate) plus `accel_mps2`
+        over `recent_lag_s`, if that is less than the bound over `lag_s`.
     """
     if not (accel_mps2 > 0.0 and turn_rate_radps >= 0.0 and lag_s >= 0.0):
         raise ValueError("accel_mps2 > 0, turn_rate_radps >= 0 and lag_s >= 0 required")
@@ -195,14 +212,23 @@ def unseen_speed_up_mps(
     facing = np.cos(np.maximum(off - turn_rate_radps * lag_s, 0.0))
     facing = np.where(np.isnan(facing), 1.0, np.maximum(facing, 0.0))
     bound = accel_mps2 * lag_s
-    dv = np.full(len(others_position_m), bound)
+    up = np.full(len(others_position_m), bound)
     if others_speed_mps is not None:
-        dv = np.clip(v_max_mps - others_speed_mps, 0.0, dv)
-    closing = dv * facing
+        up = np.clip(v_max_mps - others_speed_mps, 0.0, up)
+        down = np.minimum(bound, others_speed_mps)
+        if recent_speed_mps is not None and recent_lag_s is not None:
+            # what the newest interval already shows, and what it cannot show yet
+            since = accel_mps2 * np.maximum(recent_lag_s, 0.0)
+            change = recent_speed_mps - others_speed_mps  # NaN where unknown
+            known = ~np.isnan(change)
+            change = np.where(known, change, 0.0)
+            up = np.where(known, np.minimum(up, np.maximum(change, 0.0) + since), up)
+            down = np.where(known, np.minimum(down, np.maximum(-change, 0.0) + since), down)
+    closing = up * facing
     if others_speed_mps is not None:
         # one heading away from the robot may have braked since: as much closer, down to rest
         away = np.where(np.isnan(off), 0.0, np.maximum(-np.cos(off), 0.0))
-        closing = np.maximum(closing, np.minimum(bound, others_speed_mps) * away)
+        closing = np.maximum(closing, down * away)
     return np.where(is_robot, closing, 0.0)
 
 

@@ -105,6 +105,11 @@ class Others:
         is_robot: (K,) bool, False for scenario obstacles.
         heading_rad: (K,) the observed headings (the world publishes full poses); None
             means unknown (NaN: whoever reads it must assume any heading).
+        recent_speed_mps: (K,) speed over the newest interval of the observed history (the
+            last two samples the disc is in), NaN when unknown (seen once only); None: all
+            unknown. Read by the braking guard (`agent.safety.unseen_speed_up_mps`): it
+            shows a speed change that the least-squares velocity still trails.
+        recent_interval_s: (K,) the length of that interval (NaN when unknown).
     """
 
     ids: np.ndarray
@@ -115,6 +120,8 @@ class Others:
     track_start_m: np.ndarray
     is_robot: np.ndarray
     heading_rad: np.ndarray | None = None
+    recent_speed_mps: np.ndarray | None = None
+    recent_interval_s: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         ids = np.asarray(self.ids, dtype=np.int64).reshape(-1)
@@ -137,6 +144,17 @@ class Others:
         heading = (np.full(k, np.nan) if self.heading_rad is None
                    else _as_array("heading_rad", self.heading_rad, (k,)))
         object.__setattr__(self, "heading_rad", heading)
+        for name in ("recent_speed_mps", "recent_interval_s"):
+            value = getattr(self, name)
+            if value is None:
+                arr = np.full(k, np.nan)
+            else:
+                arr = np.asarray(value, dtype=float).reshape(-1)
+                if arr.shape != (k,):
+                    raise ValueError(f"{name}: shape {arr.shape}, expected {(k,)}")
+                if np.any(np.isinf(arr)) or np.any(arr < 0.0):
+                    raise ValueError(f"{name}: expected NaN (unknown) or finite values >= 0")
+            object.__setattr__(self, name, arr)
 
     def __len__(self) -> int:
         return int(self.ids.shape[0])
@@ -154,12 +172,16 @@ class Others:
             track_start_m=z2,
             is_robot=np.zeros(0, dtype=bool),
             heading_rad=np.zeros(0),
+            recent_speed_mps=np.zeros(0),
+            recent_interval_s=np.zeros(0),
         )
 
     @classmethod
     def trusted(cls, ids: np.ndarray, position_m: np.ndarray, velocity_mps: np.ndarray,
                 radius_m: np.ndarray, linearity: np.ndarray, track_start_m: np.ndarray,
-                is_robot: np.ndarray, heading_rad: np.ndarray | None = None) -> Others:
+                is_robot: np.ndarray, heading_rad: np.ndarray | None = None,
+                recent_speed_mps: np.ndarray | None = None,
+                recent_interval_s: np.ndarray | None = None) -> Others:
         """Build from arrays derived from already validated ones, skipping validation.
 
         For the hot path only (subsets, time shifts, estimates from validated snapshots);
@@ -174,6 +196,11 @@ class Others:
         if heading_rad is None:
             heading_rad = np.full(ids.shape[0], np.nan)
         object.__setattr__(obj, "heading_rad", heading_rad)
+        unknown = np.full(ids.shape[0], np.nan)
+        object.__setattr__(obj, "recent_speed_mps",
+                           unknown if recent_speed_mps is None else recent_speed_mps)
+        object.__setattr__(obj, "recent_interval_s",
+                           unknown if recent_interval_s is None else recent_interval_s)
         return obj
 
     def subset(self, index: np.ndarray) -> Others:
@@ -187,6 +214,8 @@ class Others:
             track_start_m=self.track_start_m[index],
             is_robot=self.is_robot[index],
             heading_rad=self.heading_rad[index],
+            recent_speed_mps=self.recent_speed_mps[index],
+            recent_interval_s=self.recent_interval_s[index],
         )
 
 

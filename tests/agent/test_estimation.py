@@ -129,3 +129,36 @@ def test_the_latest_observed_heading_is_reported_and_follows_subsets():
     np.testing.assert_allclose(o.heading_rad, [0.6, -1.9])
     np.testing.assert_allclose(o.subset(np.array([1])).heading_rad, [-1.9])
     np.testing.assert_allclose(tr.others(near_m=np.zeros(2), within_m=3.0).heading_rad, [0.6])
+
+
+def test_recent_speed_is_the_newest_interval_and_shows_a_braking_the_slope_trails():
+    # Robot 1 cruises at 1.0 m/s, then brakes at 1.5 m/s^2 from t = 0.5 s; robot 2 joins
+    # in the newest sample only.
+    tr = NeighborTracker(own_id=0, window_s=0.5)
+    x, v = 0.0, 1.0
+    for k in range(9):
+        t = 0.1 * k
+        rows = [(1, x, 0.0)] + ([(2, 5.0, 5.0)] if k == 8 else [])
+        tr.update(snap(t, k, rows))
+        v_next = v - 1.5 * 0.1 if t >= 0.5 else v
+        x += 0.5 * (v + v_next) * 0.1
+        v = v_next
+    o = tr.others()
+    assert o.ids.tolist() == [1, 2]
+    # from t = 0.7 to 0.8 it slowed from 0.70 to 0.55 m/s: 0.5 (0.70 + 0.55) 0.1 = 0.0625 m
+    assert o.recent_speed_mps[0] == pytest.approx(0.625)
+    assert o.recent_interval_s[0] == pytest.approx(0.1)
+    assert math.isnan(o.recent_speed_mps[1]) and math.isnan(o.recent_interval_s[1])
+    # the least-squares slope still shows more: it trails the braking
+    assert np.hypot(*o.velocity_mps[0]) > o.recent_speed_mps[0] + 0.1
+    np.testing.assert_allclose(o.subset(np.array([0])).recent_speed_mps, [0.625])
+
+
+def test_recent_speed_skips_a_sample_the_disc_was_missing_from():
+    tr = NeighborTracker(own_id=0, window_s=0.5, max_samples=8)
+    for k in range(7):
+        rows = [(1, 1.0 * 0.1 * k, 0.0)] + ([(2, 3.0, 2.0 * 0.1 * k)] if k != 5 else [])
+        tr.update(snap(0.1 * k, k, rows))
+    o = tr.others()
+    np.testing.assert_allclose(o.recent_speed_mps, [1.0, 2.0])
+    np.testing.assert_allclose(o.recent_interval_s, [0.1, 0.2])

@@ -232,6 +232,42 @@ def test_a_leader_heading_away_may_have_braked_down_to_rest():
     assert speed_up([2.0, 0.0], 0.0) == pytest.approx([0.0])
 
 
+def test_a_speed_change_seen_in_the_newest_interval_replaces_the_blind_bound():
+    # Four others 2 m ahead, estimated at 1.0, 1.0, 0.3 and 1.0 m/s; lag 0.3 s at 1.5 m/s^2
+    # (bound 0.45 m/s). Their newest intervals show 1.0 (no change), 0.8 (braking),
+    # 0.6 (speeding up) and NaN (seen once), each 0.05 s old.
+    ahead = np.tile([2.0, 0.0], (4, 1))
+    heading = np.array([0.0, 0.0, math.pi, 0.0])  # away, away, facing, away
+    common = {"accel_mps2": 1.5, "turn_rate_radps": 0.0, "lag_s": 0.3, "v_max_mps": 1.1,
+              "others_speed_mps": np.array([1.0, 1.0, 0.3, 1.0])}
+    recent = np.array([1.0, 0.8, 0.6, math.nan])
+    up = unseen_speed_up_mps((0.0, 0.0), ahead, heading, np.ones(4, bool), **common,
+                             recent_speed_mps=recent, recent_lag_s=np.full(4, 0.05))
+    # no change seen: only what 0.05 s can hide (0.075); braking seen: 0.2 + 0.075; the
+    # speed-up seen: 0.3 + 0.075; nothing known: the bound, as without recent speeds
+    assert up == pytest.approx([0.075, 0.275, 0.375, 0.45])
+    blind = unseen_speed_up_mps((0.0, 0.0), ahead, heading, np.ones(4, bool), **common)
+    assert blind == pytest.approx([0.45, 0.45, 0.45, 0.45])
+    # a change larger than the lag allows is still capped by the bound (and by v_max)
+    capped = unseen_speed_up_mps((0.0, 0.0), ahead[:2], heading[:2], np.ones(2, bool),
+                                 **(common | {"others_speed_mps": np.array([1.0, 1.0])}),
+                                 recent_speed_mps=np.array([0.0, 1.0]),
+                                 recent_lag_s=np.array([0.05, 1.0]))
+    assert capped == pytest.approx([0.45, 0.45])
+
+
+@settings(max_examples=200, deadline=None)
+@given(speed=st.floats(0.0, 1.1), recent=st.floats(0.0, 1.5), off=st.floats(-4.0, 4.0),
+       lag=st.floats(0.0, 0.6), recent_lag=st.floats(0.0, 0.6))
+def test_recent_speeds_never_make_the_unseen_term_larger(speed, recent, off, lag, recent_lag):
+    common = {"accel_mps2": 1.5, "turn_rate_radps": 1.5, "lag_s": lag, "v_max_mps": 1.1,
+              "others_speed_mps": np.array([speed])}
+    args = ((0.0, 0.0), np.array([[2.0, 0.0]]), np.array([math.pi + off]), np.ones(1, bool))
+    with_recent = unseen_speed_up_mps(*args, **common, recent_speed_mps=np.array([recent]),
+                                      recent_lag_s=np.array([recent_lag]))
+    assert 0.0 <= with_recent[0] <= unseen_speed_up_mps(*args, **common)[0] + 1e-12
+
+
 @pytest.mark.parametrize("kwargs", [{"accel_mps2": 0.0}, {"turn_rate_radps": -1.0},
                                     {"lag_s": -0.1}])
 def test_bad_speed_up_parameters_are_rejected(kwargs):
@@ -309,7 +345,9 @@ def _one_pass_guard(planner, obs: Observation, v_mps: float, omega_radps: float)
     unseen = unseen_speed_up_mps(
         (ego.x_m, ego.y_m), others.position_m, others.heading_rad, others.is_robot,
         accel_mps2=limits.accel_max_mps2, turn_rate_radps=limits.omega_max_radps, lag_s=lag_s,
-        others_speed_mps=np.hypot(*others.velocity_mps.T), v_max_mps=limits.v_max_mps)
+        others_speed_mps=np.hypot(*others.velocity_mps.T), v_max_mps=limits.v_max_mps,
+        recent_speed_mps=others.recent_speed_mps,
+        recent_lag_s=0.5 * others.recent_interval_s + obs.pose_age_s)
     v_safe = braking_speed_limit(
         (ego.x_m, ego.y_m), ego.heading_rad, obs.radius_m, others.position_m,
         others.velocity_mps, others.radius_m, reaction_s=reaction_s,
@@ -333,10 +371,16 @@ def test_the_guards_cheap_first_pass_never_changes_its_result(seed, k, pose_age_
     xy = rng.uniform(-4.0, 4.0, (k, 2))
     # headings unknown (None: any heading) in a fifth of the crowds
     heading = rng.uniform(-math.pi, math.pi, k) if rng.random() > 0.2 else None
+    # recent speeds known for most (NaN: seen once), unknown altogether in a fifth
+    recent = np.where(rng.random(k) < 0.8, rng.uniform(0.0, 1.1, k), np.nan)
+    interval = np.where(np.isnan(recent), np.nan, rng.uniform(0.02, 0.17, k))
+    known = rng.random() > 0.2
     others = Others(ids=np.arange(k) + 10, position_m=xy,
                     velocity_mps=rng.uniform(-0.8, 0.8, (k, 2)),
                     radius_m=np.full(k, R), linearity=np.ones(k), track_start_m=xy,
-                    is_robot=rng.random(k) < 0.8, heading_rad=heading)
+                    is_robot=rng.random(k) < 0.8, heading_rad=heading,
+                    recent_speed_mps=recent if known else None,
+                    recent_interval_s=interval if known else None)
     ego = EgoState(x_m=0.0, y_m=0.0, heading_rad=float(rng.uniform(-math.pi, math.pi)),
                    v_mps=float(rng.uniform(0.0, 1.1)), omega_radps=0.0)
     obs = Observation(robot_id=1, ego=ego, goal_m=np.array([20.0, 0.0]), radius_m=R,
