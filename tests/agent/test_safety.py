@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from agent.config import MpcConfig, PlannerConfig, RobotLimits
-from agent.planners import make_planner
+from agent.planners import RECENT_SPEED_MAX_AGE_S, make_planner
 from agent.safety import braking_speed_limit, heading_sweep_rad, unseen_speed_up_mps
 from agent.types import EgoState, Observation, Others
 
@@ -346,7 +346,8 @@ def _one_pass_guard(planner, obs: Observation, v_mps: float, omega_radps: float)
         (ego.x_m, ego.y_m), others.position_m, others.heading_rad, others.is_robot,
         accel_mps2=limits.accel_max_mps2, turn_rate_radps=limits.omega_max_radps, lag_s=lag_s,
         others_speed_mps=np.hypot(*others.velocity_mps.T), v_max_mps=limits.v_max_mps,
-        recent_speed_mps=others.recent_speed_mps,
+        recent_speed_mps=(others.recent_speed_mps
+                          if obs.pose_age_s <= RECENT_SPEED_MAX_AGE_S else None),
         recent_lag_s=0.5 * others.recent_interval_s + obs.pose_age_s)
     v_safe = braking_speed_limit(
         (ego.x_m, ego.y_m), ego.heading_rad, obs.radius_m, others.position_m,
@@ -361,7 +362,7 @@ def _one_pass_guard(planner, obs: Observation, v_mps: float, omega_radps: float)
 
 @settings(max_examples=300, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), k=st.integers(1, 10),
-       pose_age_s=st.sampled_from([0.0, 0.05, 0.13, 0.4]),
+       pose_age_s=st.sampled_from([0.0, 0.03, 0.05, 0.13, 0.4]),
        v_mps=st.floats(0.0, 1.1), omega_radps=st.floats(-1.5, 1.5))
 def test_the_guards_cheap_first_pass_never_changes_its_result(seed, k, pose_age_s, v_mps,
                                                               omega_radps):
@@ -388,3 +389,36 @@ def test_the_guards_cheap_first_pass_never_changes_its_result(seed, k, pose_age_
     planner = make_planner("eifp-mpc", _config(0.1))
     assert planner._braking_guard(obs, v_mps, omega_radps) == \
         _one_pass_guard(planner, obs, v_mps, omega_radps)
+
+
+def _follower(pose_age_s: float, recent: float | None) -> Observation:
+    """A robot at 1.0 m/s, 1.3 m behind a leader heading the same way at 1.0 m/s; the
+    leader's speed over its newest 0.1 s interval is `recent` (None: unknown)."""
+    leader = Others(ids=np.array([2]), position_m=np.array([[1.3, 0.0]]),
+                    velocity_mps=np.array([[1.0, 0.0]]), radius_m=np.array([R]),
+                    linearity=np.ones(1), track_start_m=np.array([[0.8, 0.0]]),
+                    is_robot=np.ones(1, bool), heading_rad=np.zeros(1),
+                    recent_speed_mps=None if recent is None else np.array([recent]),
+                    recent_interval_s=None if recent is None else np.array([0.1]))
+    ego = EgoState(x_m=0.0, y_m=0.0, heading_rad=0.0, v_mps=1.0, omega_radps=0.0)
+    return Observation(robot_id=1, ego=ego, goal_m=np.array([20.0, 0.0]), radius_m=R,
+                       limits=RobotLimits(), others=leader, pose_age_s=pose_age_s)
+
+
+def test_the_guard_reads_recent_speeds_from_fresh_poses_only():
+    planner = make_planner("eifp-mpc", _config(0.05))
+    # fresh poses: a leader seen keeping its speed is allowed a braking of a_max over half
+    # the interval only, so the follower may go faster than under the blind bound
+    fresh_blind = planner._braking_guard(_follower(0.0, None), 1.1, 0.0)
+    fresh_seen = planner._braking_guard(_follower(0.0, 1.0), 1.1, 0.0)
+    # blind: the leader may recede at 1.0 - 1.5 x 0.25 = 0.625 m/s, room 0.25 + 0.625^2 / 3
+    assert fresh_blind == pytest.approx(1.5 * (-0.1 + math.sqrt(0.01 + 2 * 0.3802 / 1.5)),
+                                        abs=1e-3)
+    # seen at 1.0: at least 1.0 - 1.5 x 0.05 = 0.925 m/s, room enough for the full 1.1 m/s
+    assert fresh_seen == 1.1 > fresh_blind
+    # a leader seen braking (0.6 m/s over the newest interval) takes that back
+    assert planner._braking_guard(_follower(0.0, 0.6), 1.1, 0.0) < fresh_seen
+    # poses older than RECENT_SPEED_MAX_AGE_S: the blind bound, recent speeds or not
+    old = RECENT_SPEED_MAX_AGE_S + 0.05
+    assert planner._braking_guard(_follower(old, 1.0), 1.1, 0.0) == \
+        planner._braking_guard(_follower(old, None), 1.1, 0.0)
