@@ -223,15 +223,18 @@ def _recent_speed(pos: np.ndarray, use: np.ndarray, tt: np.ndarray
     if pos.shape[0] < 2:
         return np.full(k, np.nan), np.full(k, np.nan)
     if use[-2].all():
-        # the usual case: every disc in the sample before the newest too
+        # the usual case, every disc in the sample before the newest too: one interval
+        dt = float(tt[-1] - tt[-2])
+        if dt <= 1e-9:
+            return np.full(k, np.nan), np.full(k, np.nan)
         step = pos[-1] - pos[-2]
-        interval = np.full(k, tt[-1] - tt[-2])
-    else:
-        prev = np.where(use[:-1], np.arange(pos.shape[0] - 1)[:, None], -1).max(axis=0)
-        known = prev >= 0
-        prev_pos = pos[np.maximum(prev, 0), np.arange(k)]
-        step = np.where(known[:, None], pos[-1] - prev_pos, np.nan)
-        interval = np.where(known, tt[-1] - tt[np.maximum(prev, 0)], np.nan)
+        return np.hypot(step[:, 0], step[:, 1]) / dt, np.full(k, dt)
+    # some disc missing from the sample before the newest: its own newest earlier sample
+    prev = np.where(use[:-1], np.arange(pos.shape[0] - 1)[:, None], -1).max(axis=0)
+    known = prev >= 0
+    prev_pos = pos[np.maximum(prev, 0), np.arange(k)]
+    step = np.where(known[:, None], pos[-1] - prev_pos, np.nan)
+    interval = np.where(known, tt[-1] - tt[np.maximum(prev, 0)], np.nan)
     ok = interval > 1e-9  # NaN compares False
     speed = np.where(ok, np.hypot(step[:, 0], step[:, 1]) / np.where(ok, interval, 1.0), np.nan)
     return speed, np.where(ok, interval, np.nan)

@@ -162,3 +162,23 @@ def test_recent_speed_skips_a_sample_the_disc_was_missing_from():
     o = tr.others()
     np.testing.assert_allclose(o.recent_speed_mps, [1.0, 2.0])
     np.testing.assert_allclose(o.recent_interval_s, [0.1, 0.2])
+
+
+def test_recent_speed_dense_path_equals_the_per_disc_path():
+    # The usual case (every disc in the sample before the newest) takes a shortcut; a disc
+    # missing there sends the whole call down the per-disc path, which must agree on the
+    # others to the last bit.
+    from agent.estimation import _recent_speed
+
+    rng = np.random.default_rng(3)
+    for h in (2, 4, 7):
+        pos = rng.uniform(-5.0, 5.0, (h, 6, 2))
+        tt = np.sort(rng.uniform(-0.5, 0.0, h))
+        tt -= tt[-1]
+        use = np.ones((h, 6), dtype=bool)
+        dense = _recent_speed(pos[:, :5], use[:, :5], tt)
+        use[-2, 5] = False
+        general = _recent_speed(pos, use, tt)
+        np.testing.assert_array_equal(general[0][:5], dense[0])
+        np.testing.assert_array_equal(general[1][:5], dense[1])
+        assert math.isnan(general[0][5]) == (h == 2)  # with h > 2 an older sample serves
