@@ -321,11 +321,11 @@ def _config_kwargs(ctx: _Ctx, path: str, data: Mapping[str, Any], cls: type,
     return out
 
 
-def _check_limits(ctx: _Ctx, path: str, limits: RobotLimits | dict[str, Any]) -> None:
-    """v_min <= v_max, on built limits or on the keyword arguments of `RobotLimits`."""
-    get = limits.get if isinstance(limits, dict) else lambda name, _d: getattr(limits, name)
-    v_min = get("v_min_mps", RobotLimits.v_min_mps)
-    v_max = get("v_max_mps", RobotLimits.v_max_mps)
+def _check_limits(ctx: _Ctx, path: str, kwargs: Mapping[str, Any]) -> None:
+    """v_min <= v_max on the keyword arguments of `RobotLimits`, before it is built (built
+    limits refuse it themselves, without the file and key)."""
+    v_min = kwargs.get("v_min_mps", RobotLimits.v_min_mps)
+    v_max = kwargs.get("v_max_mps", RobotLimits.v_max_mps)
     if v_min > v_max:
         raise ctx.error(_join(path, "v_min"), f"must be <= v_max ({v_max!r}), got {v_min!r}")
 
@@ -458,7 +458,6 @@ def validate_scenario(scenario: Scenario, source: str = "<scenario>") -> Scenari
         _vector(ctx, _join(path, "goal"), r.goal, ("x", "y"))
         _number(ctx, _join(path, "radius"), r.radius_m, lower="positive")
         _check_config(ctx, path, r.limits)
-        _check_limits(ctx, path, r.limits)
         _planner_name(ctx, _join(path, "planner"), r.planner)
     for k, o in enumerate(scenario.obstacles):
         path = _join("obstacles", k)
