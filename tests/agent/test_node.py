@@ -398,3 +398,41 @@ def test_after_its_own_suspension_a_robot_waits_the_longer_rejoin_grace(monkeypa
     clock[0] = 100.0 + 1.01 * REJOIN_GRACE_S
     with pytest.raises(_Exit, match="not back within"):
         node.poll_world()
+
+
+def test_a_configuration_out_of_range_is_refused_and_named_at_start_up() -> None:
+    # The world's reply carries command_hold_periods = -1 (typed right, out of range): the
+    # robot must not build a controller from it, and leaves at its start-up deadline naming
+    # the field. A fake session stands in for Zenoh: fetch_config only calls get().
+    import time
+    from types import SimpleNamespace
+
+    import msgpack
+
+    from agent import node
+    from protocol import RunKeys
+
+    good = RunConfigMsg(run_id="r1", robot=RobotSpec(id=3, start=(0.0, 0.0, 0.0),
+                                                      goal=(5.0, 0.0)),
+                        planner=PlannerConfig(), goal_tolerance_m=0.25, control_rate_hz=10.0,
+                        world_rate_hz=50.0, time_scale=1.0, time_limit_s=60.0,
+                        cmd_timeout_s=0.5, known_ids=(3,))
+    body = msgpack.unpackb(good.encode())
+    body["planner"]["command_hold_periods"] = -1.0
+    payload = msgpack.packb(body, use_bin_type=True)
+    reply = SimpleNamespace(ok=SimpleNamespace(
+        payload=SimpleNamespace(to_bytes=lambda: payload)), err=None)
+    asked = []
+    session = SimpleNamespace(get=lambda key, timeout: asked.append(key) or [reply])
+    with pytest.raises(node._Exit) as caught:
+        node.fetch_config(session, RunKeys("r1"), 3, node._StopFlag(),
+                          deadline=time.monotonic() + 0.25)
+    assert caught.value.code == node.EXIT_SETUP
+    assert "config.planner: command_hold_periods: must be > 0" in caught.value.reason
+    assert asked  # it did ask, and kept asking until the deadline
+    # the same reply with the field in range is taken
+    body["planner"]["command_hold_periods"] = 1.5
+    payload = msgpack.packb(body, use_bin_type=True)
+    got = node.fetch_config(session, RunKeys("r1"), 3, node._StopFlag(),
+                            deadline=time.monotonic() + 1.0)
+    assert got.planner.command_hold_periods == 1.5
