@@ -8,7 +8,7 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from agent.config import PlannerConfig, RobotLimits
-from agent.ifp import VIA_MARGIN_M, ViaPlan, plan_ifp, select_earliest
+from agent.ifp import ESCAPE_STANDING_MPS, VIA_MARGIN_M, ViaPlan, plan_ifp, select_earliest
 from agent.types import EgoState, Observation, Others, PlanStatus, Side
 from agent.viapoints import ESCAPE_MARGIN_M, via_point_candidates
 
@@ -141,6 +141,17 @@ def test_inside_an_inflated_disc_escapes_straight_out():
     np.testing.assert_allclose(plan.waypoints_m, [[0, 0], plan.via_point_m, [10, 0]])
 
 
+def test_a_standing_robot_escapes_without_the_goal_in_its_plan():
+    # the goal lies back past the disc: [P, escape point] only, not a spline through it
+    o = others([[0.5, 0.0]], ids=[3])
+    for v in (0.0, ESCAPE_STANDING_MPS - 1e-3):
+        plan = plan_ifp(observe(o, v=v), CFG)
+        assert plan.status is PlanStatus.ESCAPE
+        np.testing.assert_allclose(plan.waypoints_m, [[0, 0], [0.5 - L - ESCAPE_MARGIN_M, 0.0]])
+    moving = plan_ifp(observe(o, v=ESCAPE_STANDING_MPS), CFG)
+    assert len(moving.waypoints_m) == 3
+
+
 def test_escape_from_the_deepest_disc_and_coincident_is_finite():
     o = others([[0.0, 0.0], [0.6, 0.0]], ids=[5, 6])
     plan = plan_ifp(observe(o, heading=0.0, v=1.0), CFG)
@@ -240,7 +251,10 @@ def test_property_finite_inputs_give_a_finite_well_formed_plan(rows, v, heading,
     assert np.all(np.isfinite(wps))
     assert 2 <= len(wps) <= CFG.max_depth + 2
     np.testing.assert_array_equal(wps[0], [0, 0])
-    np.testing.assert_array_equal(wps[-1], goal)
+    if plan.status is PlanStatus.ESCAPE and v < ESCAPE_STANDING_MPS:
+        assert len(wps) == 2  # out of the disc first, the goal next cycle
+    else:
+        np.testing.assert_array_equal(wps[-1], goal)
     assert plan.status in (PlanStatus.OK, PlanStatus.ESCAPE, PlanStatus.NO_FEASIBLE)
     if plan.via_point_m is not None:
         np.testing.assert_array_equal(plan.via_point_m, wps[1])

@@ -179,3 +179,19 @@ def test_stage_times_come_from_the_injected_timer():
     assert t.control_ms == pytest.approx(1.0)
     assert t.total_ms == pytest.approx(t.threats_ms + t.viapoints_ms + t.spline_ms
                                        + t.control_ms)
+
+
+def test_robots_standing_inside_each_others_inflated_discs_get_out_and_arrive():
+    # Setup E at 100 +- 30 ms with 10 % loss (lockstep, link seed 2) ended with robots 2 and
+    # 3 standing 1.28 m apart (inside each other's inflated radius, 1.3 m) for 80 s, each
+    # facing away, each goal behind the other: the escape plan [P, escape point, goal] made
+    # a spline that leaves 7 cm one way and turns back through the other's disc, and the
+    # MPC stood still. A standing robot now steers out first ([P, escape point]).
+    robots = (
+        RobotSpec(2, (-0.0632, 0.7357, -1.5841), (1.99, 0.26), planner="eifp-mpc"),
+        RobotSpec(3, (1.2052, 0.9333, 1.6144), (-0.29, 1.5), planner="eifp-mpc"),
+    )
+    sim, decisions = run_loop(Scenario("escape", "", 30.0, 0.25, PlannerConfig(), robots), 30.0)
+    assert decisions[0][2] is PlanStatus.ESCAPE
+    assert sim.contact_count == 0
+    assert sim.all_arrived(), f"arrived {sim.arrived.tolist()} at t={sim.t_s:.1f}"
