@@ -181,4 +181,5 @@ def _advance(others: Others, age_s: float) -> Others:
         heading_rad=others.heading_rad,  # a heading's drift over the age is not predicted
         recent_speed_mps=others.recent_speed_mps,
         recent_interval_s=others.recent_interval_s,
+        recent_turn_rate_radps=others.recent_turn_rate_radps,
     )

@@ -13,7 +13,13 @@ poses it observed and estimates, per other disc,
 - recent speed: distance over time between the disc's two newest samples, with that
   interval's length. The least-squares slope trails a speed change by about window / 2;
   this one by half an interval (a sixth of the window or less), so the braking guard
-  reads from it how much of a speed change the slope does not show yet.
+  reads from it how much of a speed change the slope does not show yet;
+- recent turn rate: the heading change between the same two samples (wrapped to
+  [-pi, pi)) over that interval. The slope's direction trails a turn as its magnitude
+  trails a speed change; the braking guard reads from it how far a robot turning towards
+  this one may have turned since (`agent.safety.unseen_turn_closing_mps`). Samples are at
+  most a third of the window apart, so a robot's heading moves by less than a half turn
+  between them (omega_max window / 3 = 0.25 rad at 1.5 rad/s) and the wrap is unambiguous.
 All neighbours are handled at once with arrays of shape (H samples, n discs).
 """
 
@@ -51,6 +57,7 @@ class NeighborTracker:
         self._ids = np.zeros(0, dtype=np.int64)
         self._radius = np.zeros(0)
         self._heading = np.zeros(0)  # the latest observed heading per column
+        self._hdg = np.zeros((self.max_samples, 0))  # observed headings per sample
         self._t = np.full(self.max_samples, -np.inf)
         self._pos = np.zeros((self.max_samples, 0, 2))
         self._seen = np.zeros((self.max_samples, 0), dtype=bool)
@@ -71,6 +78,7 @@ class NeighborTracker:
         self._radius = np.concatenate([self._radius, np.zeros(extra)])
         self._heading = np.concatenate([self._heading, np.zeros(extra)])
         self._pos = np.concatenate([self._pos, np.zeros((self.max_samples, extra, 2))], axis=1)
+        self._hdg = np.concatenate([self._hdg, np.zeros((self.max_samples, extra))], axis=1)
         self._seen = np.concatenate(
             [self._seen, np.zeros((self.max_samples, extra), dtype=bool)], axis=1
         )
@@ -99,6 +107,7 @@ class NeighborTracker:
         self._pos[r, cols] = snapshot.pose[mask, :2]
         self._radius[cols] = snapshot.radius_m[mask]
         self._heading[cols] = snapshot.pose[mask, 2]
+        self._hdg[r, cols] = self._heading[cols]
         self._latest = self._seen[r].copy()
 
     def others(self, near_m: np.ndarray | None = None, within_m: float = np.inf) -> Others:
@@ -133,7 +142,8 @@ class NeighborTracker:
         else:
             velocity, start, linearity = self._estimate_sparse(
                 self._pos[rows][:, cols], seen, tt)
-        recent_speed, recent_interval = _recent_speed(self._pos[rows][:, cols], seen, tt)
+        recent_speed, recent_turn, recent_interval = _recent_motion(
+            self._pos[rows][:, cols], self._hdg[rows][:, cols], seen, tt)
         latest = self._pos[r][cols]
         ids = self._ids[cols]
         # Built from a validated snapshot (finite poses, radii) by finite arithmetic.
@@ -148,6 +158,7 @@ class NeighborTracker:
             heading_rad=self._heading[cols],
             recent_speed_mps=recent_speed,
             recent_interval_s=recent_interval,
+            recent_turn_rate_radps=recent_turn,
         )
 
     @staticmethod
@@ -207,34 +218,46 @@ class NeighborTracker:
         return velocity, start, linearity
 
 
-def _recent_speed(pos: np.ndarray, use: np.ndarray, tt: np.ndarray
-                  ) -> tuple[np.ndarray, np.ndarray]:
-    """Speed between each disc's two newest samples in the window, and the interval.
+def _recent_motion(pos: np.ndarray, heading: np.ndarray, use: np.ndarray, tt: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Speed and turn rate between each disc's two newest samples in the window, and the
+    interval.
 
     Args:
         pos: (h, k, 2) positions in the window, oldest first.
+        heading: (h, k) observed headings in the same samples.
         use: (h, k) whether disc j was seen in sample i; the last row is all True.
         tt: (h,) sample times relative to the newest (<= 0).
 
     Returns:
-        (k,) speed [m/s] and (k,) interval [s], both NaN for a disc seen once only.
+        (k,) speed [m/s], (k,) signed turn rate [rad/s] and (k,) interval [s], all NaN for
+        a disc seen once only.
     """
     k = pos.shape[1]
     if pos.shape[0] < 2:
-        return np.full(k, np.nan), np.full(k, np.nan)
+        return np.full(k, np.nan), np.full(k, np.nan), np.full(k, np.nan)
     if use[-2].all():
         # the usual case, every disc in the sample before the newest too: one interval
         dt = float(tt[-1] - tt[-2])
         if dt <= 1e-9:
-            return np.full(k, np.nan), np.full(k, np.nan)
+            return np.full(k, np.nan), np.full(k, np.nan), np.full(k, np.nan)
         step = pos[-1] - pos[-2]
-        return np.hypot(step[:, 0], step[:, 1]) / dt, np.full(k, dt)
+        turn = _wrap(heading[-1] - heading[-2])
+        return np.hypot(step[:, 0], step[:, 1]) / dt, turn / dt, np.full(k, dt)
     # some disc missing from the sample before the newest: its own newest earlier sample
     prev = np.where(use[:-1], np.arange(pos.shape[0] - 1)[:, None], -1).max(axis=0)
     known = prev >= 0
-    prev_pos = pos[np.maximum(prev, 0), np.arange(k)]
-    step = np.where(known[:, None], pos[-1] - prev_pos, np.nan)
-    interval = np.where(known, tt[-1] - tt[np.maximum(prev, 0)], np.nan)
+    cols = np.arange(k)
+    prev_row = np.maximum(prev, 0)
+    step = np.where(known[:, None], pos[-1] - pos[prev_row, cols], np.nan)
+    turn = np.where(known, _wrap(heading[-1] - heading[prev_row, cols]), np.nan)
+    interval = np.where(known, tt[-1] - tt[prev_row], np.nan)
     ok = interval > 1e-9  # NaN compares False
-    speed = np.where(ok, np.hypot(step[:, 0], step[:, 1]) / np.where(ok, interval, 1.0), np.nan)
-    return speed, np.where(ok, interval, np.nan)
+    safe = np.where(ok, interval, 1.0)
+    speed = np.where(ok, np.hypot(step[:, 0], step[:, 1]) / safe, np.nan)
+    return speed, np.where(ok, turn / safe, np.nan), np.where(ok, interval, np.nan)
+
+
+def _wrap(angle_rad: np.ndarray) -> np.ndarray:
+    """Angles wrapped to [-pi, pi)."""
+    return np.remainder(angle_rad + np.pi, 2.0 * np.pi) - np.pi

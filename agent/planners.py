@@ -37,7 +37,12 @@ from typing import Protocol
 import numpy as np
 
 from agent.config import PLANNER_NAMES, PlannerConfig
-from agent.safety import braking_speed_limit, heading_sweep_rad, unseen_speed_up_mps
+from agent.safety import (
+    braking_speed_limit,
+    heading_sweep_rad,
+    unseen_speed_up_mps,
+    unseen_turn_closing_mps,
+)
 from agent.types import Observation, PlanResult, PlanStatus, Side, StageTimes
 
 Timer = Callable[[], float]
@@ -65,9 +70,17 @@ its hold and resumes its next command at once (`world.dynamics`), and such a rob
 speed jumps. Measured (distributed, setup G at 100 +- 30 ms with 10 % loss, stop 16's
 machine): read at every age, 3 of 10 runs touched, one of them a follower into a braking
 leader; the blind bound, 3 of 10 on the same machine. So the gate is not shown to be
-needed, but it keeps every run with a delayed link identical to the code whose safety
-envelope was measured (README, "The safety envelope"). Poses are fresh (age 0) in an
-undisturbed lockstep run and a few ms old in a healthy distributed one."""
+needed, but it keeps the speed terms of every run with a delayed link those of the code
+whose safety envelope was measured (README, "The safety envelope"). Poses are fresh (age 0)
+in an undisturbed lockstep run and a few ms old in a healthy distributed one.
+
+The same age switches the guard's turn allowances on. From poses older than this the
+robot's own heading is swept on through its stop, not only over the reaction time, and
+an other turning towards the robot counts as closing as much faster than its estimate
+shows as its observed turn rate makes it (`agent.safety.unseen_turn_closing_mps`). With
+fresh poses both are left out: no run without link faults has touched, and each cost
+setup G oscillations without faults (the sweep 7.7 -> 9.3 per robot, reading the heading
+instead of the estimate's direction 7.2 -> 10.1; stops 14 and 15)."""
 
 
 class Planner(Protocol):
@@ -219,11 +232,19 @@ class ViaPointPlanner:
         `accel_max x lag` (a scalar: no per-disc trigonometry); the speed limit falls as the
         speed-up grows, so when that pass lets `v_mps` through, the exact one would too. Only
         a command the bound limits pays for `unseen_speed_up_mps`, which reads the others'
-        recent speeds from fresh poses only (`RECENT_SPEED_MAX_AGE_S`)."""
+        recent speeds from fresh poses only (`RECENT_SPEED_MAX_AGE_S`). From older poses
+        the others' turns count too (`unseen_turn_closing_mps`, the larger of the two per
+        other); the first pass's bound is then at least the largest turn term."""
         ego, limits, others = observation.ego, observation.limits, observation.others
         reaction_s = observation.pose_age_s + self.control_period_s
         # how much an other robot's velocity estimate may trail its velocity now
         lag_s = 0.5 * self.config.estimation_window_s + observation.pose_age_s
+
+        fresh = observation.pose_age_s <= RECENT_SPEED_MAX_AGE_S
+        # the headings the robot sweeps before it stands: up to when a braking command can
+        # act (fresh poses), or on through the stop (delayed ones: a robot that keeps
+        # turning while it brakes can face a disc it did not face now)
+        turning_s = reaction_s if fresh else reaction_s + max(v_mps, 0.0) / limits.accel_max_mps2
 
         def limit(unseen_dv: np.ndarray | float) -> float:
             return braking_speed_limit(
@@ -231,20 +252,32 @@ class ViaPointPlanner:
                 others.position_m, others.velocity_mps, others.radius_m,
                 reaction_s=reaction_s, decel_mps2=limits.accel_max_mps2,
                 margin_m=self.config.mpc.braking_margin_m,
-                sweep_rad=heading_sweep_rad(omega_radps, reaction_s), up_to_mps=v_mps,
+                sweep_rad=heading_sweep_rad(omega_radps, turning_s), up_to_mps=v_mps,
                 unseen_dv_mps=unseen_dv,
             )
 
-        if v_mps <= limit(limits.accel_max_mps2 * lag_s):
+        turning = None
+        if not fresh:
+            turning = unseen_turn_closing_mps(
+                (ego.x_m, ego.y_m), others.position_m, others.velocity_mps, others.heading_rad,
+                others.recent_turn_rate_radps, others.is_robot,
+                turn_rate_max_radps=limits.omega_max_radps, age_s=observation.pose_age_s,
+                reaction_s=reaction_s)
+        bound = limits.accel_max_mps2 * lag_s
+        if turning is not None and len(turning):
+            bound = max(bound, float(turning.max()))
+        if v_mps <= limit(bound):
             return v_mps
-        fresh = observation.pose_age_s <= RECENT_SPEED_MAX_AGE_S
-        v_safe = limit(unseen_speed_up_mps(
+        unseen = unseen_speed_up_mps(
             (ego.x_m, ego.y_m), others.position_m, others.heading_rad, others.is_robot,
             accel_mps2=limits.accel_max_mps2, turn_rate_radps=limits.omega_max_radps,
             lag_s=lag_s, others_speed_mps=np.hypot(*others.velocity_mps.T),
             v_max_mps=limits.v_max_mps,
             recent_speed_mps=others.recent_speed_mps if fresh else None,
-            recent_lag_s=0.5 * others.recent_interval_s + observation.pose_age_s))
+            recent_lag_s=0.5 * others.recent_interval_s + observation.pose_age_s)
+        if turning is not None:
+            unseen = np.maximum(unseen, turning)
+        v_safe = limit(unseen)
         if v_mps <= v_safe:
             return v_mps
         hardest = ego.v_mps - limits.accel_max_mps2 * self.control_period_s

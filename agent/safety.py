@@ -15,7 +15,10 @@ a is the smallest angle between u and the headings the robot sweeps if it keeps 
 the commanded rate until a braking command can act (tau). Sweeping on through the stop
 (tau + v / decel) was measured too: as safe under latency, but it slowed the crowded
 centre of setup G without faults (oscillations 7.7 -> 9.3 per robot, one of 30 seeds out
-of time). Over
+of time); so the planner sweeps through the stop only from delayed poses (older than
+`agent.planners.RECENT_SPEED_MAX_AGE_S`), where a robot turned at full rate into a robot it
+had not faced (setup F at 100 +- 30 ms, lockstep link seed 9, -4.2 cm with the turn term
+alone). Over
 the reaction time tau it keeps closing at that rate (the command in flight and the one
 period it is held), then brakes at `decel` (its closing speed falls at decel cos a). The
 other's speed along u, w = v_j . u, changes the room R the robot has:
@@ -70,7 +73,12 @@ the lag left G link seed 4 touching (-4 cm). The braking term came with the comm
 into a leader that had braked and turned while its slope still showed 0.7 m/s (setup G
 seed 1, -5.8 cm; with the term seeds 0-5 kept clear, but of seeds 0-9 seed 7 touched,
 1.1 cm: two robots turning towards each other at speed, which neither term covers; see the
-README for the variants tried).
+README for the variants tried). That is the turn term's case (`unseen_turn_closing_mps`):
+the estimate's direction trails a turn by about window / 2, the observed heading by the
+pose age only, so an other whose heading, carried on at its observed turn rate, points
+more at the robot than its estimate closes that much faster. It is read from delayed poses
+only (`agent.planners.RECENT_SPEED_MAX_AGE_S`), and per other the larger of it and the
+speed term counts.
 
 The largest safe speed solves v cos a tau + v^2 cos a / (2 decel) = R:
 
@@ -233,6 +241,66 @@ def unseen_speed_up_mps(
         away = np.where(np.isnan(off), 0.0, np.maximum(-np.cos(off), 0.0))
         closing = np.maximum(closing, down * away)
     return np.where(is_robot, closing, 0.0)
+
+
+def unseen_turn_closing_mps(
+    position_m: tuple[float, float],
+    others_position_m: np.ndarray,
+    others_velocity_mps: np.ndarray,
+    others_heading_rad: np.ndarray,
+    others_turn_rate_radps: np.ndarray,
+    is_robot: np.ndarray,
+    *,
+    turn_rate_max_radps: float,
+    age_s: float,
+    reaction_s: float,
+) -> np.ndarray:
+    """How much faster than its estimate each other may be closing because it turns.
+
+    The estimated velocity's direction trails a turn by about window / 2 (a least-squares
+    slope over a curved track), the observed heading by the pose age only. An other that
+    keeps its observed turn rate (`Others.recent_turn_rate_radps`, at most the largest)
+    heads, from now until a braking command of the robot acts, somewhere between
+    h + omega age and h + omega (age + reaction); at its estimated speed its closing speed
+    is then up to |v_j| max cos(bearing to the robot - heading) over those headings. The
+    term is how much that exceeds the estimate's closing speed, never negative. Unknown
+    heading: 0 (`unseen_speed_up_mps` already takes any heading as facing the robot);
+    unknown turn rate: the heading now only; scenario obstacles: 0.
+
+    Args:
+        position_m: (x, y) of the robot.
+        others_position_m, others_velocity_mps: (K, 2) the others (predicted to now) and
+            their estimated velocities.
+        others_heading_rad: (K,) observed headings (NaN: unknown).
+        others_turn_rate_radps: (K,) observed turn rates (NaN: unknown).
+        is_robot: (K,) False for scenario obstacles.
+        turn_rate_max_radps: the others' largest turn rate (>= 0).
+        age_s: how old the observed headings are (>= 0).
+        reaction_s: how long until a braking command of the robot acts (>= 0).
+
+    Returns:
+        (K,) the extra closing speed in m/s, >= 0 and at most 2 |v_j|.
+    """
+    if not (turn_rate_max_radps >= 0.0 and age_s >= 0.0 and reaction_s >= 0.0):
+        raise ValueError("turn_rate_max_radps, age_s and reaction_s must be >= 0")
+    to_robot = np.asarray(position_m, dtype=float) - others_position_m
+    dist = np.hypot(to_robot[:, 0], to_robot[:, 1])
+    unit = to_robot / np.maximum(dist, 1e-9)[:, None]
+    estimated = (others_velocity_mps * unit).sum(axis=1)  # closing speed, > 0 approaching
+    speed = np.hypot(others_velocity_mps[:, 0], others_velocity_mps[:, 1])
+    omega = np.clip(np.nan_to_num(others_turn_rate_radps, nan=0.0),
+                    -turn_rate_max_radps, turn_rate_max_radps)
+    bearing = np.arctan2(unit[:, 1], unit[:, 0])
+    # the bearing seen from the heading now, and the heading's sweep over the reaction
+    delta = np.remainder(bearing - others_heading_rad - omega * age_s + np.pi,
+                         2.0 * np.pi) - np.pi
+    sweep = omega * reaction_s  # |sweep| < pi for any sensible reaction time
+    inside = np.where(sweep >= 0.0, (delta >= 0.0) & (delta <= sweep),
+                      (delta <= 0.0) & (delta >= sweep))
+    best = np.where(inside, 1.0, np.maximum(np.cos(delta), np.cos(delta - sweep)))
+    extra = np.maximum(speed * best - estimated, 0.0)
+    known = ~np.isnan(others_heading_rad) & np.asarray(is_robot, dtype=bool) & (dist > 1e-9)
+    return np.where(known, np.nan_to_num(extra, nan=0.0), 0.0)
 
 
 def heading_sweep_rad(omega_radps: float, reaction_s: float) -> float:

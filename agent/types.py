@@ -110,6 +110,9 @@ class Others:
             unknown. Read by the braking guard (`agent.safety.unseen_speed_up_mps`): it
             shows a speed change that the least-squares velocity still trails.
         recent_interval_s: (K,) the length of that interval (NaN when unknown).
+        recent_turn_rate_radps: (K,) signed heading change over that interval per second
+            (NaN when unknown). Read by the braking guard under a delayed link
+            (`agent.safety.unseen_turn_closing_mps`): a turn the estimate's direction trails.
     """
 
     ids: np.ndarray
@@ -122,6 +125,7 @@ class Others:
     heading_rad: np.ndarray | None = None
     recent_speed_mps: np.ndarray | None = None
     recent_interval_s: np.ndarray | None = None
+    recent_turn_rate_radps: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         ids = np.asarray(self.ids, dtype=np.int64).reshape(-1)
@@ -155,6 +159,15 @@ class Others:
                 if np.any(np.isinf(arr)) or np.any(arr < 0.0):
                     raise ValueError(f"{name}: expected NaN (unknown) or finite values >= 0")
             object.__setattr__(self, name, arr)
+        if self.recent_turn_rate_radps is None:
+            turn = np.full(k, np.nan)
+        else:
+            turn = np.asarray(self.recent_turn_rate_radps, dtype=float).reshape(-1)
+            if turn.shape != (k,):
+                raise ValueError(f"recent_turn_rate_radps: shape {turn.shape}, expected {(k,)}")
+            if np.any(np.isinf(turn)):
+                raise ValueError("recent_turn_rate_radps: expected NaN (unknown) or finite values")
+        object.__setattr__(self, "recent_turn_rate_radps", turn)
 
     def __len__(self) -> int:
         return int(self.ids.shape[0])
@@ -174,6 +187,7 @@ class Others:
             heading_rad=np.zeros(0),
             recent_speed_mps=np.zeros(0),
             recent_interval_s=np.zeros(0),
+            recent_turn_rate_radps=np.zeros(0),
         )
 
     @classmethod
@@ -181,7 +195,8 @@ class Others:
                 radius_m: np.ndarray, linearity: np.ndarray, track_start_m: np.ndarray,
                 is_robot: np.ndarray, heading_rad: np.ndarray | None = None,
                 recent_speed_mps: np.ndarray | None = None,
-                recent_interval_s: np.ndarray | None = None) -> Others:
+                recent_interval_s: np.ndarray | None = None,
+                recent_turn_rate_radps: np.ndarray | None = None) -> Others:
         """Build from arrays derived from already validated ones, skipping validation.
 
         For the hot path only (subsets, time shifts, estimates from validated snapshots);
@@ -201,6 +216,8 @@ class Others:
                            unknown if recent_speed_mps is None else recent_speed_mps)
         object.__setattr__(obj, "recent_interval_s",
                            unknown if recent_interval_s is None else recent_interval_s)
+        object.__setattr__(obj, "recent_turn_rate_radps",
+                           unknown if recent_turn_rate_radps is None else recent_turn_rate_radps)
         return obj
 
     def subset(self, index: np.ndarray) -> Others:
@@ -216,6 +233,7 @@ class Others:
             heading_rad=self.heading_rad[index],
             recent_speed_mps=self.recent_speed_mps[index],
             recent_interval_s=self.recent_interval_s[index],
+            recent_turn_rate_radps=self.recent_turn_rate_radps[index],
         )
 
 

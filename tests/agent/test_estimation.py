@@ -164,21 +164,40 @@ def test_recent_speed_skips_a_sample_the_disc_was_missing_from():
     np.testing.assert_allclose(o.recent_interval_s, [0.1, 0.2])
 
 
-def test_recent_speed_dense_path_equals_the_per_disc_path():
+def test_recent_motion_dense_path_equals_the_per_disc_path():
     # The usual case (every disc in the sample before the newest) takes a shortcut; a disc
     # missing there sends the whole call down the per-disc path, which must agree on the
     # others to the last bit.
-    from agent.estimation import _recent_speed
+    from agent.estimation import _recent_motion
 
     rng = np.random.default_rng(3)
     for h in (2, 4, 7):
         pos = rng.uniform(-5.0, 5.0, (h, 6, 2))
+        hdg = rng.uniform(-4.0, 4.0, (h, 6))
         tt = np.sort(rng.uniform(-0.5, 0.0, h))
         tt -= tt[-1]
         use = np.ones((h, 6), dtype=bool)
-        dense = _recent_speed(pos[:, :5], use[:, :5], tt)
+        dense = _recent_motion(pos[:, :5], hdg[:, :5], use[:, :5], tt)
         use[-2, 5] = False
-        general = _recent_speed(pos, use, tt)
-        np.testing.assert_array_equal(general[0][:5], dense[0])
-        np.testing.assert_array_equal(general[1][:5], dense[1])
+        general = _recent_motion(pos, hdg, use, tt)
+        for got, want in zip(general, dense, strict=True):
+            np.testing.assert_array_equal(got[:5], want)
         assert math.isnan(general[0][5]) == (h == 2)  # with h > 2 an older sample serves
+        assert math.isnan(general[1][5]) == (h == 2)
+
+
+def test_recent_turn_rate_is_the_wrapped_heading_change_over_the_newest_interval():
+    # Robot 1 turns left at 1.2 rad/s across the +-pi seam; robot 2 turns right at
+    # 0.5 rad/s; robot 3 joins in the newest sample only.
+    tr = NeighborTracker(own_id=0, window_s=0.5)
+    for k in range(8):
+        t = 0.1 * k
+        rows = [(1, 0.0, 0.0, 2.8 + 1.2 * t), (2, 4.0, 0.0, 0.3 - 0.5 * t)]
+        rows += [(3, 0.0, 4.0, 1.0)] if k == 7 else []
+        tr.update(PoseSnapshot(stamp_s=t, tick=k, ids=[r[0] for r in rows],
+                               pose=[list(r[1:]) for r in rows], radius_m=[0.5] * len(rows)))
+    o = tr.others()
+    np.testing.assert_allclose(o.recent_turn_rate_radps[:2], [1.2, -0.5], atol=1e-9)
+    assert math.isnan(o.recent_turn_rate_radps[2])
+    np.testing.assert_allclose(o.subset(np.array([1])).recent_turn_rate_radps, [-0.5],
+                               atol=1e-9)

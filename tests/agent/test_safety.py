@@ -10,7 +10,12 @@ from hypothesis import strategies as st
 
 from agent.config import MpcConfig, PlannerConfig, RobotLimits
 from agent.planners import RECENT_SPEED_MAX_AGE_S, make_planner
-from agent.safety import braking_speed_limit, heading_sweep_rad, unseen_speed_up_mps
+from agent.safety import (
+    braking_speed_limit,
+    heading_sweep_rad,
+    unseen_speed_up_mps,
+    unseen_turn_closing_mps,
+)
 from agent.types import EgoState, Observation, Others
 
 R = 0.5
@@ -349,11 +354,19 @@ def _one_pass_guard(planner, obs: Observation, v_mps: float, omega_radps: float)
         recent_speed_mps=(others.recent_speed_mps
                           if obs.pose_age_s <= RECENT_SPEED_MAX_AGE_S else None),
         recent_lag_s=0.5 * others.recent_interval_s + obs.pose_age_s)
+    turning_s = reaction_s
+    if obs.pose_age_s > RECENT_SPEED_MAX_AGE_S:
+        turning_s += max(v_mps, 0.0) / limits.accel_max_mps2  # on through the stop
+        unseen = np.maximum(unseen, unseen_turn_closing_mps(
+            (ego.x_m, ego.y_m), others.position_m, others.velocity_mps, others.heading_rad,
+            others.recent_turn_rate_radps, others.is_robot,
+            turn_rate_max_radps=limits.omega_max_radps, age_s=obs.pose_age_s,
+            reaction_s=reaction_s))
     v_safe = braking_speed_limit(
         (ego.x_m, ego.y_m), ego.heading_rad, obs.radius_m, others.position_m,
         others.velocity_mps, others.radius_m, reaction_s=reaction_s,
         decel_mps2=limits.accel_max_mps2, margin_m=planner.config.mpc.braking_margin_m,
-        sweep_rad=heading_sweep_rad(omega_radps, reaction_s), unseen_dv_mps=unseen)
+        sweep_rad=heading_sweep_rad(omega_radps, turning_s), unseen_dv_mps=unseen)
     if v_mps <= v_safe:
         return v_mps
     return max(v_safe, ego.v_mps - limits.accel_max_mps2 * planner.control_period_s,
@@ -376,12 +389,14 @@ def test_the_guards_cheap_first_pass_never_changes_its_result(seed, k, pose_age_
     recent = np.where(rng.random(k) < 0.8, rng.uniform(0.0, 1.1, k), np.nan)
     interval = np.where(np.isnan(recent), np.nan, rng.uniform(0.02, 0.17, k))
     known = rng.random() > 0.2
+    turn = np.where(rng.random(k) < 0.8, rng.uniform(-2.0, 2.0, k), np.nan)
     others = Others(ids=np.arange(k) + 10, position_m=xy,
                     velocity_mps=rng.uniform(-0.8, 0.8, (k, 2)),
                     radius_m=np.full(k, R), linearity=np.ones(k), track_start_m=xy,
                     is_robot=rng.random(k) < 0.8, heading_rad=heading,
                     recent_speed_mps=recent if known else None,
-                    recent_interval_s=interval if known else None)
+                    recent_interval_s=interval if known else None,
+                    recent_turn_rate_radps=turn if known else None)
     ego = EgoState(x_m=0.0, y_m=0.0, heading_rad=float(rng.uniform(-math.pi, math.pi)),
                    v_mps=float(rng.uniform(0.0, 1.1)), omega_radps=0.0)
     obs = Observation(robot_id=1, ego=ego, goal_m=np.array([20.0, 0.0]), radius_m=R,
@@ -422,3 +437,98 @@ def test_the_guard_reads_recent_speeds_from_fresh_poses_only():
     old = RECENT_SPEED_MAX_AGE_S + 0.05
     assert planner._braking_guard(_follower(old, 1.0), 1.1, 0.0) == \
         planner._braking_guard(_follower(old, None), 1.1, 0.0)
+
+
+def _turn_term(heading, turn, *, velocity=(0.0, 1.0), is_robot=True, age=0.1, reaction=0.2):
+    """The turn term for one other at (5, 0) seen from a robot at the origin."""
+    return unseen_turn_closing_mps(
+        (0.0, 0.0), np.array([[5.0, 0.0]]), np.array([velocity]), np.array([heading]),
+        np.array([turn]), np.array([is_robot]), turn_rate_max_radps=1.5, age_s=age,
+        reaction_s=reaction)[0]
+
+
+def test_turn_term_hand_computed():
+    # heading and estimate straight at the robot, not turning: nothing unseen
+    assert _turn_term(math.pi, 0.0, velocity=(-1.0, 0.0)) == pytest.approx(0.0, abs=1e-12)
+    # crossing upwards (estimate (0, 1): no closing) and turning left towards the robot at
+    # 1 rad/s: heading now pi/2 + 0.1, then up to pi/2 + 0.3 before the robot's braking
+    # acts; closing 1.0 cos(pi - pi/2 - 0.3)
+    assert _turn_term(math.pi / 2, 1.0) == pytest.approx(math.cos(math.pi / 2 - 0.3))
+    # the same turn to the right, away from the robot: nothing
+    assert _turn_term(math.pi / 2, -1.0) == 0.0
+    # the robot's bearing inside the swept headings: the full speed
+    assert _turn_term(3.0, 1.0) == pytest.approx(1.0)
+    # a turn rate above the largest counts as the largest (1.5 rad/s)
+    assert _turn_term(math.pi / 2, 9.0) == pytest.approx(math.cos(math.pi / 2 - 0.45))
+    # turn rate unknown: the heading now only (cos(pi - 2.0) closing, the estimate none)
+    assert _turn_term(2.0, math.nan, age=0.0) == pytest.approx(math.cos(math.pi - 2.0))
+    # heading unknown, or an obstacle: nothing (the speed-up term covers those)
+    assert _turn_term(math.nan, 1.0) == 0.0
+    assert _turn_term(math.pi / 2, 1.0, is_robot=False) == 0.0
+
+
+@given(heading=st.floats(-10.0, 10.0), turn=st.floats(-5.0, 5.0),
+       vx=st.floats(-1.1, 1.1), vy=st.floats(-1.1, 1.1), age=st.floats(0.0, 0.5),
+       reaction=st.floats(0.0, 0.7))
+def test_turn_term_is_between_zero_and_twice_the_speed(heading, turn, vx, vy, age, reaction):
+    term = _turn_term(heading, turn, velocity=(vx, vy), age=age, reaction=reaction)
+    assert 0.0 <= term <= 2.0 * math.hypot(vx, vy) + 1e-12
+
+
+def _crosser(pose_age_s: float, turn: float | None, ahead_m: float = 1.6) -> Observation:
+    """A robot at 1.0 m/s heading +x; another `ahead_m` ahead and 0.2 m to its left
+    crossing at 1.0 m/s to the left (estimate (0, 1)), its heading already 0.3 rad into a
+    left turn, back round towards the robot; its turn rate over the newest 0.1 s is `turn`
+    (None: unknown)."""
+    other = Others(ids=np.array([2]), position_m=np.array([[ahead_m, 0.2]]),
+                   velocity_mps=np.array([[0.0, 1.0]]), radius_m=np.array([R]),
+                   linearity=np.ones(1), track_start_m=np.array([[ahead_m, -0.3]]),
+                   is_robot=np.ones(1, bool), heading_rad=np.array([math.pi / 2 + 0.3]),
+                   recent_speed_mps=np.array([1.0]), recent_interval_s=np.array([0.1]),
+                   recent_turn_rate_radps=None if turn is None else np.array([turn]))
+    ego = EgoState(x_m=0.0, y_m=0.0, heading_rad=0.0, v_mps=1.0, omega_radps=0.0)
+    return Observation(robot_id=1, ego=ego, goal_m=np.array([20.0, 0.0]), radius_m=R,
+                       limits=RobotLimits(), others=other, pose_age_s=pose_age_s)
+
+
+def test_the_guard_reads_the_others_turns_from_delayed_poses_only():
+    planner = make_planner("eifp-mpc", _config(0.05))
+    old = RECENT_SPEED_MAX_AGE_S + 0.05
+    # delayed poses: one turning towards the robot's path limits the robot more than the
+    # same other seen with no turn, and more still than one turning away
+    towards = planner._braking_guard(_crosser(old, 1.5), 1.1, 0.0)
+    straight = planner._braking_guard(_crosser(old, 0.0), 1.1, 0.0)
+    away = planner._braking_guard(_crosser(old, -1.5), 1.1, 0.0)
+    assert towards < straight - 0.1  # 0.85 (the hardest braking) against 0.99
+    assert straight < away  # 0.99 against 1.03: the heading alone already counts
+    # fresh poses: the turn is not read (no-fault runs decide as before), also where the
+    # guard binds
+    fresh = planner._braking_guard(_crosser(0.0, 1.5, ahead_m=1.4), 1.1, 0.0)
+    assert fresh < 1.0
+    assert fresh == planner._braking_guard(_crosser(0.0, None, ahead_m=1.4), 1.1, 0.0)
+
+
+def _behind_right(pose_age_s: float) -> Observation:
+    """A robot at 1.0 m/s heading +x, a still obstacle behind it on the right (bearing
+    -1.80 rad, gap 0.33 m): not faced now, faced once the robot has turned right by
+    about 1.3 rad."""
+    xy = np.array([[-0.3, -1.3]])
+    others = Others(ids=np.array([-1]), position_m=xy, velocity_mps=np.zeros((1, 2)),
+                    radius_m=np.array([R]), linearity=np.ones(1), track_start_m=xy,
+                    is_robot=np.array([False]))
+    ego = EgoState(x_m=0.0, y_m=0.0, heading_rad=0.0, v_mps=1.0, omega_radps=0.0)
+    return Observation(robot_id=1, ego=ego, goal_m=np.array([20.0, 0.0]), radius_m=R,
+                       limits=RobotLimits(), others=others, pose_age_s=pose_age_s)
+
+
+def test_under_delayed_poses_the_guard_sweeps_its_own_turn_on_through_the_stop():
+    planner = make_planner("eifp-mpc", _config(0.05))
+    # fresh poses: the turn over the reaction time (1.5 x 0.1 rad) does not face it
+    assert planner._braking_guard(_behind_right(0.0), 1.1, -1.5) == 1.1
+    # delayed (0.1 s): turning right at 1.5 rad/s until stopped, the robot faces it
+    # (sweep 1.5 (0.2 + 1.1 / 1.5) = 1.4 rad): 0.28 m of room, cos a = cos 0.40, so
+    # v 0.92 x 0.2 + v^2 0.92 / 3 = 0.28 gives about 0.71 m/s; the hardest braking
+    # from 1.0 in one period is 0.85
+    assert planner._braking_guard(_behind_right(0.1), 1.1, -1.5) == pytest.approx(0.85)
+    # turning left, away from it: no limit
+    assert planner._braking_guard(_behind_right(0.1), 1.1, 1.5) == 1.1

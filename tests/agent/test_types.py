@@ -12,12 +12,16 @@ from agent.types import Others
     ("recent_speed_mps", [0.5, 0.5], "shape"),
     ("recent_speed_mps", [math.inf], "NaN .unknown. or finite"),
     ("recent_interval_s", [-0.1], "NaN .unknown. or finite"),
+    ("recent_turn_rate_radps", [0.1, 0.2], "shape"),
+    ("recent_turn_rate_radps", [-math.inf], "NaN .unknown. or finite"),
 ])
-def test_others_reject_bad_recent_speeds(field, value, message):
+def test_others_reject_bad_recent_motion(field, value, message):
     base = dict(ids=[1], position_m=[[1.0, 0.0]], velocity_mps=[[0.0, 0.0]], radius_m=[0.5],
                 linearity=[1.0], track_start_m=[[1.0, 0.0]], is_robot=[True])
     ok = Others(**base, recent_speed_mps=[math.nan], recent_interval_s=[0.1])
     assert math.isnan(ok.recent_speed_mps[0]) and ok.recent_interval_s[0] == 0.1
     assert np.isnan(Others(**base).recent_speed_mps).all()  # None: unknown
+    assert np.isnan(Others(**base).recent_turn_rate_radps).all()
+    assert Others(**base, recent_turn_rate_radps=[-1.2]).recent_turn_rate_radps[0] == -1.2
     with pytest.raises(ValueError, match=f"{field}: .*{message}"):
         Others(**base, **{field: value})
