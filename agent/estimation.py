@@ -56,7 +56,6 @@ class NeighborTracker:
         self._col: dict[int, int] = {}
         self._ids = np.zeros(0, dtype=np.int64)
         self._radius = np.zeros(0)
-        self._heading = np.zeros(0)  # the latest observed heading per column
         self._hdg = np.zeros((self.max_samples, 0))  # observed headings per sample
         self._t = np.full(self.max_samples, -np.inf)
         self._pos = np.zeros((self.max_samples, 0, 2))
@@ -76,7 +75,6 @@ class NeighborTracker:
         extra = len(new_ids)
         self._ids = np.concatenate([self._ids, np.array(new_ids, dtype=np.int64)])
         self._radius = np.concatenate([self._radius, np.zeros(extra)])
-        self._heading = np.concatenate([self._heading, np.zeros(extra)])
         self._pos = np.concatenate([self._pos, np.zeros((self.max_samples, extra, 2))], axis=1)
         self._hdg = np.concatenate([self._hdg, np.zeros((self.max_samples, extra))], axis=1)
         self._seen = np.concatenate(
@@ -106,8 +104,7 @@ class NeighborTracker:
         self._seen[r, cols] = True
         self._pos[r, cols] = snapshot.pose[mask, :2]
         self._radius[cols] = snapshot.radius_m[mask]
-        self._heading[cols] = snapshot.pose[mask, 2]
-        self._hdg[r, cols] = self._heading[cols]
+        self._hdg[r, cols] = snapshot.pose[mask, 2]
         self._latest = self._seen[r].copy()
 
     def others(self, near_m: np.ndarray | None = None, within_m: float = np.inf) -> Others:
@@ -155,7 +152,7 @@ class NeighborTracker:
             linearity=np.minimum(linearity, 1.0),  # >= 0 already
             track_start_m=start,
             is_robot=ids >= 0,
-            heading_rad=self._heading[cols],
+            heading_rad=self._hdg[r][cols],  # the latest sample: every column in it
             recent_speed_mps=recent_speed,
             recent_interval_s=recent_interval,
             recent_turn_rate_radps=recent_turn,

@@ -37,6 +37,12 @@ def check_row(row: dict, planner: str, robots: int, cycles: int) -> None:
     assert sum(row["statuses"].values()) == row["cycles"]
     assert "arrived" not in row["statuses"] and "stale" not in row["statuses"]
     assert row["excluded"] == sum(row["excluded_statuses"].values())
+    if planner == "eifp-mpc":  # OSQP's iterations: ordered, within the cap
+        assert 0 < row["solver_iterations_p50"] <= row["solver_iterations_p99"] \
+            <= row["solver_iterations_max"] <= row["solver_max_iter"]
+        assert 0.0 <= row["solver_at_cap_frac"] <= 1.0
+    else:
+        assert "solver_iterations_p50" not in row
     assert row["warmup_cycles"] == bench.WARMUP_ROUNDS * robots * row["episodes"]
     assert 0 <= row["neighbors_mean"] <= row["neighbors_max"] <= row["max_neighbors"]
     assert row["neighbors_max"] <= row["neighbors_in_range_max"] <= robots - 1
@@ -104,6 +110,18 @@ def test_arrived_cycles_are_excluded_and_counted(monkeypatch):
     assert len(samples) == 30 and set(samples.statuses) <= {"ok", "escape", "no_feasible"}
     # Robot 0 was excluded once per timed round: as often as robot 1 was counted.
     assert samples.excluded == {"arrived": 30}
+
+
+def test_crowded_circle_keeps_osqps_iteration_tail_short():
+    # The MPC stage's time tail is its iteration tail. With a slack weight of 1e4 this
+    # crowd's p99 was 685-1000 iterations (0.5-1.5 % of the solves at the 1000 cap; the
+    # weight dominated the residual norms OSQP's rho adaptation balances), with 1e3 it is
+    # 330-430 (`MpcConfig.slack_weight`). Iterations, not time: deterministic everywhere.
+    samples = bench.run_bench("eifp-mpc", 16, cycles=2000, seed=0)
+    row = bench._iteration_figures(samples.solver_iterations, 1000)
+    assert row["solver_iterations_p99"] <= 600
+    assert row["solver_at_cap_frac"] <= 0.005
+    assert samples.contacts == 0
 
 
 @pytest.mark.parametrize("argv", [
