@@ -54,10 +54,17 @@ scaling, and OSQP's own scaling is off: it would redo Ruiz at every matrix updat
 cost about four times the KKT refactorisation itself. The command period is taken equal
 to dt (the rate bounds use it).
 
-Outcome: OSQP solved -> OK. Iteration cap (or inaccurate) with a finite iterate ->
-SOLVER_INACCURATE, the iterate is used. Anything else (infeasible, non-convex, NaN, an
-exception) -> SOLVER_FAILED: brake, i.e. v falls at accel_max and omega decays to 0 at
-alpha_max (both rate limits kept), `failures` += 1 and the warm start is dropped. The
+OSQP runs in chunks of `MpcConfig.settle_chunk_iter` iterations (rounded up to a multiple
+of the rho adaptation interval), each going on from OSQP's own iterates, so a chunked solve
+is the same ADMM run as one call; between chunks the solve stops once the first command
+(the only one applied) has settled (moved less than `settle_v_tol_mps` /
+`settle_omega_tol_radps` over a chunk), else at `max_iter` in all.
+
+Outcome: OSQP solved -> OK. Iteration cap, a settled first command (or inaccurate) with a
+finite iterate -> SOLVER_INACCURATE, the iterate is used. Anything else (infeasible,
+non-convex, NaN, an exception) -> SOLVER_FAILED: brake, i.e. v falls at accel_max and
+omega decays to 0 at alpha_max (both rate limits kept), `failures` += 1 and the warm start
+is dropped. The
 command is always clipped to the bounds and to the rate limits from the last command.
 """
 
@@ -77,6 +84,7 @@ from agent.types import PlanStatus
 from agent.unicycle import clamp_command, rollout
 
 _INF = 1.0e30  # OSQP_INFTY: bounds beyond it are infinite
+_RHO_INTERVAL = 25  # OSQP iterations between rho adaptations
 _SOLVED = int(osqp.SolverStatus.OSQP_SOLVED)
 _USABLE = frozenset(
     int(s)
@@ -343,6 +351,12 @@ class MpcTracker:
         p_scaled.data *= (
             c_cost * d_var[p_scaled.indices] * d_var[np.repeat(np.arange(n_var), np.diff(P.indptr))]
         )
+        # Chunks are whole multiples of the rho adaptation interval, so that a chunked
+        # solve is the same ADMM run as one call (the adaptation counts from each call).
+        chunk = -(-config.settle_chunk_iter // _RHO_INTERVAL) * _RHO_INTERVAL
+        self._chunk_iter = min(chunk, config.max_iter) if chunk > 0 else config.max_iter
+        i_first = np.array([iu[0, 0], iu[0, 1]])
+        self._i_first, self._d_first = i_first, d_var[i_first]
         self._solver = osqp.OSQP()
         self._solver.setup(
             p_scaled,
@@ -354,7 +368,7 @@ class MpcTracker:
             warm_starting=True,
             polishing=False,
             scaling=0,
-            max_iter=config.max_iter,
+            max_iter=self._chunk_iter,
             eps_abs=config.eps_abs,
             eps_rel=config.eps_rel,
             check_termination=5,
@@ -363,7 +377,7 @@ class MpcTracker:
             # of a robot held in front of a neighbour (all half-planes active and
             # parallel, a degenerate QP) about four-fold in our runs.
             adaptive_rho=1,
-            adaptive_rho_interval=25,
+            adaptive_rho_interval=_RHO_INTERVAL,
             adaptive_rho_tolerance=2.0,
         )
         # osqp.OSQP wraps an extension solver with the same update/warm_start/solve calls;
@@ -529,20 +543,48 @@ class MpcTracker:
         if ext is None:
             self._solver.update(q=q, l=lo, u=hi, Ax=a_data)
             self._solver.warm_start(x=x_ws, y=y_ws)
-            res = self._solver.solve(raise_error=False)
-            return int(res.info.status_val), int(res.info.iter), res.x, res.y
-        # The same calls one level down: the public wrapper re-checks, copies and builds
-        # a result namespace on every call, about 15 % of a warm-started cycle here.
-        flags = (
-            ext.update_data_vec(q=q, l=lo, u=hi),
-            ext.update_data_mat(P_x=None, P_i=None, A_x=a_data, A_i=None),
-            ext.warm_start(x_ws, y_ws),
-            ext.solve(),
-        )
-        if any(flags):
-            raise osqp.OSQPException(next(f for f in flags if f))
-        info, solution = ext.info, ext.solution
-        return int(info.status_val), int(info.iter), solution.x, solution.y
+        else:
+            # The same calls one level down: the public wrapper re-checks, copies and
+            # builds a result namespace on every call, about 15 % of a warm-started cycle.
+            flags = (
+                ext.update_data_vec(q=q, l=lo, u=hi),
+                ext.update_data_mat(P_x=None, P_i=None, A_x=a_data, A_i=None),
+                ext.warm_start(x_ws, y_ws),
+            )
+            if any(flags):
+                raise osqp.OSQPException(next(f for f in flags if f))
+        # In chunks (`MpcConfig.settle_chunk_iter`): stop at the tolerances, at max_iter,
+        # or once the first command has settled; each chunk resumes from the last iterate.
+        total, first_before = 0, None
+        while True:
+            if ext is None:
+                res = self._solver.solve(raise_error=False)
+                status_val, iters = int(res.info.status_val), int(res.info.iter)
+                z, y = res.x, res.y
+            else:
+                flag = ext.solve()
+                if flag:
+                    raise osqp.OSQPException(flag)
+                info, solution = ext.info, ext.solution
+                status_val, iters = int(info.status_val), int(info.iter)
+                z, y = solution.x, solution.y
+            total += iters
+            if status_val == _SOLVED or total >= self.config.max_iter or z is None or y is None:
+                return status_val, total, z, y
+            if status_val not in _USABLE:
+                return status_val, total, z, y
+            first = z[self._i_first] * self._d_first
+            if not np.isfinite(first).all():
+                return status_val, total, z, y
+            if first_before is not None and (
+                abs(first[0] - first_before[0]) < self.config.settle_v_tol_mps
+                and abs(first[1] - first_before[1]) < self.config.settle_omega_tol_radps
+            ):
+                return status_val, total, z, y
+            first_before = first
+            # No warm start here: with warm starting on, the next solve goes on from OSQP's
+            # own iterates (x, z, y). A warm start would reset z = A x, and restarting so
+            # made ADMM slower (every 25 iterations) or diverge (every 5) in our tests.
 
     def _set_half_planes(self, xb: np.ndarray, preds: np.ndarray, clear: np.ndarray) -> int:
         """Write the linearised neighbour half-planes; returns how many neighbours are used.

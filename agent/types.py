@@ -37,7 +37,7 @@ class PlanStatus(enum.StrEnum):
     ARRIVED = "arrived"  # within goal tolerance: commanding a stop
     ESCAPE = "escape"  # inside an inflated disc: steering straight out of it
     NO_FEASIBLE = "no_feasible"  # threats but no feasible via-point: slowing on the direct path
-    SOLVER_INACCURATE = "solver_inaccurate"  # OSQP hit its cap; the iterate is used, clipped
+    SOLVER_INACCURATE = "solver_inaccurate"  # OSQP stopped short (cap, first command settled)
     SOLVER_FAILED = "solver_failed"  # OSQP failed: safe braking command
     STALE = "stale"  # set by the robot node when it brakes for lack of fresh poses
 

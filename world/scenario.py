@@ -24,6 +24,7 @@ File format (YAML, SI units: metres, seconds, radians)::
       mpc:                       # MpcConfig, same rule: horizon_steps, dt, q_position,
         horizon_steps: 20        #   q_heading, q_terminal, r_v, r_omega, r_dv, r_domega,
         dt: 0.1                  #   max_constraints, slack_weight, max_iter, eps_abs, eps_rel,
+      #                              settle_chunk_iter, settle_v_tol, settle_omega_tol,
       #                              braking_guard, braking_margin
     robots:                      # required, at least one
       - id: 0                    # required, int in [0, 2^31 - 1], unique

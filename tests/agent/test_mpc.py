@@ -233,6 +233,47 @@ def test_iteration_cap_gives_an_inaccurate_but_bounded_command():
     assert_within_limits((res.v_mps, res.omega_radps), last)
 
 
+def _crowded_solve(config):
+    """One cycle with three neighbours closing in (a QP with several active half-planes)."""
+    tracker = MpcTracker(LIM, config)
+    times = DT * np.arange(N + 1)
+    starts = np.array([[2.0, 0.4], [2.5, -0.6], [1.5, 1.2]])
+    vels = np.array([[-0.8, 0.0], [-0.6, 0.3], [-0.3, -0.7]])
+    preds = starts[:, None, :] + times[None, :, None] * vels[:, None, :]
+    last = np.array([0.9, 0.0])
+    return tracker.solve(np.array([0.0, 0.0, 0.0]), last, line_ref(0.0), preds,
+                         np.full(3, 1.1)), last
+
+
+def test_chunks_are_one_admm_run():
+    # Never "settled" (tolerances 0): chunks of 25 (and 30, rounded up to 50) give the very
+    # result of one call, iterations included. A warm start between chunks would not (it
+    # resets OSQP's z = A x: slower every 25 iterations, diverging every 5).
+    whole, _ = _crowded_solve(MpcConfig(settle_chunk_iter=0))
+    assert whole.status is PlanStatus.OK and whole.iterations > 50
+    for chunk in (25, 30):
+        chunked, _ = _crowded_solve(MpcConfig(
+            settle_chunk_iter=chunk, settle_v_tol_mps=0.0, settle_omega_tol_radps=0.0))
+        assert chunked.status is PlanStatus.OK
+        assert chunked.iterations == whole.iterations
+        np.testing.assert_array_equal(chunked.planned_inputs, whole.planned_inputs)
+
+
+def test_a_settled_first_command_stops_the_solve_before_the_cap():
+    # Tolerances of 1e-12: one run needs 655 iterations; with the settle rule the solve
+    # stops at the first chunk boundary at which the first command moved < 0.01 over a
+    # chunk (at least two chunks), with a first command close to that of the long run.
+    tight = dict(eps_abs=1e-12, eps_rel=1e-12, max_iter=2000)
+    long_run, _ = _crowded_solve(MpcConfig(settle_chunk_iter=0, **tight))
+    settled, last = _crowded_solve(MpcConfig(settle_chunk_iter=50, **tight))
+    assert long_run.status is PlanStatus.OK and long_run.iterations > 300
+    assert settled.status is PlanStatus.SOLVER_INACCURATE
+    assert 100 <= settled.iterations < long_run.iterations and settled.iterations % 50 == 0
+    assert settled.v_mps == pytest.approx(long_run.v_mps, abs=0.02)
+    assert settled.omega_radps == pytest.approx(long_run.omega_radps, abs=0.02)
+    assert_within_limits((settled.v_mps, settled.omega_radps), last)
+
+
 def test_warm_start_needs_fewer_iterations_than_cold():
     """Replay one closed-loop run; cold = the same inputs with no memory (reset each cycle)."""
     warm = MpcTracker(LIM, CFG)
