@@ -125,7 +125,9 @@ def test_every_planner_and_mpc_field_is_settable(tmp_path):
     mpc_bools = {f.name for f in dataclasses.fields(MpcConfig) if f.type in (bool, "bool")}
     assert mpc_bools  # braking_guard: the bool branch below is exercised
     defaults["mpc"] = {k: False if mpc[k] in mpc_bools
-                       else 3 if k in ("horizon_steps", "max_constraints", "max_iter") else 0.05
+                       else 3 if k in ("horizon_steps", "max_constraints", "max_iter",
+                                       "settle_chunk_iter")
+                       else 0.05
                        for k in mpc}
     s = scenario_from_dict({"name": "all", "time_limit": 5, "defaults": defaults,
                             "robots": [{"id": 0, "start": [0, 0, 0], "goal": [2, 0]}]}, "all")
