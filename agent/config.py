@@ -109,7 +109,9 @@ class MpcConfig:
             iterate used), and such iterates drove robots into each other at 100 ms
             latency (F, link seeds 4, 7, 8: contacts at 200, none at 1000; measured
             before the braking guard and with a slack weight of 1e4). With 1e3 about
-            0.2 % of the bench crowd's solves reach it.
+            0.2 % of the bench crowd's solves reached it; with the settle rule below, none
+            (`orchestrator bench`, N = 8-64). Counted in whole chunks: a cap that is not
+            a multiple of the chunk is overshot by less than one chunk.
         settle_chunk_iter: OSQP runs in chunks of this many iterations (rounded up to a
             multiple of 25, OSQP's rho adaptation interval here; 0: one run to
             `max_iter`). The chunks are one uninterrupted ADMM run; after a chunk that

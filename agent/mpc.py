@@ -64,8 +64,8 @@ Outcome: OSQP solved -> OK. Iteration cap, a settled first command (or inaccurat
 finite iterate -> SOLVER_INACCURATE, the iterate is used. Anything else (infeasible,
 non-convex, NaN, an exception) -> SOLVER_FAILED: brake, i.e. v falls at accel_max and
 omega decays to 0 at alpha_max (both rate limits kept), `failures` += 1 and the warm start
-is dropped. The
-command is always clipped to the bounds and to the rate limits from the last command.
+is dropped. The command is always clipped to the bounds and to the rate limits from the
+last command.
 """
 
 from __future__ import annotations
@@ -554,7 +554,7 @@ class MpcTracker:
             if any(flags):
                 raise osqp.OSQPException(next(f for f in flags if f))
         # In chunks (`MpcConfig.settle_chunk_iter`): stop at the tolerances, at max_iter,
-        # or once the first command has settled; each chunk resumes from the last iterate.
+        # or once the first command has settled; each chunk resumes from OSQP's iterates.
         total, first_before = 0, None
         while True:
             if ext is None:
