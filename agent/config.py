@@ -97,11 +97,13 @@ class MpcConfig:
             keeps the larger d_safety; the MPC constraint is the last line of defence).
         slack_weight: linear and quadratic weight on half-plane slack (soft constraints).
             The linear part makes the penalty exact (no slack while it can be avoided) as
-            long as a half-plane's multiplier stays below it: in the 16-robot bench crowd
+            long as a step's half-plane multipliers (one slack per step, shared by its
+            half-planes: `agent.mpc`) sum to less than it: in the 16-robot bench crowd
             the largest multiplier of a feasible QP was below 1e3 in 99.86 % of cycles
-            (p99 306). 1e3, not the earlier 1e4: the larger weight dominated the residual
-            norms OSQP's rho adaptation balances and made the iteration tail (bench p99
-            685-1000 iterations, 1e3: 330-430; `orchestrator bench` prints them); the
+            (p99 306; measured with a slack per half-plane). 1e3, not the earlier 1e4:
+            the larger weight dominated the residual norms OSQP's rho adaptation balances
+            and made the iteration tail (bench p99 685-1000 iterations, 1e3: 330-430;
+            `orchestrator bench` prints them); the
             braking guard, not the slack, is what keeps the gap (`agent.safety`).
         max_iter: OSQP iteration cap per solve. 1000, not OSQP's usual few hundred: in the
             crowded centre of setups F and G (more so with the wider half-planes of a

@@ -65,6 +65,7 @@ class RobotController:
         self.command = (0.0, 0.0)
         self.rejected_stale = 0
         self.last_observation: Observation | None = None
+        self._row = -1
         self._goal = np.asarray(spec.goal, dtype=float)
 
     def observe(self, snapshot: PoseSnapshot) -> bool:
@@ -78,11 +79,13 @@ class RobotController:
         if last is not None and (snapshot.tick <= last.tick or snapshot.stamp_s < last.stamp_s):
             self.rejected_stale += 1
             return False
-        if not (snapshot.ids == self.spec.id).any():
+        rows = np.flatnonzero(snapshot.ids == self.spec.id)
+        if rows.size == 0:
             self.rejected_stale += 1
             return False
         self.tracker.update(snapshot)
         self.snapshot = snapshot
+        self._row = int(rows[0])  # this robot's row in `snapshot`
         return True
 
     def observation(self, now_s: float, *, with_others: bool | None = True) -> Observation:
@@ -97,8 +100,8 @@ class RobotController:
         snap = self.snapshot
         if snap is None:
             raise RuntimeError("no snapshot observed yet")
-        row = int(np.flatnonzero(snap.ids == self.spec.id)[0])
-        x, y, heading = snap.pose[row]
+        row = self._row
+        x, y, heading = snap.pose[row].tolist()
         v, omega = self.command
         age = min(max(float(now_s - snap.stamp_s), 0.0), MAX_COMPENSATED_AGE_S)
         if self.compensate_latency and age > 0.0:
@@ -145,8 +148,7 @@ class RobotController:
         self.command = (0.0, 0.0)
         here = np.zeros((2, 2))
         if self.snapshot is not None:
-            row = int(np.flatnonzero(self.snapshot.ids == self.spec.id)[0])
-            here[:] = self.snapshot.pose[row, :2]
+            here[:] = self.snapshot.pose[self._row, :2]
         return PlanResult(v_mps=0.0, omega_radps=0.0, status=PlanStatus.STALE, waypoints_m=here)
 
 

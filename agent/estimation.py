@@ -58,6 +58,9 @@ class NeighborTracker:
         self._radius = np.zeros(0)
         self._hdg = np.zeros((self.max_samples, 0))  # observed headings per sample
         self._t = np.full(self.max_samples, -np.inf)
+        # Ring order, oldest first, when row r is the newest (rows fill in time order).
+        ring = np.arange(self.max_samples)
+        self._ring_order = [np.roll(ring, -(r + 1)) for r in range(self.max_samples)]
         self._pos = np.zeros((self.max_samples, 0, 2))
         self._seen = np.zeros((self.max_samples, 0), dtype=bool)
         self._latest = np.zeros(0, dtype=bool)
@@ -125,23 +128,23 @@ class NeighborTracker:
             if not sel.any():
                 return Others.empty()
         t_now = self._t[r]
-        order = np.argsort(self._t)  # oldest first; unused rows have -inf
+        order = self._ring_order[r]  # oldest first; unused rows have -inf
         t = self._t[order]
         in_window = t_now - t <= self.window_s + 1e-9  # a suffix of `order` (t is sorted)
         cols = sel.nonzero()[0]
         rows = order[in_window]
         seen = self._seen[rows][:, cols]  # (h, k)
         tt = t[in_window] - t_now
+        pos = self._pos[rows][:, cols]  # (h, k, 2)
         if seen.all():
             # Every disc in every sample of the window (the usual case: the world publishes
             # all discs each tick): one set of least-squares weights serves all columns.
-            velocity, start, linearity = self._estimate_dense(self._pos[rows][:, cols], tt)
+            velocity, start, linearity = self._estimate_dense(pos, tt)
         else:
-            velocity, start, linearity = self._estimate_sparse(
-                self._pos[rows][:, cols], seen, tt)
+            velocity, start, linearity = self._estimate_sparse(pos, seen, tt)
         recent_speed, recent_turn, recent_interval = _recent_motion(
-            self._pos[rows][:, cols], self._hdg[rows][:, cols], seen, tt)
-        latest = self._pos[r][cols]
+            pos, self._hdg[rows][:, cols], seen, tt)
+        latest = pos[-1]
         ids = self._ids[cols]
         # Built from a validated snapshot (finite poses, radii) by finite arithmetic.
         return Others.trusted(

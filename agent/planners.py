@@ -176,7 +176,7 @@ class ViaPointPlanner:
         near = nearby_others(np.array([ego.x_m, ego.y_m]), observation.others,
                              cfg.sensing_radius_m, cfg.max_neighbors)
         if near is not observation.others:
-            observation = replace(observation, others=near)
+            observation = observation.with_others(near)
         if self._selector is None:
             via = self._plan_ifp(observation, cfg, clock)
         else:

@@ -46,8 +46,6 @@ _ARC_SUBDIVISIONS = 24
 _ARC_FRACTIONS = np.arange(_ARC_SUBDIVISIONS) / _ARC_SUBDIVISIONS
 _POWERS = np.arange(4)
 _ARC_POWERS = _ARC_FRACTIONS[:, None] ** _POWERS  # (subdivisions, 4)
-_D1 = np.array([1.0, 2.0, 3.0])  # d/dtau of tau, tau^2, tau^3
-_D2 = np.array([2.0, 6.0])  # d2/dtau2 of tau^2, tau^3
 
 _TWO_PI = 2.0 * math.pi
 
@@ -162,19 +160,15 @@ class NaturalCubicSpline:
             for j in range(len(rows) - 1, -1, -1):  # back substitution; m_n = 0
                 i = first + j
                 m[i] = (rhs[j] - rows[j][2] * m[i + 1]) / diag[j]
-        self.coef = np.array(
-            [
-                (
-                    points[i],
-                    slope[i] - h[i] * (2.0 * m[i] + m[i + 1]) / 6.0,
-                    0.5 * m[i],
-                    (m[i + 1] - m[i]) / (6.0 * h[i]),
-                )
-                for i in range(n)
-            ]
-        )  # (n, 4): a, b, c, d
-        # Coefficients of dp/du (b, 2c, 3d) and d2p/du2 (2c, 6d), packed after p's.
-        self._all = np.concatenate((self.coef, self.coef[:, 1:] * _D1, self.coef[:, 2:] * _D2), 1)
+        rows9 = []
+        for i in range(n):
+            b = slope[i] - h[i] * (2.0 * m[i] + m[i + 1]) / 6.0
+            c = 0.5 * m[i]
+            d = (m[i + 1] - m[i]) / (6.0 * h[i])
+            # p's coefficients a, b, c, d; then dp/du's (b, 2c, 3d) and d2p/du2's (2c, 6d).
+            rows9.append((points[i], b, c, d, b, 2.0 * c, 3.0 * d, 2.0 * c, 6.0 * d))
+        self._all = np.array(rows9)  # (n, 9)
+        self.coef = self._all[:, :4]  # (n, 4): a, b, c, d
         self.h = np.array(h)
         self.knots = np.array([0.0, *itertools.accumulate(h)])
         self.end = points[-1]

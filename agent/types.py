@@ -9,6 +9,7 @@ docstrings. Construction validates shapes and finiteness and raises `ValueError`
 
 from __future__ import annotations
 
+import copy
 import enum
 import math
 from dataclasses import dataclass, field
@@ -277,6 +278,13 @@ class Observation:
         if tol <= 0.0:
             raise ValueError("goal_tolerance_m: must be positive")
         object.__setattr__(self, "goal_tolerance_m", tol)
+
+    def with_others(self, others: Others) -> Observation:
+        """The same observation with `others` replaced, skipping validation: for the hot
+        path, where `others` is a subset of this observation's (already validated) others."""
+        obj = copy.copy(self)
+        object.__setattr__(obj, "others", others)
+        return obj
 
 
 @dataclass(frozen=True)

@@ -141,6 +141,35 @@ def test_oncoming_neighbour_is_avoided():
     assert max(r.max_slack_m for r in results) < 0.05
 
 
+def test_a_corridor_between_two_neighbours_costs_no_slack():
+    # Two parked neighbours 1.0 m either side of the line, clearance 0.8: both half-planes
+    # can hold at once, so the shared per-step slack stays (numerically) zero.
+    tracker = MpcTracker(LIM, CFG)
+    centres = np.array([[4.0, 1.0], [4.0, -1.0]])
+    preds = np.broadcast_to(centres[:, None, :], (2, N + 1, 2))
+    states, results = run(tracker, [0.0, 0.0, 0.0], line_ref, 80, lambda i: preds, np.full(2, 0.8))
+    assert states[-1, 0] > 6.0  # through the gap
+    for c in centres:
+        assert np.hypot(*(states[:, :2] - c).T).min() >= 0.8 - 0.02
+    assert max(r.max_slack_m for r in results) < 1e-3
+
+
+def test_a_gap_too_narrow_stops_the_robot_centred_before_it():
+    # The gap (2 x 0.7 m) is narrower than the clearances (2 x 0.8 m) and the reference
+    # pulls 0.3 m to one side and on through: the exact penalty holds the robot where both
+    # half-planes still hold, centred in front of the gap, instead of trading one gap away.
+    tracker = MpcTracker(LIM, CFG)
+    centres = np.array([[4.0, 0.7], [4.0, -0.7]])
+    preds = np.broadcast_to(centres[:, None, :], (2, N + 1, 2))
+    states, results = run(tracker, [0.0, 0.0, 0.0], lambda t: line_ref(t, y=0.3), 80,
+                          lambda i: preds, np.full(2, 0.8))
+    end = states[-1]
+    assert 3.0 < end[0] < 4.0 and abs(end[1]) < 0.03
+    for c in centres:
+        assert np.hypot(*(states[:, :2] - c).T).min() >= 0.8 - 0.02
+    assert max(r.max_slack_m for r in results) < 1e-3
+
+
 def test_nearest_neighbours_become_the_constraints():
     tracker = MpcTracker(LIM, MpcConfig(max_constraints=2))
     far = np.array([[40.0 + 3 * j, 30.0] for j in range(15)])
