@@ -58,7 +58,9 @@ class NeighborTracker:
         self._radius = np.zeros(0)
         self._hdg = np.zeros((self.max_samples, 0))  # observed headings per sample
         self._t = np.full(self.max_samples, -np.inf)
-        # Ring order, oldest first, when row r is the newest (rows fill in time order).
+        # Ring order, oldest first, when row r is the newest: rows fill in time order
+        # because `update` is only given snapshots no older than the last one (the
+        # controller drops stale and out-of-order ones before it calls `update`).
         ring = np.arange(self.max_samples)
         self._ring_order = [np.roll(ring, -(r + 1)) for r in range(self.max_samples)]
         self._pos = np.zeros((self.max_samples, 0, 2))

@@ -45,9 +45,10 @@ Constraints l <= A z <= u, in row blocks ordered by step k:
   * slack signs (N rows): s_k >= 0.
 The slack makes the QP always feasible; the half-plane is the tangent of the clearance
 disc, so n . p >= n . o + c implies |p - o| >= c exactly. One slack per step, shared by
-that step's M half-planes, so s_k is the step's largest violation: the penalty is exact
-while the step's multipliers sum to less than w_s, and a robot squeezed between two
-neighbours is pushed to balance the two gaps. A slack per (step, neighbour) had N M more
+that step's M half-planes, so s_k is the step's largest violation and the penalty is
+exact while the step's multipliers sum to less than w_s (a robot facing a gap narrower
+than the clearances stops in front of it: tests/agent/test_mpc.py). A slack per
+(step, neighbour) had N M more
 variables and sign rows (180 variables and 300 rows against 120 and 240 at N = 20,
 M = 4); the smaller KKT system cut OSQP's time per iteration by about 15 % and its
 iterations in the 16-robot bench crowd (`orchestrator bench`: p50 40 -> 35, p99 255 ->

@@ -62,6 +62,24 @@ def test_observe_drops_duplicate_out_of_order_stale_and_foreign_snapshots() -> N
     assert ctrl.snapshot is newer and ctrl.rejected_stale == 4
 
 
+def test_the_robot_is_found_in_whatever_row_each_snapshot_lists_it() -> None:
+    # The world may list the discs in any order; the controller finds its own row once per
+    # accepted snapshot, and a rejected snapshot (this robot missing) does not move it.
+    ctrl = RobotController(spec(), PlannerConfig(), TOL_M)
+    assert ctrl.observe(snap(1.0, 50, {1: (5.0, 0.0, math.pi), 0: (0.5, 0.2, 0.1)}))
+    ego = ctrl.observation(1.0).ego
+    assert (ego.x_m, ego.y_m, ego.heading_rad) == (0.5, 0.2, 0.1)
+    assert not ctrl.observe(snap(1.1, 55, {1: (9.0, 9.0, 0.0), 2: (3.0, 3.0, 0.0)}))
+    ego = ctrl.observation(1.0).ego
+    assert (ego.x_m, ego.y_m, ego.heading_rad) == (0.5, 0.2, 0.1)
+    assert ctrl.observe(snap(1.2, 60, {2: (3.0, 3.0, 0.0), 1: (4.0, 0.0, math.pi),
+                                       0: (0.7, 0.3, 0.2)}))
+    obs = ctrl.observation(1.2)
+    assert (obs.ego.x_m, obs.ego.y_m, obs.ego.heading_rad) == (0.7, 0.3, 0.2)
+    assert sorted(obs.others.ids.tolist()) == [1, 2]
+    np.testing.assert_array_equal(ctrl.brake().waypoints_m, [[0.7, 0.3], [0.7, 0.3]])
+
+
 def test_plan_without_a_snapshot_brakes_as_stale() -> None:
     ctrl = RobotController(spec(), PlannerConfig(), TOL_M)
     ctrl.command = (0.8, 0.3)  # whatever it was doing, it must stop

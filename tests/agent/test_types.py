@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from agent.types import Others
+from agent.types import EgoState, Observation, Others
 
 
 @pytest.mark.parametrize(("field", "value", "message"), [
@@ -25,3 +25,18 @@ def test_others_reject_bad_recent_motion(field, value, message):
     assert Others(**base, recent_turn_rate_radps=[-1.2]).recent_turn_rate_radps[0] == -1.2
     with pytest.raises(ValueError, match=f"{field}: .*{message}"):
         Others(**base, **{field: value})
+
+
+def test_with_others_swaps_only_the_others_and_leaves_the_original_alone():
+    base = dict(ids=[1, 2], position_m=[[1.0, 0.0], [3.0, 0.0]], velocity_mps=[[0.0, 0.0]] * 2,
+                radius_m=[0.5, 0.5], linearity=[1.0, 1.0], track_start_m=[[1.0, 0.0]] * 2,
+                is_robot=[True, True])
+    obs = Observation(robot_id=0, ego=EgoState(0.0, 0.0, 0.0, 0.4, 0.1), goal_m=[5.0, 1.0],
+                      radius_m=0.5, others=Others(**base), pose_age_s=0.05)
+    near = obs.others.subset(np.array([0]))
+    narrowed = obs.with_others(near)
+    assert narrowed is not obs and narrowed.others is near
+    assert obs.others.ids.tolist() == [1, 2]  # the original is unchanged
+    for name in ("robot_id", "ego", "goal_m", "radius_m", "limits", "goal_tolerance_m",
+                 "pose_age_s"):
+        assert getattr(narrowed, name) is getattr(obs, name)
