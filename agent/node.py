@@ -408,6 +408,10 @@ class RobotNode:
                        "plan_errors": 0, "stale_plans": 0, "link_dropped": 0, "suspended": 0,
                        "token_timeouts": 0}
         self.seq = 0
+        # CPU time of the loop by part (thread CPU clock of this, the main, thread) and the
+        # process's CPU clock at the loop's start: see `cpu_summary`.
+        self.cpu_s = {"sense": 0.0, "plan": 0.0, "send": 0.0}
+        self.cpu_start: tuple[float, float] | None = None
         self.last_rx_wall: float | None = None
         self.newest: PosesMsg | None = None
         self.world_alive = False
@@ -564,6 +568,7 @@ class RobotNode:
         if msg is None or not self.schedule.due(msg.t_s):
             return
         now_s = self.sim_now()
+        cpu0 = time.thread_time()
         try:
             if now_s - msg.t_s > STALE_PLAN_S:
                 self.counts["stale_plans"] += 1
@@ -575,14 +580,18 @@ class RobotNode:
             if self.counts["plan_errors"] <= 3:
                 log.exception("robot %d: planner raised; braking", self.robot_id)
             result = self.controller.brake()
+        cpu1 = time.thread_time()
+        self.cpu_s["plan"] += cpu1 - cpu0
         if self.options.plan_delay_ms > 0.0:  # a CPU-starved robot: the command leaves late
             time.sleep(self.options.plan_delay_ms * 1e-3 / self.config.time_scale)
+            cpu1 = time.thread_time()
         self.cmd_pub.put(CommandMsg(
             robot_id=self.robot_id, seq=self.seq, pose_stamp_s=msg.t_s, v_mps=result.v_mps,
             omega_radps=result.omega_radps, plan_ms=max(0.0, result.times.total_ms),
             status=result.status, side=int(result.side), resolved_id=result.resolved_id,
             hold_s=self.controller.command_hold_s,
         ).encode())
+        self.cpu_s["send"] += time.thread_time() - cpu1
         self.seq += 1
         self.counts["plans"] += 1
         self.counts["overruns"] += self.schedule.planned(msg.t_s)
@@ -609,7 +618,9 @@ class RobotNode:
             if not held:
                 self.counts["token_timeouts"] += 1
         try:
+            cpu0 = time.thread_time()
             fresh = self.poll_poses()
+            self.cpu_s["sense"] += time.thread_time() - cpu0
             if fresh and self.world_alive:  # never command a world we cannot see
                 self.plan_and_send()
             return fresh
@@ -651,6 +662,7 @@ class RobotNode:
             startup_deadline: monotonic time by which the world's token must have been seen
                 (after that, the world owns the start: it ends the run if robots are missing).
         """
+        self.cpu_start = (time.thread_time(), time.process_time())
         try:
             while not self.stop:
                 now = time.monotonic()
@@ -677,9 +689,29 @@ class RobotNode:
             # Stop commanding before anything else.
             self.cmd_pub.undeclare()
 
+    def cpu_summary(self) -> dict[str, int]:
+        """CPU time the loop took since it started, by part, in whole microseconds.
+
+        ``cpu_sense_us``: draining the pose ring, decoding, the pose link, observing
+        (`poll_poses`); ``cpu_plan_us``: `RobotController.plan` (estimates, planner, MPC);
+        ``cpu_send_us``: encoding and publishing the command; ``cpu_loop_us``: the rest of
+        the main thread (control and liveliness polls, waits); ``cpu_threads_us``: every
+        other thread of the process (Zenoh's runtime: receiving, sending, the lease).
+        Thread and process CPU clocks (`time.thread_time`, `time.process_time`); empty
+        before the loop started. `orchestrator scale` divides them by the plans.
+        """
+        if self.cpu_start is None:
+            return {}
+        main_s = time.thread_time() - self.cpu_start[0]
+        process_s = time.process_time() - self.cpu_start[1]
+        parts = {**self.cpu_s, "loop": main_s - sum(self.cpu_s.values()),
+                 "threads": process_s - main_s}
+        return {f"cpu_{k}_us": max(0, round(v * 1e6)) for k, v in parts.items()}
+
     def summary(self) -> str:
-        """Counters as key=value pairs."""
-        return " ".join(f"{k}={v}" for k, v in {**self.counts, "seq": self.seq}.items())
+        """Counters and `cpu_summary` as key=value pairs (integers)."""
+        fields = {**self.counts, "seq": self.seq, **self.cpu_summary()}
+        return " ".join(f"{k}={v}" for k, v in fields.items())
 
 
 def close_session(session: zenoh.Session, timeout_s: float = CLOSE_TIMEOUT_S) -> bool:

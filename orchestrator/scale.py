@@ -29,7 +29,13 @@ processes that map them; RSS where the kernel gives no PSS). Per N it reports:
 - robots_lost: robots whose liveliness token the world saw disappear during the run (a
   process that missed its 1 s transport lease under overload, or crashed);
 - connections: the world's TCP connections per local address (robots reaching it through
-  each of ``--hosts``).
+  each of ``--hosts``);
+- cpu_ms_per_plan_sense / _plan / _send / _loop / _threads: where a robot process's CPU
+  went, per plan it sent: the robots' own thread and process CPU clocks over their loops
+  (`agent.node.RobotNode.cpu_summary`, from their exit lines in robots.json), summed over
+  the robots and divided by all their plans. sense: decoding and observing poses; plan:
+  estimates and the planner; send: encoding and publishing the command; loop: the rest of
+  the main thread; threads: Zenoh's threads (receiving, sending, the lease).
 
 ``--hosts A,B``: the world listens on ``tcp/0.0.0.0:PORT`` and robot k connects to
 ``tcp/<hosts[k % len]>:PORT``, as robots on other hosts would (on Linux every 127.x.y.z
@@ -71,6 +77,9 @@ ROBOT_NICE = 0
 """Default niceness added to the robots (see README, "Scale": a nicer robot's Zenoh threads
 starve too, and a missed 1 s lease loses the robot)."""
 
+CPU_PARTS = ("sense", "plan", "send", "loop", "threads")
+"""Parts of a robot process's CPU time (`agent.node.RobotNode.cpu_summary`)."""
+
 COLUMNS = (
     "agents", "family", "planner", "success", "arrived", "contacts", "min_gap_m",
     "plan_ms_p50", "plan_ms_p99", "latency_ms_p50", "latency_ms_p99", "deadline_miss_rate",
@@ -79,6 +88,7 @@ COLUMNS = (
     "alive_s", "sim_time_s", "wall_s", "world_overruns", "robots_lost", "world_status",
     "connections",
     "launcher",
+    *(f"cpu_ms_per_plan_{part}" for part in CPU_PARTS),
 )
 PLOTTED = (
     ("plan_ms_p50", "plan_ms_p99", "planning time [ms]"),
@@ -225,11 +235,29 @@ def _events(out_dir: Path) -> list[dict]:
     return read_events(path) if path.exists() else []
 
 
+def cpu_per_plan_ms(exits: dict[str, Any]) -> dict[str, float | None]:
+    """The robots' CPU per plan by part (ms), from robots.json's parsed exit lines.
+
+    Sums every process that reported its CPU split and divides by the plans those sent;
+    None for every part if none did (or none planned).
+    """
+    reported = [p for p in exits.get("processes", ())
+                if all(f"cpu_{part}_us" in p for part in CPU_PARTS)]
+    plans = sum(int(p.get("plans", 0)) for p in reported)
+    return {f"cpu_ms_per_plan_{part}":
+            (sum(int(p[f"cpu_{part}_us"]) for p in reported) / plans / 1e3 if plans else None)
+            for part in CPU_PARTS}
+
+
 def scale_row(metrics: dict[str, Any], events: Sequence[dict], sampler: ResourceSampler, *,
               n: int, family: str, planner: str, spawn_wall: float, spawn_mono: float,
               wall_s: float, time_scale: float, world_status: int,
-              launcher: str = "spawn") -> dict[str, Any]:
-    """One table row from a finished run (see the module docstring for each column)."""
+              launcher: str = "spawn", exits: dict[str, Any] | None = None
+              ) -> dict[str, Any]:
+    """One table row from a finished run (see the module docstring for each column).
+
+    `exits`: the run's robots.json (`orchestrator.distributed.collect_robot_exits`).
+    """
     first_join: dict[int, float] = {}  # a robot's first token (re-joins come later)
     for e in events:
         if e.get("kind") == "robot_joined" and "wall" in e and "robot" in e:
@@ -289,6 +317,7 @@ def scale_row(metrics: dict[str, Any], events: Sequence[dict], sampler: Resource
         "robots_lost": len(lost),
         "world_status": world_status,
         "connections": dict(sorted(sampler.connections.items())),
+        **cpu_per_plan_ms(exits or {}),
     }
 
 
@@ -348,10 +377,15 @@ def run_one(n: int, args: argparse.Namespace, out_root: Path) -> dict[str, Any]:
         print(f"warning: {out_dir}: no metrics: {exc}", file=sys.stderr)
         content = {}
     _plot_run(out_dir)
+    try:
+        exits = json.loads((out_dir / "robots.json").read_text())
+    except (OSError, ValueError) as exc:
+        print(f"warning: {out_dir}: no robots.json: {exc}", file=sys.stderr)
+        exits = {}
     return scale_row(content, _events(out_dir), sampler, n=n, family=args.family,
                      planner=planner, spawn_wall=spawn_wall, spawn_mono=spawn_mono,
                      wall_s=wall_s, time_scale=args.time_scale, world_status=status,
-                     launcher=args.launcher)
+                     launcher=args.launcher, exits=exits)
 
 
 def _plot_run(out_dir: Path) -> None:
@@ -456,7 +490,8 @@ def _fmt(value: Any, digits: int = 2) -> str:
 def format_rows(rows: Sequence[dict[str, Any]]) -> str:
     """The printed table, one row per N."""
     head = ["N", "ok", "arrived", "contacts", "plan p50/p99 ms", "latency p50/p99 ms",
-            "miss %", "CPU robots/world %", "CPU/robot %", "PSS/robot MiB", "PSS total MiB",
+            "miss %", "CPU robots/world %", "CPU/robot %",
+            "CPU ms/plan sense/plan/send/loop/threads", "PSS/robot MiB", "PSS total MiB",
             "alive s", "lost", "sim s", "wall s"]
     body = []
     for r in rows:
@@ -470,7 +505,9 @@ def format_rows(rows: Sequence[dict[str, Any]]) -> str:
             _fmt(100.0 * miss if miss is not None else None),
             f"{_fmt(100 * cpu_r if cpu_r is not None else None, 1)}/"
             f"{_fmt(100 * cpu_w if cpu_w is not None else None, 1)}",
-            _fmt(r["cpu_pct_per_robot"], 1), _fmt(r["mem_robot_mib"], 1),
+            _fmt(r["cpu_pct_per_robot"], 1),
+            "/".join(_fmt(r.get(f"cpu_ms_per_plan_{part}")) for part in CPU_PARTS),
+            _fmt(r["mem_robot_mib"], 1),
             _fmt(r["mem_total_mib"], 0), _fmt(r["alive_s"], 1), _fmt(r["robots_lost"]),
             _fmt(r["sim_time_s"], 1),
             _fmt(r["wall_s"], 1),

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import threading
+import time
 from collections import deque
 
 import numpy as np
@@ -227,6 +229,7 @@ def _node_with(tokens: _Tokens, *, ring: bool, fresh: bool = True) -> RobotNode:
     node.cpu_tokens = tokens
     node.pose_ring = deque(["sample"] if ring else [])
     node.counts = {"token_timeouts": 0}
+    node.cpu_s = {"sense": 0.0, "plan": 0.0, "send": 0.0}
     node.world_alive = True
 
     def poll_poses() -> bool:
@@ -436,3 +439,30 @@ def test_a_configuration_out_of_range_is_refused_and_named_at_start_up() -> None
     got = node.fetch_config(session, RunKeys("r1"), 3, node._StopFlag(),
                             deadline=time.monotonic() + 1.0)
     assert got.planner.command_hold_periods == 1.5
+
+
+def _burn(cpu_s: float) -> None:
+    """Spin until this thread has used `cpu_s` of CPU."""
+    end = time.thread_time() + cpu_s
+    while time.thread_time() < end:
+        pass
+
+
+def test_cpu_summary_splits_the_main_thread_and_charges_the_other_threads() -> None:
+    node = object.__new__(RobotNode)
+    node.cpu_s = {"sense": 0.0, "plan": 0.0, "send": 0.0}
+    node.cpu_start = None
+    node.counts, node.seq = {"plans": 3}, 3
+    assert node.cpu_summary() == {}  # the loop never started
+    node.cpu_start = (time.thread_time(), time.process_time())
+    _burn(0.05)  # this thread: 20 ms of it counted as planning, the rest is the loop's
+    node.cpu_s["plan"] = 0.02
+    other = threading.Thread(target=_burn, args=(0.05,))  # as Zenoh's threads would
+    other.start()
+    other.join()
+    got = node.cpu_summary()
+    assert set(got) == {f"cpu_{p}_us" for p in ("sense", "plan", "send", "loop", "threads")}
+    assert got["cpu_plan_us"] == 20_000 and got["cpu_sense_us"] == got["cpu_send_us"] == 0
+    assert 29_000 <= got["cpu_loop_us"] < 1_000_000
+    assert 49_000 <= got["cpu_threads_us"] < 1_000_000
+    assert "plans=3 seq=3 cpu_sense_us=0 cpu_plan_us=20000 cpu_send_us=0" in node.summary()

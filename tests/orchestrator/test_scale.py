@@ -16,9 +16,11 @@ import pytest
 
 from orchestrator.scale import (
     COLUMNS,
+    CPU_PARTS,
     ResourceSampler,
     _cpu_at,
     build_parser,
+    cpu_per_plan_ms,
     format_rows,
     main,
     robot_endpoints,
@@ -84,6 +86,25 @@ def test_scale_row_from_events_and_samples() -> None:
     assert row["mem_total_mib"] == pytest.approx(130.0)
     assert row["world_overruns"] == 3 and row["robots_lost"] == 1
     assert set(row) == set(COLUMNS)
+
+
+def test_cpu_per_plan_sums_the_robots_that_reported_and_divides_by_their_plans() -> None:
+    cpu = {"cpu_sense_us": 300, "cpu_plan_us": 900, "cpu_send_us": 60, "cpu_loop_us": 30,
+           "cpu_threads_us": 210}
+    exits = {"processes": [
+        {"robot": 0, "plans": 2, **cpu},
+        {"robot": 1, "plans": 1, **{k: 2 * v for k, v in cpu.items()}},
+        {"robot": 2, "plans": 50},  # an older robot build: no CPU split, left out
+    ]}
+    got = cpu_per_plan_ms(exits)
+    assert got["cpu_ms_per_plan_sense"] == pytest.approx(0.9 / 3)  # (300 + 600) us / 3 plans
+    assert got["cpu_ms_per_plan_plan"] == pytest.approx(2.7 / 3)
+    assert got["cpu_ms_per_plan_threads"] == pytest.approx(0.63 / 3)
+    assert set(got) == {f"cpu_ms_per_plan_{p}" for p in CPU_PARTS}
+    assert all(v is None for v in cpu_per_plan_ms({"processes": exits["processes"][2:]}).values())
+    assert all(v is None for v in cpu_per_plan_ms({}).values())
+    row = {**{c: None for c in COLUMNS}, "agents": 4, **got}
+    assert "0.30/0.90/0.06/0.03/0.21" in format_rows([row])
 
 
 def test_alive_is_unknown_when_a_robot_never_joined() -> None:

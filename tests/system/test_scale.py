@@ -50,6 +50,12 @@ def test_scale_run_with_robots_connecting_through_a_second_address(tmp_path: Pat
     assert row["plan_ms_p50"] > 0.0 and row["latency_ms_p99"] >= 0.0
     assert 0.0 <= row["deadline_miss_rate"] <= 1.0
     assert row["sim_time_s"] > 0.0 and row["wall_s"] > row["sim_time_s"]
+    # The robots' own CPU split, per plan: every part reported, planning is not free, and
+    # the parts add up to no more than the robots' CPU share allows (sampled from outside).
+    parts = [row[f"cpu_ms_per_plan_{p}"] for p in ("sense", "plan", "send", "loop", "threads")]
+    assert all(x is not None and x >= 0.0 for x in parts), parts
+    assert row["cpu_ms_per_plan_plan"] > 0.0 and row["cpu_ms_per_plan_sense"] > 0.0
+    assert sum(parts) < 100.0  # ms per 100 ms control period: less than one core per robot
 
 
 def _fleet(tmp_path: Path, ids: str):
