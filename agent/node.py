@@ -696,7 +696,8 @@ class RobotNode:
         (`poll_poses`); ``cpu_plan_us``: `RobotController.plan` (estimates, planner, MPC);
         ``cpu_send_us``: encoding and publishing the command; ``cpu_loop_us``: the rest of
         the main thread (control and liveliness polls, waits); ``cpu_threads_us``: every
-        other thread of the process (Zenoh's runtime: receiving, sending, the lease).
+        other thread of the process (Zenoh's runtime: receiving, sending, the lease; and the
+        thread zenoh-python runs the pose callback `_on_pose` on).
         Thread and process CPU clocks (`time.thread_time`, `time.process_time`); empty
         before the loop started. `orchestrator scale` divides them by the plans.
         """

@@ -35,7 +35,7 @@ processes that map them; RSS where the kernel gives no PSS). Per N it reports:
   (`agent.node.RobotNode.cpu_summary`, from their exit lines in robots.json), summed over
   the robots and divided by all their plans. sense: decoding and observing poses; plan:
   estimates and the planner; send: encoding and publishing the command; loop: the rest of
-  the main thread; threads: Zenoh's threads (receiving, sending, the lease).
+  the main thread; threads: the other threads (Zenoh's runtime, the pose callback's).
 
 ``--hosts A,B``: the world listens on ``tcp/0.0.0.0:PORT`` and robot k connects to
 ``tcp/<hosts[k % len]>:PORT``, as robots on other hosts would (on Linux every 127.x.y.z
