@@ -296,7 +296,9 @@ def _observation(ahead_m: float, pose_age_s: float, is_robot: bool = False,
 
 
 def _config(margin_m: float, guard: bool = True) -> PlannerConfig:
-    return PlannerConfig(mpc=replace(MpcConfig(), braking_guard=guard, braking_margin_m=margin_m))
+    # The guard tests' arithmetic takes a 0.5 s estimation window: estimates lag 0.25 s.
+    return PlannerConfig(estimation_window_s=0.5,
+                         mpc=replace(MpcConfig(), braking_guard=guard, braking_margin_m=margin_m))
 
 
 def test_eifp_mpc_speed_is_capped_by_the_guard_and_braking_stays_within_the_rate_limit():
