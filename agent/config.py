@@ -207,9 +207,12 @@ class PlannerConfig:
         estimation_window_s: history length used to estimate others' velocity and linearity.
             0.75 s (was 0.5): measured, it cut the reversals in the dense crossings
             (lockstep, 5 cm jitter, seeds 0-9: F 4.28 -> 3.09, G 8.30 -> 6.75 per robot;
-            README, "Results"); 1.25 s and longer made them worse again. The braking
-            guard's allowance for an estimate's lag (window / 2) grows with it
-            (`agent.safety`).
+            README, "Results"); 1.25 s and longer made them worse again. With poses 0.1 s
+            apart (lockstep, and a distributed robot reading its pose slot) the 8-sample
+            history (`NeighborTracker`) spans 0.7 s: 0.75 s fits every sample it holds,
+            1.0 s the same ones, and from 1.25 s on (spacing window / 6 > 0.2 s) it keeps
+            every other pose. The braking guard's allowance for an estimate's lag
+            (window / 2) grows with it (`agent.safety`).
         command_hold_periods: each command tells the world to apply it for at most this
             many control periods (`protocol.CommandMsg.hold_s`); a command that is not
             followed in time (lost or late on the link) then gives way to braking instead
