@@ -201,3 +201,28 @@ def test_recent_turn_rate_is_the_wrapped_heading_change_over_the_newest_interval
     assert math.isnan(o.recent_turn_rate_radps[2])
     np.testing.assert_allclose(o.subset(np.array([1])).recent_turn_rate_radps, [-0.5],
                                atol=1e-9)
+
+
+@pytest.mark.parametrize("rate_hz", [10.0, 50.0])
+def test_the_default_window_spans_about_the_same_at_10_and_50_hz(rate_hz):
+    # PlannerConfig's 0.75 s window. Poses 0.1 s apart: every pose is kept and the 8-sample
+    # history holds 0.7 s. Poses 0.02 s apart: samples are kept about window / 6 apart and
+    # the fit reaches back to the oldest one inside the window (0.72 s here). The ghost
+    # start is the oldest sample fitted; at 1 m/s its distance back is its age.
+    from agent.config import PlannerConfig
+
+    window_s = PlannerConfig().estimation_window_s
+    assert window_s == 0.75
+    tr = NeighborTracker(own_id=0, window_s=window_s)
+    dt = 1.0 / rate_hz
+    n = round(3.0 / dt)
+    for k in range(n + 1):
+        t = k * dt
+        tr.update(snap(t, k, [(0, 0.0, 0.0), (1, 1.0 * t, 0.0)]))
+    o = tr.others()
+    np.testing.assert_allclose(o.velocity_mps[0], [1.0, 0.0], atol=1e-9)
+    reach_s = n * dt - o.track_start_m[0, 0]
+    if rate_hz == 10.0:
+        assert reach_s == pytest.approx(0.7, abs=1e-9)
+    else:
+        assert window_s - window_s / 6.0 < reach_s <= window_s + 1e-9, reach_s
