@@ -296,7 +296,8 @@ class MpcTracker:
         r_hp = row0 + n_cons * k_all[:, None] + np.arange(n_cons)  # (N, M)
         self._hx = add(r_hp, np.broadcast_to(ix[:, 0:1], r_hp.shape), np.sqrt(0.5))
         self._hy = add(r_hp, np.broadcast_to(ix[:, 1:2], r_hp.shape), np.sqrt(0.5))
-        add(r_hp, np.broadcast_to(i_s[:, None], r_hp.shape), 1.0)
+        if n_cons:  # without neighbour slots there are no half-planes and no slack
+            add(r_hp, np.broadcast_to(i_s[:, None], r_hp.shape), 1.0)
         row0 += n_hp
         r_slack = row0 + np.arange(ns)
         add(r_slack, i_s, 1.0)
@@ -337,10 +338,10 @@ class MpcTracker:
                 r_box[shift].ravel(),
                 r_rate[shift].ravel(),
                 r_hp[shift].ravel(),
-                r_slack[shift].ravel(),
+                r_slack[shift].ravel() if ns else r_slack,
             ]
         )
-        self._slack_shift = (i_s[shift] - (nx + nu)).ravel()
+        self._slack_shift = (i_s[shift] - (nx + nu)).ravel() if ns else i_s
         self._x_zero = np.zeros(n_var)
         self._y_zero = np.zeros(n_rows)
 

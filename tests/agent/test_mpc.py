@@ -105,6 +105,18 @@ def test_predicted_states_are_a_rollout_from_the_state():
     np.testing.assert_allclose(res.predicted_states[1], first, atol=1e-12)
 
 
+def test_without_neighbour_slots_it_tracks_and_ignores_neighbours():
+    # max_constraints = 0 is a valid configuration (a scenario may set it): no half-plane
+    # rows, no slack. It once failed while building the QP.
+    tracker = MpcTracker(LIM, MpcConfig(max_constraints=0))
+    preds = np.broadcast_to(np.array([2.0, 0.0]), (1, N + 1, 2))  # on the line: not a constraint
+    states, results = run(tracker, [0.0, 0.3, 0.0], line_ref, 80, lambda i: preds,
+                          np.array([0.8]))
+    assert all(r.status is PlanStatus.OK for r in results[5:])
+    assert all(r.max_slack_m == 0.0 for r in results)
+    assert np.abs(states[60:, 1]).max() < 0.05  # tracked straight through the neighbour
+
+
 def test_large_heading_error_turns_within_limits():
     tracker = MpcTracker(LIM, CFG)
     states, _ = run(tracker, [0.0, 0.0, math.pi], line_ref, 150)  # facing backwards
