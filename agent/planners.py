@@ -187,6 +187,7 @@ class ViaPointPlanner:
             via.waypoints_m, ego.heading_rad, limits.v_max_mps, limits.accel_max_mps2,
             mpc_cfg.dt_s, mpc_cfg.horizon_steps, v_start_mps=ego.v_mps,
             clamp_heading=cfg.spline_clamp_heading and ego.v_mps >= CLAMP_MIN_SPEED_MPS,
+            first_leg_segments=cfg.spline_first_leg_segments,
         )
         t2 = clock()
         last = np.array([ego.v_mps, ego.omega_radps])

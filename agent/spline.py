@@ -262,6 +262,31 @@ def distance_profile(
     return np.minimum(s, length_m), v
 
 
+def split_first_leg(waypoints_m: np.ndarray, segments: int) -> np.ndarray:
+    """`waypoints_m` with `segments - 1` knots spaced evenly between the first two points.
+
+    Why (not in the paper, which splines the waypoints alone): a via-point is built for a
+    robot that travels the straight leg to it (the tangent to the other's inflated disc,
+    reached at the cone time; `agent.viapoints`). A natural or clamped cubic spline
+    through robot, via-point and goal bows away from that leg, the robot follows the bow,
+    and next cycle's via-point, built from where the bow took it, has moved. Knots along
+    the leg keep the reference on it up to the via-point, where it turns.
+
+    Args:
+        waypoints_m: (M, 2) waypoints, M >= 2 [m].
+        segments: number of equal parts of the first leg (>= 1).
+
+    Returns:
+        (M + segments - 1, 2) waypoints.
+    """
+    if segments < 1:
+        raise ValueError(f"segments: must be >= 1, got {segments!r}")
+    start, via = waypoints_m[0], waypoints_m[1]
+    fractions = np.arange(1, segments)[:, None] / segments
+    inner = start + fractions * (via - start)
+    return np.concatenate((waypoints_m[:1], inner, waypoints_m[1:]))
+
+
 def build_reference(
     waypoints_m: np.ndarray,
     heading_rad: float,
@@ -272,6 +297,7 @@ def build_reference(
     v_start_mps: float | None = None,
     min_spacing_m: float = MIN_WAYPOINT_SPACING_M,
     clamp_heading: bool = False,
+    first_leg_segments: int = 1,
 ) -> Reference:
     """Spline the waypoints and sample it every dt_s at the speed profile.
 
@@ -290,6 +316,9 @@ def build_reference(
         clamp_heading: start the spline along `heading_rad` (clamped start) when there are
             via-points (M >= 3) and the first one is within `CLAMP_MAX_OFF_HEADING_RAD` of
             the heading; otherwise (and for a two-point plan, a straight line) natural.
+        first_leg_segments: with via-points (M >= 3), cut the first leg (robot to first
+            via-point) into this many equal parts by extra knots, so the spline runs
+            nearly straight along it (`split_first_leg`); 1 leaves the waypoints as they are.
 
     Returns:
         The sampled reference.
@@ -306,6 +335,8 @@ def build_reference(
     if not (v_max_mps > 0.0 and accel_mps2 > 0.0 and dt_s > 0.0 and horizon_steps >= 1):
         raise ValueError("build_reference: v_max, accel and dt must be positive, N >= 1")
     wp = dedup_waypoints(wp, min_spacing_m)
+    if first_leg_segments > 1 and wp.shape[0] >= 3:
+        wp = split_first_leg(wp, first_leg_segments)
     t = np.arange(horizon_steps + 1) * dt_s
     if wp.shape[0] == 1:
         zeros = np.zeros_like(t)

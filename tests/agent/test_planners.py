@@ -118,6 +118,34 @@ def test_threat_ahead_gets_a_via_point_and_side():
     assert res.waypoints_m.shape[0] >= 3
 
 
+def test_first_leg_segments_reach_the_reference(monkeypatch):
+    import agent.spline
+
+    seen = []
+    build = agent.spline.build_reference
+
+    def spy(*args, **kwargs):
+        seen.append(kwargs["first_leg_segments"])
+        return build(*args, **kwargs)
+
+    monkeypatch.setattr(agent.spline, "build_reference", spy)
+    obs = observation(0.0, 0.0, 0.0, 1.0, [[6.0, 0.2]], [[-1.0, 0.0]])
+    plain = make_planner("eifp-mpc", PlannerConfig()).plan(obs, 0.0)
+    split = make_planner("eifp-mpc", PlannerConfig(spline_first_leg_segments=3)).plan(obs, 0.0)
+    assert seen == [1, 3]
+    np.testing.assert_array_equal(plain.waypoints_m, split.waypoints_m)  # same via-points
+    assert (plain.v_mps, plain.omega_radps) != (split.v_mps, split.omega_radps)
+
+
+def test_first_leg_segments_head_on_pair_passes():
+    from dataclasses import replace
+
+    scenario = head_on("eifp-mpc", offset_m=0.3)
+    scenario = replace(scenario, planner_config=PlannerConfig(spline_first_leg_segments=3))
+    sim, _ = run_loop(scenario, 60.0)
+    assert sim.contact_count == 0 and sim.all_arrived()
+
+
 def test_half_plane_clearance_grows_with_the_pose_age():
     from dataclasses import replace
 

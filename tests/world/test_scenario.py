@@ -120,7 +120,8 @@ def test_every_planner_and_mpc_field_is_settable(tmp_path):
     planner = {file_key(f.name): f.name for f in dataclasses.fields(PlannerConfig)}
     mpc = {file_key(f.name): f.name for f in dataclasses.fields(MpcConfig)}
     bools = {f.name for f in dataclasses.fields(PlannerConfig) if f.type in (bool, "bool")}
-    defaults = {k: True if planner[k] in bools else 2 if k in ("max_neighbors", "max_depth")
+    defaults = {k: True if planner[k] in bools else 2 if k in ("max_neighbors", "max_depth",
+                                                               "spline_first_leg_segments")
                 else 0.7 for k in planner if k != "mpc"}
     mpc_bools = {f.name for f in dataclasses.fields(MpcConfig) if f.type in (bool, "bool")}
     assert mpc_bools  # braking_guard: the bool branch below is exercised
@@ -254,6 +255,8 @@ def test_non_finite_inside_a_vector(tmp_path):
     ("    horizon_steps: 15\n", "    horizon_steps: 0\n",
      "defaults.mpc.horizon_steps: must be >= 1"),
     ("    dt: 0.1\n", "    dt: 0.0\n", "defaults.mpc.dt: must be > 0"),
+    ("  d_safety: 0.3\n", "  d_safety: 0.3\n  spline_first_leg_segments: 0\n",
+     "defaults.spline_first_leg_segments: must be >= 1"),
 ])
 def test_zero_or_negative_sizes(tmp_path, old, new, field):
     expect_error(bad(tmp_path, old, new), field)
