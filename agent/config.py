@@ -205,9 +205,10 @@ class PlannerConfig:
             (`agent.spline.split_first_leg`); 1 is the paper's spline through the
             waypoints alone. Off (1) by default: measured (lockstep, 5 cm jitter, seeds
             0-9, oscillations per robot F / G): 1: 3.09 / 6.75; 3: 3.54 / 4.62; 4: 3.48 /
-            5.02; 6: 3.93 / 9.25; every run arrived with no contact. It helps G and costs F,
-            and the effect is not monotonic in the count, so it is an option until it is
-            understood and its safety envelope measured (README, "Results").
+            5.02; 6: 3.93 / 9.25; every run arrived with no contact. With 3 it also lowers
+            A and D and raises B, C and E, and the effect is not monotonic in the count,
+            so it is an option until that is understood (README, "Results"; at 100 ms
+            latency with 10 % loss, 3 parts: F and G 0/20 runs touch).
         primary_hysteresis: eIFP resolves the threat it resolved first last cycle first
             again while its TCPA is within 1 s of the most imminent one's
             (`agent.ifp.PRIMARY_TCPA_MARGIN_S`), instead of re-ranking from scratch. Off by
