@@ -209,6 +209,16 @@ class PlannerConfig:
             A and D and raises B, C and E, and the effect is not monotonic in the count,
             so it is an option until that is understood (README, "Results"; at 100 ms
             latency with 10 % loss, 3 parts: F and G 0/20 runs touch).
+        reference_lines_arcs: the reference follows the waypoint legs with arcs at the
+            corners and a start arc along the heading (`agent.spline.LineArcPath`), with
+            no turn-rate feed-forward, instead of the paper's cubic spline through the
+            waypoints (False: the spline, with `spline_clamp_heading` and
+            `spline_first_leg_segments`). On by default (not in the paper): measured
+            (lockstep, 5 cm jitter, seeds 0-9; README, "Results") it lowers the
+            oscillations where the spline's bow off the legs made the robots weave.
+        path_corner_radius_m: radius of the arcs at the via-points (lines and arcs).
+        path_start_radius_m: radius of the start arc along the heading (lines and arcs;
+            0: none, the path starts along the first leg).
         primary_hysteresis: eIFP resolves the threat it resolved first last cycle first
             again while its TCPA is within 1 s of the most imminent one's
             (`agent.ifp.PRIMARY_TCPA_MARGIN_S`), instead of re-ranking from scratch. Off by
@@ -254,6 +264,9 @@ class PlannerConfig:
     encounter_rules: bool = True
     spline_clamp_heading: bool = True
     spline_first_leg_segments: int = 1
+    reference_lines_arcs: bool = True
+    path_corner_radius_m: float = 1.0
+    path_start_radius_m: float = 5.0
     primary_hysteresis: bool = False
     stand_on_emergency_s: float = 2.0
     estimation_window_s: float = 0.75

@@ -51,8 +51,9 @@ ARRIVAL_FRACTION = 0.5
 """A planner stops when closer to its goal than this fraction of the goal tolerance."""
 
 CLAMP_MIN_SPEED_MPS = 0.2
-"""Below this speed the reference spline starts natural: a robot that (nearly) stands can
-turn on the spot, and a reference forced along its heading would send it the wrong way."""
+"""Below this speed the reference spline starts natural and the lines-and-arcs path has no
+start arc: a robot that (nearly) stands can turn on the spot, and a reference forced along
+its heading would send it the wrong way."""
 
 CONTROL_PERIOD_S = 0.1
 """Default command period: the rate limits of the tracking laws use it."""
@@ -188,6 +189,8 @@ class ViaPointPlanner:
             mpc_cfg.dt_s, mpc_cfg.horizon_steps, v_start_mps=ego.v_mps,
             clamp_heading=cfg.spline_clamp_heading and ego.v_mps >= CLAMP_MIN_SPEED_MPS,
             first_leg_segments=cfg.spline_first_leg_segments,
+            lines_arcs=cfg.reference_lines_arcs, corner_radius_m=cfg.path_corner_radius_m,
+            start_radius_m=cfg.path_start_radius_m if ego.v_mps >= CLAMP_MIN_SPEED_MPS else 0.0,
         )
         t2 = clock()
         last = np.array([ego.v_mps, ego.omega_radps])

@@ -262,6 +262,124 @@ def distance_profile(
     return np.minimum(s, length_m), v
 
 
+class LineArcPath:
+    """The waypoint polyline with its corners rounded by circular arcs (lines and arcs).
+
+    Our alternative to the paper's cubic spline (`PlannerConfig.reference_lines_arcs`, the
+    default). A via-point is built for a robot that drives the straight leg to it (the
+    tangent to the other's inflated disc, reached at the cone time; `agent.viapoints`);
+    a cubic spline through robot, via-point and goal bows off that leg and turns along
+    the whole of it. Here the reference runs along the legs and turns only where they
+    meet:
+
+    - Corner at via-point i (turn delta between its two legs): an arc of radius
+      `corner_radius_m`, tangent to both legs, so it starts R tan(|delta| / 2) before the
+      via-point. That cut is capped at half of a leg between two via-points and at the
+      whole of the first and the last leg (if the caps of one leg's two corners overlap,
+      both are scaled down to share it): a corner between short legs gets a tighter arc,
+      and the arcs of a short polygon round a disc join into a curve.
+    - Start (`start_radius_m` > 0): when the first leg lies within
+      `CLAMP_MAX_OFF_HEADING_RAD` of the robot's heading, the path leaves along the
+      heading on an arc of that radius and then runs straight to where the first corner's
+      arc begins (a Dubins-like turn-then-line; it meets that arc at a small kink, the
+      difference between its line and the leg). The clamped spline start's job: a
+      via-point that moves a little between cycles bends the path ahead instead of
+      swinging the reference under the robot. A sharper turn starts straight along the
+      leg, and the robot turns to it at once. Also none when the first leg's straight part
+      is empty, or the arc would have to turn by more than pi.
+
+    Each piece is a line or an arc, p(sigma) = p0 + u0 sigma (kappa = 0) or
+    p0 + u0 (exp(i kappa sigma) - 1) / (i kappa), heading arg(u0) + kappa sigma: position
+    and heading in closed form at any distance.
+
+    Args:
+        points: M >= 3 complex points, distinct consecutive entries [m].
+        heading_rad: the robot's heading, for the start arc [rad].
+        corner_radius_m: R of the corner arcs (0: sharp corners, the polyline) [m].
+        start_radius_m: radius of the start arc (0: none) [m].
+    """
+
+    def __init__(self, points: list[complex], heading_rad: float, corner_radius_m: float,
+                 start_radius_m: float) -> None:
+        legs = [q - p for p, q in zip(points, points[1:])]
+        lengths = [abs(d) for d in legs]
+        units = [d / n for d, n in zip(legs, lengths)]
+        n = len(legs)
+        turn = [0.0] * (n + 1)  # turn at each point (0 at both ends)
+        cut = [0.0] * (n + 1)  # how far before and after each point its arc starts and ends
+        for i in range(1, n):
+            turn[i] = cmath.phase(units[i] / units[i - 1])
+            if turn[i] != 0.0:
+                cut[i] = min(corner_radius_m * math.tan(0.5 * abs(turn[i])),
+                             lengths[i - 1] * (1.0 if i == 1 else 0.5),
+                             lengths[i] * (1.0 if i == n - 1 else 0.5))
+        for i in range(n):  # two corners of one leg share it
+            both = cut[i] + cut[i + 1]
+            if both > lengths[i]:
+                cut[i] *= lengths[i] / both
+                cut[i + 1] *= lengths[i] / both
+        # Pieces (start point, unit direction at start, curvature, length).
+        pieces: list[tuple[complex, complex, float, float]] = []
+        for i in range(n):
+            straight = lengths[i] - cut[i] - cut[i + 1]
+            if straight > 0.0:
+                pieces.append((points[i] + units[i] * cut[i], units[i], 0.0, straight))
+            if i + 1 < n and cut[i + 1] > 0.0:
+                radius = cut[i + 1] / math.tan(0.5 * abs(turn[i + 1]))
+                pieces.append((points[i + 1] - units[i] * cut[i + 1], units[i],
+                               math.copysign(1.0 / radius, turn[i + 1]),
+                               radius * abs(turn[i + 1])))
+        if start_radius_m > 0.0 and lengths[0] - cut[1] > 0.0:
+            pieces[0:1] = self._start(points[0], heading_rad, pieces[0], start_radius_m)
+        self.start = np.array([0.0, *itertools.accumulate(pc[3] for pc in pieces)])
+        self.length_m = float(self.start[-1])
+        self._p0 = np.array([pc[0] for pc in pieces])
+        self._u0 = np.array([pc[1] for pc in pieces])
+        self._kappa = np.array([pc[2] for pc in pieces])
+        self._len = np.array([pc[3] for pc in pieces])
+
+    @staticmethod
+    def _start(p: complex, heading_rad: float, line: tuple[complex, complex, float, float],
+               radius_m: float) -> list[tuple[complex, complex, float, float]]:
+        """The first straight piece replaced by an arc along the heading and a line."""
+        ahead = cmath.exp(1j * heading_rad)
+        off = cmath.phase(line[1] / ahead)
+        if not 0.0 < abs(off) < CLAMP_MAX_OFF_HEADING_RAD:
+            return [line]
+        side = 1.0 if off > 0.0 else -1.0  # turn left (+) or right (-)
+        centre = p + side * radius_m * 1j * ahead
+        end = line[0] + line[1] * line[3]  # where the first corner's arc begins
+        to_end = end - centre
+        dist = abs(to_end)
+        if not dist > radius_m:
+            return [line]
+        # The tangent point T on the circle from which the line runs to `end`.
+        leave = cmath.phase(to_end) - side * math.acos(radius_m / dist)
+        swept = (side * (leave - cmath.phase(p - centre))) % (2.0 * math.pi)
+        if swept >= math.pi:
+            return [line]
+        tangent_point = centre + radius_m * cmath.exp(1j * leave)
+        rest = abs(end - tangent_point)
+        return [(p, ahead, side / radius_m, radius_m * swept),
+                (tangent_point, (end - tangent_point) / rest, 0.0, rest)]
+
+    def evaluate(self, s_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Position (complex) and heading (not unwrapped) at distances s along the path.
+
+        Args:
+            s_m: (n,) distances, clipped to [0, length] [m].
+        """
+        s = np.minimum(np.maximum(s_m, 0.0), self.length_m)
+        k = np.minimum(np.searchsorted(self.start[1:-1], s, side="right"), self._len.size - 1)
+        sigma = np.minimum(s - self.start[k], self._len[k])
+        kappa = self._kappa[k]
+        bent = kappa != 0.0
+        along = sigma.astype(complex)
+        along[bent] = (np.exp(1j * kappa[bent] * sigma[bent]) - 1.0) / (1j * kappa[bent])
+        u0 = self._u0[k]
+        return self._p0[k] + u0 * along, np.angle(u0) + kappa * sigma
+
+
 def split_first_leg(waypoints_m: np.ndarray, segments: int) -> np.ndarray:
     """`waypoints_m` with `segments - 1` knots spaced evenly between the first two points.
 
@@ -298,6 +416,9 @@ def build_reference(
     min_spacing_m: float = MIN_WAYPOINT_SPACING_M,
     clamp_heading: bool = False,
     first_leg_segments: int = 1,
+    lines_arcs: bool = False,
+    corner_radius_m: float = 1.0,
+    start_radius_m: float = 5.0,
 ) -> Reference:
     """Spline the waypoints and sample it every dt_s at the speed profile.
 
@@ -319,6 +440,14 @@ def build_reference(
         first_leg_segments: with via-points (M >= 3), cut the first leg (robot to first
             via-point) into this many equal parts by extra knots, so the spline runs
             nearly straight along it (`split_first_leg`); 1 leaves the waypoints as they are.
+        lines_arcs: with via-points (M >= 3), the reference follows `LineArcPath` (legs
+            joined by arcs) instead of the cubic spline; `clamp_heading` and
+            `first_leg_segments` then do not apply. Its `omega_radps` is 0: the arcs place
+            positions and headings, and the tracker turns as much as their errors ask for
+            (a turn-rate feed-forward along the arcs made the dense crossings weave more;
+            `PlannerConfig.reference_lines_arcs`).
+        corner_radius_m: `LineArcPath` corner radius [m] (>= 0).
+        start_radius_m: `LineArcPath` start arc radius, 0 for none [m] (>= 0).
 
     Returns:
         The sampled reference.
@@ -334,8 +463,12 @@ def build_reference(
         require_finite("build_reference", v_start_mps)
     if not (v_max_mps > 0.0 and accel_mps2 > 0.0 and dt_s > 0.0 and horizon_steps >= 1):
         raise ValueError("build_reference: v_max, accel and dt must be positive, N >= 1")
+    if lines_arcs:
+        require_finite("build_reference", corner_radius_m, start_radius_m)
+        if corner_radius_m < 0.0 or start_radius_m < 0.0:
+            raise ValueError("build_reference: corner and start radii must be >= 0")
     wp = dedup_waypoints(wp, min_spacing_m)
-    if first_leg_segments > 1 and wp.shape[0] >= 3:
+    if first_leg_segments > 1 and wp.shape[0] >= 3 and not lines_arcs:
         wp = split_first_leg(wp, first_leg_segments)
     t = np.arange(horizon_steps + 1) * dt_s
     if wp.shape[0] == 1:
@@ -350,6 +483,11 @@ def build_reference(
             s_m=zeros.copy(),
             length_m=0.0,
         )
+    if lines_arcs and wp.shape[0] >= 3:
+        return _line_arc_reference(
+            LineArcPath([complex(x, y) for x, y in wp.tolist()], heading_rad, corner_radius_m,
+                        start_radius_m),
+            t, heading_rad, v_max_mps, accel_mps2, v_start_mps)
     tangent = None
     if clamp_heading and wp.shape[0] >= 3:
         tangent = complex(math.cos(heading_rad), math.sin(heading_rad))
@@ -388,6 +526,25 @@ def build_reference(
         omega_radps=curvature * v,
         s_m=s,
         length_m=length,
+    )
+
+
+def _line_arc_reference(path: LineArcPath, t: np.ndarray, heading_rad: float, v_max_mps: float,
+                        accel_mps2: float, v_start_mps: float | None) -> Reference:
+    """`build_reference` on a `LineArcPath`: the same speed profile, no turn feed-forward."""
+    s, v = distance_profile(t, path.length_m, v_max_mps, accel_mps2, v_start_mps)
+    p, heading = path.evaluate(s)
+    heading = np.unwrap(heading)
+    heading += _TWO_PI * round((heading_rad - float(heading[0])) / _TWO_PI)
+    return Reference(
+        t_s=t,
+        x_m=p.real.copy(),
+        y_m=p.imag.copy(),
+        heading_rad=heading,
+        v_mps=v,
+        omega_radps=np.zeros_like(t),
+        s_m=s,
+        length_m=path.length_m,
     )
 
 

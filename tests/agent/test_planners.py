@@ -1,6 +1,7 @@
 """The four planners behind one interface: head-on in a closed loop, determinism, bounds."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -130,8 +131,9 @@ def test_first_leg_segments_reach_the_reference(monkeypatch):
 
     monkeypatch.setattr(agent.spline, "build_reference", spy)
     obs = observation(0.0, 0.0, 0.0, 1.0, [[6.0, 0.2]], [[-1.0, 0.0]])
-    plain = make_planner("eifp-mpc", PlannerConfig()).plan(obs, 0.0)
-    split = make_planner("eifp-mpc", PlannerConfig(spline_first_leg_segments=3)).plan(obs, 0.0)
+    spline = PlannerConfig(reference_lines_arcs=False)  # the option shapes the spline only
+    plain = make_planner("eifp-mpc", spline).plan(obs, 0.0)
+    split = make_planner("eifp-mpc", replace(spline, spline_first_leg_segments=3)).plan(obs, 0.0)
     assert seen == [1, 3]
     np.testing.assert_array_equal(plain.waypoints_m, split.waypoints_m)  # same via-points
     assert (plain.v_mps, plain.omega_radps) != (split.v_mps, split.omega_radps)
@@ -141,7 +143,40 @@ def test_first_leg_segments_head_on_pair_passes():
     from dataclasses import replace
 
     scenario = head_on("eifp-mpc", offset_m=0.3)
-    scenario = replace(scenario, planner_config=PlannerConfig(spline_first_leg_segments=3))
+    scenario = replace(scenario, planner_config=PlannerConfig(spline_first_leg_segments=3,
+                                                              reference_lines_arcs=False))
+    sim, _ = run_loop(scenario, 60.0)
+    assert sim.contact_count == 0 and sim.all_arrived()
+
+
+def test_lines_arcs_reference_is_the_default_and_reaches_the_reference(monkeypatch):
+    import agent.spline
+
+    seen = []
+    build = agent.spline.build_reference
+
+    def spy(*args, **kwargs):
+        seen.append((kwargs["lines_arcs"], kwargs["corner_radius_m"], kwargs["start_radius_m"]))
+        return build(*args, **kwargs)
+
+    monkeypatch.setattr(agent.spline, "build_reference", spy)
+    moving = observation(0.0, 0.0, 0.0, 1.0, [[6.0, 0.2]], [[-1.0, 0.0]])
+    arcs = make_planner("eifp-mpc", PlannerConfig()).plan(moving, 0.0)
+    spline = make_planner("eifp-mpc", PlannerConfig(reference_lines_arcs=False)).plan(moving, 0.0)
+    standing = observation(0.0, 0.0, 0.0, 0.0, [[6.0, 0.2]], [[-1.0, 0.0]])
+    make_planner("eifp-mpc", PlannerConfig(path_corner_radius_m=2.0)).plan(standing, 0.0)
+    # Defaults R = 1 m, start arc 5 m; a standing robot turns on the spot (no start arc).
+    assert seen == [(True, 1.0, 5.0), (False, 1.0, 5.0), (True, 2.0, 0.0)]
+    np.testing.assert_array_equal(arcs.waypoints_m, spline.waypoints_m)  # same via-points
+    assert (arcs.v_mps, arcs.omega_radps) != (spline.v_mps, spline.omega_radps)
+
+
+@pytest.mark.parametrize("planner", ["eifp-mpc", "eifp", "ifp"])
+def test_spline_reference_head_on_pair_passes(planner):
+    from dataclasses import replace
+
+    scenario = head_on(planner, offset_m=0.3)
+    scenario = replace(scenario, planner_config=PlannerConfig(reference_lines_arcs=False))
     sim, _ = run_loop(scenario, 60.0)
     assert sim.contact_count == 0 and sim.all_arrived()
 

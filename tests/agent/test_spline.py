@@ -277,3 +277,116 @@ def test_first_leg_segments_keep_the_reference_on_the_leg_to_the_via_point(clamp
     a = build_reference(two, 0.0, V_MAX, ACCEL, DT, N, first_leg_segments=3)
     b = build_reference(two, 0.0, V_MAX, ACCEL, DT, N)
     np.testing.assert_array_equal(a.x_m, b.x_m)
+
+
+# --- lines and arcs (`LineArcPath`, `build_reference(lines_arcs=True)`) -------------------
+
+
+def dense(path, step_m=0.01):
+    s = np.arange(0.0, path.length_m + step_m, step_m)
+    p, heading = path.evaluate(s)
+    return s, p, np.unwrap(heading)
+
+
+def test_line_arc_path_runs_along_the_legs_and_rounds_the_corner():
+    from agent.spline import LineArcPath
+
+    # Robot heading along its first leg (no start arc), via-point (6, 1.5), goal (40, 0).
+    pts = [0j, 6 + 1.5j, 40 + 0j]
+    leg_in, leg_out = pts[1] / abs(pts[1]), (pts[2] - pts[1]) / abs(pts[2] - pts[1])
+    path = LineArcPath(pts, math.atan2(1.5, 6.0), corner_radius_m=1.0, start_radius_m=5.0)
+    delta = abs(np.angle(leg_out / leg_in))
+    cut = math.tan(0.5 * delta)  # R tan(delta / 2), R = 1
+    s, p, heading = dense(path)
+    # On the legs the path is the leg itself, up to the corner's arc.
+    first = s < abs(pts[1]) - cut
+    assert np.abs((p[first] * leg_in.conjugate()).imag).max() < 1e-9
+    last = s > path.length_m - (abs(pts[2] - pts[1]) - cut)
+    assert np.abs(((p[last] - pts[1]) * leg_out.conjugate()).imag).max() < 1e-9
+    # The arc is tangent to both legs: it passes the via-point at R (1 / cos(delta/2) - 1).
+    assert np.abs(p - pts[1]).min() == pytest.approx(1.0 / math.cos(0.5 * delta) - 1.0, abs=1e-3)
+    # Continuous in position and heading; it ends at the goal, shorter than the polyline.
+    assert np.abs(np.diff(p)).max() < 0.0101 and np.abs(np.diff(heading)).max() < 0.011
+    assert p[-1] == pytest.approx(pts[2])
+    assert path.length_m < abs(pts[1]) + abs(pts[2] - pts[1])
+
+
+def test_line_arc_path_with_zero_corner_radius_is_the_polyline():
+    from agent.spline import LineArcPath
+
+    wp = np.array([[0.0, 0.0], [3.0, 2.0], [5.0, -1.0], [9.0, 0.0]])
+    path = LineArcPath([complex(x, y) for x, y in wp], math.atan2(2.0, 3.0), 0.0, 0.0)
+    for d in (0.5, 3.6, 4.0, 7.0, path.length_m):
+        p, _ = path.evaluate(np.array([d]))
+        np.testing.assert_allclose([p[0].real, p[0].imag], polyline_point_ahead(wp, d),
+                                   atol=1e-12)
+
+
+def test_line_arc_corners_between_short_legs_share_them():
+    from agent.spline import LineArcPath
+
+    # A short polygon round a disc (legs of 0.6 m turning by 40 degrees): each corner may
+    # use at most half of a leg between two via-points, so the arcs join into a curve.
+    turn = np.exp(1j * np.radians(40.0))
+    pts = [0j, 4 + 0j]
+    for _ in range(3):
+        step = (pts[-1] - pts[-2]) / abs(pts[-1] - pts[-2]) * turn * 0.6
+        pts.append(pts[-1] + step)
+    pts.append(pts[-1] + (pts[-1] - pts[-2]) / 0.6 * 5.0)
+    path = LineArcPath(pts, 0.0, corner_radius_m=5.0, start_radius_m=0.0)
+    s, p, heading = dense(path, 0.005)
+    assert np.abs(np.diff(p)).max() < 0.0051  # no gap where two corners meet
+    assert np.abs(np.diff(heading)).max() < 0.03  # and no kink
+    assert heading[-1] - heading[0] == pytest.approx(3 * np.angle(turn), abs=1e-9)
+    assert p[-1] == pytest.approx(pts[-1])
+
+
+@pytest.mark.parametrize("off_deg", [10.0, -20.0])
+def test_line_arc_start_arc_leaves_along_the_heading(off_deg):
+    from agent.spline import LineArcPath
+
+    # Via-point ahead on the x axis, robot heading off_deg off it: the path starts along
+    # the heading (like the clamped spline), turns towards the leg on a 5 m arc, runs
+    # straight back onto the leg and meets it where the corner's arc begins.
+    pts = [0j, 12 + 0j, 30 + 6j]
+    heading = math.radians(off_deg)
+    toward = -math.copysign(1.0, heading)  # the sense of the turn back to the leg
+    path = LineArcPath(pts, heading, corner_radius_m=1.0, start_radius_m=5.0)
+    s, p, h = dense(path, 0.001)
+    assert h[0] == pytest.approx(heading, abs=1e-12)
+    assert (h[1] - h[0]) / 0.001 == pytest.approx(toward / 5.0)  # radius 5 m
+    corner_start = 12.0 - math.tan(0.5 * math.atan2(6.0, 18.0))
+    back = np.argmax(p.real >= corner_start)
+    assert abs(p[back].imag) < 2e-3  # back on the leg before the corner
+    start_part = h[:back]
+    assert np.all(toward * np.diff(start_part) >= -1e-12)  # one sense of turn, then straight
+    assert toward * (start_part[-1] - start_part[0]) > abs(heading)  # past the leg's direction
+    assert abs(start_part[-1]) < 0.25 * abs(heading)  # and back to it at a small kink
+    assert np.abs(np.diff(p)).max() < 0.00101  # continuous
+
+
+def test_line_arc_reference_times_the_path_without_turn_feed_forward():
+    wp = np.array([[0.0, 0.0], [12.0, 0.0], [30.0, 6.0]])
+    ref = build_reference(wp, 0.1, V_MAX, ACCEL, DT, 60, v_start_mps=V_MAX,
+                          lines_arcs=True, corner_radius_m=1.0, start_radius_m=5.0)
+    assert ref.heading_rad[0] == pytest.approx(0.1, abs=1e-12)
+    np.testing.assert_array_equal(ref.omega_radps, 0.0)
+    np.testing.assert_allclose(steps(ref), V_MAX * DT, atol=1e-5)  # the speed profile (chords)
+    # 45 degrees off (or behind) is a sharp turn: the path starts along the leg.
+    for sharp in (math.radians(45.0), math.pi):
+        ref = build_reference(wp, sharp, V_MAX, ACCEL, DT, 20, lines_arcs=True)
+        assert math.remainder(ref.heading_rad[0], 2 * math.pi) == pytest.approx(0.0, abs=1e-12)
+        assert abs(ref.heading_rad[0] - sharp) <= math.pi
+    # The path ends at the goal and the reference stops there.
+    long = build_reference(wp, 0.1, V_MAX, ACCEL, DT, 600, lines_arcs=True)
+    assert (long.x_m[-1], long.y_m[-1], long.v_mps[-1]) == pytest.approx((30.0, 6.0, 0.0))
+
+
+def test_line_arc_reference_without_via_points_is_the_straight_line():
+    two = np.array([[0.0, 0.0], [10.0, 2.0]])
+    a = build_reference(two, 0.3, V_MAX, ACCEL, DT, N, lines_arcs=True)
+    b = build_reference(two, 0.3, V_MAX, ACCEL, DT, N)
+    np.testing.assert_array_equal(a.x_m, b.x_m)
+    np.testing.assert_array_equal(a.heading_rad, b.heading_rad)
+    with pytest.raises(ValueError, match="radii"):
+        build_reference(two, 0.0, V_MAX, ACCEL, DT, N, lines_arcs=True, corner_radius_m=-1.0)

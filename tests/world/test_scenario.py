@@ -257,6 +257,8 @@ def test_non_finite_inside_a_vector(tmp_path):
     ("    dt: 0.1\n", "    dt: 0.0\n", "defaults.mpc.dt: must be > 0"),
     ("  d_safety: 0.3\n", "  d_safety: 0.3\n  spline_first_leg_segments: 0\n",
      "defaults.spline_first_leg_segments: must be >= 1"),
+    ("  d_safety: 0.3\n", "  d_safety: 0.3\n  path_corner_radius: -1\n",
+     "defaults.path_corner_radius: must be >= 0"),
 ])
 def test_zero_or_negative_sizes(tmp_path, old, new, field):
     expect_error(bad(tmp_path, old, new), field)
