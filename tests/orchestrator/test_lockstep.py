@@ -244,16 +244,19 @@ def test_braking_guard_makes_the_difference_in_setup_d_at_200_and_250_ms(tmp_pat
     # seed 1 at 250 ms (-0.15 m) touch unguarded, and all 20 keep clear guarded (these two
     # by +0.25 and +0.27 m). With the 0.75 s estimation window of stop 20, of link seeds 0-9
     # at 200 and 250 ms five touch unguarded (200 ms: seeds 2, 6; 250 ms: seeds 0, 5, 6;
-    # down to -0.52 m) and all 20 keep clear guarded (at least +0.084 m). A run at this
-    # level is chaotic (another CPU or numerics build moves it), so the test asks for what
-    # the guard is for over three cases: the unguarded runs touch in at least one, the
-    # guarded ones in none.
+    # down to -0.52 m) and all 20 keep clear guarded (at least +0.084 m). With the
+    # lines-and-arcs reference of stop 22, of the same 20 one touches unguarded (200 ms,
+    # seed 8: -0.25 m; the closest other +0.071 m, seed 7 at 200 ms; `orchestrator stress`
+    # on setup D with `mpc: {braking_guard: false}`, `--sweep latency_ms=200,250 --seeds
+    # 10`). A run at this level is chaotic (another CPU or numerics build moves it), so the
+    # test asks for what the guard is for over three cases: the unguarded runs touch in at
+    # least one, the guarded ones in none.
     from dataclasses import replace
 
     from orchestrator.families import resolve
 
     results = {}
-    for latency_ms, seed in ((200, 2), (250, 0), (250, 5)):
+    for latency_ms, seed in ((200, 8), (200, 7), (250, 0)):
         scenario = resolve("setup_d", agents=None, seed=seed, start_jitter_m=0.0, planner=None)
         cfg = scenario.planner_config
         assert cfg.mpc.braking_guard  # on by default
