@@ -508,7 +508,6 @@ def build_reference(
     heading[0] = cmath.phase(complex(dp[0]))
     np.cumsum(np.angle(dp[1:] * dp[:-1].conjugate()), out=heading[1:])
     heading[1:] += heading[0]
-    heading += _TWO_PI * round((heading_rad - float(heading[0])) / _TWO_PI)
     # Curvature = cross(p', p'') / |p'|^3.
     speed_sq = (dp * dp.conjugate()).real
     curvature = np.divide(
@@ -517,16 +516,7 @@ def build_reference(
         out=np.zeros_like(speed_sq),
         where=speed_sq > _MIN_TANGENT_NORM * _MIN_TANGENT_NORM,
     )
-    return Reference(
-        t_s=t,
-        x_m=p.real.copy(),
-        y_m=p.imag.copy(),
-        heading_rad=heading,
-        v_mps=v,
-        omega_radps=curvature * v,
-        s_m=s,
-        length_m=length,
-    )
+    return _sampled(t, s, v, p, heading, heading_rad, curvature * v, length)
 
 
 def _line_arc_reference(path: LineArcPath, t: np.ndarray, heading_rad: float, v_max_mps: float,
@@ -534,18 +524,17 @@ def _line_arc_reference(path: LineArcPath, t: np.ndarray, heading_rad: float, v_
     """`build_reference` on a `LineArcPath`: the same speed profile, no turn feed-forward."""
     s, v = distance_profile(t, path.length_m, v_max_mps, accel_mps2, v_start_mps)
     p, heading = path.evaluate(s)
-    heading = np.unwrap(heading)
-    heading += _TWO_PI * round((heading_rad - float(heading[0])) / _TWO_PI)
-    return Reference(
-        t_s=t,
-        x_m=p.real.copy(),
-        y_m=p.imag.copy(),
-        heading_rad=heading,
-        v_mps=v,
-        omega_radps=np.zeros_like(t),
-        s_m=s,
-        length_m=path.length_m,
-    )
+    return _sampled(t, s, v, p, np.unwrap(heading), heading_rad, np.zeros_like(t),
+                    path.length_m)
+
+
+def _sampled(t: np.ndarray, s: np.ndarray, v: np.ndarray, p: np.ndarray, heading: np.ndarray,
+             robot_heading_rad: float, omega: np.ndarray, length_m: float) -> Reference:
+    """The `Reference`, its unwrapped heading shifted by 2 pi k to start within pi of the
+    robot's (in place)."""
+    heading += _TWO_PI * round((robot_heading_rad - float(heading[0])) / _TWO_PI)
+    return Reference(t_s=t, x_m=p.real.copy(), y_m=p.imag.copy(), heading_rad=heading,
+                     v_mps=v, omega_radps=omega, s_m=s, length_m=length_m)
 
 
 def reference_point_ahead(reference: Reference, lookahead_s: float) -> np.ndarray:
