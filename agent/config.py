@@ -198,12 +198,14 @@ class PlannerConfig:
             is below this with DCPA inside the inflated radius (`agent.encounters`).
         spline_clamp_heading: the reference spline leaves the robot along its heading
             (clamped start) when the first via-point is within 30 degrees of it, instead of
-            the paper's natural end conditions (`agent.spline.build_reference`).
+            the paper's natural end conditions (`agent.spline.build_reference`). Spline
+            only (`reference_lines_arcs` false); the lines and arcs have their start arc.
         spline_first_leg_segments: the reference spline's first leg (robot to first
             via-point) is cut into this many equal parts by extra knots, so the reference
             runs along the straight leg the via-point was built for
             (`agent.spline.split_first_leg`); 1 is the paper's spline through the
-            waypoints alone. Off (1) by default: measured (lockstep, 5 cm jitter, seeds
+            waypoints alone. Spline only (`reference_lines_arcs` false). Off (1) by
+            default: measured on the spline (lockstep, 5 cm jitter, seeds
             0-9, oscillations per robot F / G): 1: 3.09 / 6.75; 3: 3.54 / 4.62; 4: 3.48 /
             5.02; 6: 3.93 / 9.25; every run arrived with no contact. With 3 it also lowers
             A and D and raises B, C and E, and the effect is not monotonic in the count,
@@ -214,8 +216,10 @@ class PlannerConfig:
             no turn-rate feed-forward, instead of the paper's cubic spline through the
             waypoints (False: the spline, with `spline_clamp_heading` and
             `spline_first_leg_segments`). On by default (not in the paper): measured
-            (lockstep, 5 cm jitter, seeds 0-9; README, "Results") it lowers the
-            oscillations where the spline's bow off the legs made the robots weave.
+            (lockstep, 5 cm jitter, seeds 0-9, oscillations per robot, spline -> lines and
+            arcs; README, "Results", stop 22): A 0.50 -> 0, C 0.30 -> 0, D 2.12 -> 0.10,
+            F 3.09 -> 2.73, G 6.75 -> 3.94, but B 0.37 -> 1.47 and E 1.28 -> 2.12; every
+            run arrived with no contact.
         path_corner_radius_m: radius of the arcs at the via-points (lines and arcs).
         path_start_radius_m: radius of the start arc along the heading (lines and arcs;
             0: none, the path starts along the first leg).
