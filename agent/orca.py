@@ -164,8 +164,13 @@ class OrcaController:
         sim.do_step()
         new_v = sim.get_agent_velocity(me)
         v_orca = np.array([new_v.x, new_v.y])
-
         speed = float(np.hypot(v_orca[0], v_orca[1]))
+        if speed > lim.v_max_mps:
+            # RVO2 solves its linear program in float32: its velocity can exceed maxSpeed by
+            # float32 round-off (1.1000104 for 1.1 m/s; found by the random-input test).
+            v_orca *= lim.v_max_mps / speed
+            speed = lim.v_max_mps
+
         direction = float(np.arctan2(v_orca[1], v_orca[0])) if speed > 1e-6 else heading_rad
         v, omega = heading_law(heading_rad, direction, speed, lim, cfg.heading_gain)
         if last_command is not None:

@@ -228,3 +228,15 @@ def test_random_inputs_give_a_command_within_limits(pose, goal, last, others):
     assert_within_limits((out.v_mps, out.omega_radps), last)
     assert np.isfinite(out.velocity_orca_mps).all()
     assert np.hypot(*out.velocity_orca_mps) <= LIM.v_max_mps + 1e-5
+
+
+def test_float32_round_off_does_not_push_the_orca_velocity_past_v_max():
+    # Found by the random-input test: four others stacked at the goal and two on the robot's
+    # line; RVO2's float32 linear program returned |v| = 1.1000104 for v_max 1.1.
+    o = np.array([(0.0, 0.0, 0.0, 0.0, 1.0)] * 4
+                 + [(0.0, -16.0, 0.5, 0.0, 1.0), (0.0, -19.0, 0.0, 0.0, 1.0)])
+    seen = others_of(o[:, :2], o[:, 2:4], o[:, 4])
+    out = OrcaController(LIM, CFG, DT).command(np.array([0.0, -17.5]), 0.0, np.zeros(2),
+                                               np.array([0.0, 0.0]), RADIUS, seen, np.zeros(2))
+    assert np.hypot(*out.velocity_orca_mps) <= LIM.v_max_mps
+    assert np.hypot(*out.velocity_orca_mps) > LIM.v_max_mps - 1e-4  # clipped, not zeroed
