@@ -1,4 +1,8 @@
-"""The time-parametrised reference: a cubic spline through the waypoints (trajectory smoothing).
+"""The time-parametrised reference through the waypoints (trajectory smoothing).
+
+Two paths (`build_reference`): `LineArcPath`, the waypoint legs joined by arcs (our
+change, the planners' default, `PlannerConfig.reference_lines_arcs`), and the paper's
+cubic spline, described here.
 
 The paper fits cubic splines S_x(t), S_y(t) through the waypoints with t in [0, 1]. We
 parametrise by cumulative chord length u instead (u_0 = 0, u_i = u_{i-1} + |p_i - p_{i-1}|):
