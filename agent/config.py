@@ -224,10 +224,14 @@ class PlannerConfig:
         path_start_radius_m: radius of the start arc along the heading (lines and arcs;
             0: none, the path starts along the first leg).
         primary_hysteresis: eIFP resolves the threat it resolved first last cycle first
-            again while its TCPA is within 1 s of the most imminent one's
-            (`agent.ifp.PRIMARY_TCPA_MARGIN_S`), instead of re-ranking from scratch. Off by
-            default: in lockstep trials it lowered setup D's oscillations (2 -> 0.25-1) but
-            raised setup G's (6.8 -> 8.1 per robot, mean over 6 seeds).
+            again while its TCPA is within `primary_margin_s` of the most imminent one's,
+            instead of re-ranking from scratch. Off by default: in lockstep trials on the
+            spline it lowered setup D's oscillations (2 -> 0.25-1) but raised setup G's
+            (6.8 -> 8.1 per robot, mean over 6 seeds). On the lines and arcs (stop 22,
+            README) it is the lead for the dense crossings, not yet measured enough to be a
+            default: lockstep, seeds 0-3, F / G per robot: off 2.48 / 3.91; margin 1 s
+            2.06 / 4.59 (10 seeds); 2 s 2.00 / 3.66; 2.5 s and 3 s 4.15 and 3.96 / 1.98.
+        primary_margin_s: see `primary_hysteresis` [s].
         estimation_window_s: history length used to estimate others' velocity and linearity.
             0.75 s (was 0.5): measured, it cut the reversals in the dense crossings
             (lockstep, 5 cm jitter, seeds 0-9: F 4.28 -> 3.09, G 8.30 -> 6.75 per robot;
@@ -272,6 +276,7 @@ class PlannerConfig:
     path_corner_radius_m: float = 1.0
     path_start_radius_m: float = 5.0
     primary_hysteresis: bool = False
+    primary_margin_s: float = 1.0
     stand_on_emergency_s: float = 2.0
     estimation_window_s: float = 0.75
     command_hold_periods: float = 1.5

@@ -87,10 +87,6 @@ LEG_GRAZE_TOL_M = 1.0e-6
 # are not resolved [s].
 GOAL_TCPA_MARGIN_S = 0.5
 
-# The previous cycle's primary threat stays first unless another's TCPA is this much
-# smaller [s] (eIFP).
-PRIMARY_TCPA_MARGIN_S = 1.0
-
 # How far outside its inflated disc a via-point is placed [m].
 VIA_MARGIN_M = 0.05
 
@@ -234,7 +230,7 @@ def plan_via_points(
             is inside their inflated disc, and still listed in `ViaPlan.threats`.
         primary_id: the other the previous cycle's first via-point resolved (eIFP): if it
             is still a threat it is resolved first again unless another one's TCPA is
-            more than `PRIMARY_TCPA_MARGIN_S` smaller (hysteresis on the ranking).
+            more than `config.primary_margin_s` smaller (hysteresis on the ranking).
         encounter_rule: eIFP's encounter rules (`EncounterRule`): their ignored ids join
             `ignored_ids`, their committed ids `committed_ids`.
 
@@ -275,7 +271,7 @@ def plan_via_points(
         index = index[~ignored[index]]
     if primary_id is not None and index.size > 1:
         hit = (others.ids[index] == primary_id).nonzero()[0]
-        if hit.size and tcpa[index[hit[0]]] <= tcpa[index[0]] + PRIMARY_TCPA_MARGIN_S:
+        if hit.size and tcpa[index[hit[0]]] <= tcpa[index[0]] + config.primary_margin_s:
             index = np.concatenate((index[hit[:1]], np.delete(index, hit[0])))
     threats_s = timer() - t_start if timer is not None else 0.0
     if len(others) == 0:

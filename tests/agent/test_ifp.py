@@ -278,11 +278,16 @@ def test_ignored_others_are_neither_resolved_nor_on_any_leg_but_still_escaped():
     assert inside.status is PlanStatus.ESCAPE
 
 
-def test_primary_threat_keeps_its_rank_within_the_margin():
-    from agent.ifp import PRIMARY_TCPA_MARGIN_S, plan_via_points
+@pytest.mark.parametrize("margin_s", [1.0, 0.6])
+def test_primary_threat_keeps_its_rank_within_the_margin(margin_s):
+    from dataclasses import replace
 
-    def plan(o, goal, primary):
-        return plan_via_points(observe(o, v=1.0, goal=goal), CFG, lambda _o: select_earliest,
+    from agent.ifp import plan_via_points
+
+    cfg = replace(CFG, primary_margin_s=margin_s)
+
+    def plan(o, goal, primary, config=cfg):
+        return plan_via_points(observe(o, v=1.0, goal=goal), config, lambda _o: select_earliest,
                                primary_id=primary)
 
     # Two head-on threats, TCPA 3.0 s (id 1) and 3.5 s (id 2): 1 is resolved first ...
@@ -290,8 +295,11 @@ def test_primary_threat_keeps_its_rank_within_the_margin():
     plain = plan(o, (20.0, 0.0), None)
     assert plan(o, (20.0, 0.0), 1).waypoints_m.tolist() == plain.waypoints_m.tolist()
     # ... unless 2 was the primary last cycle: within the margin it is resolved first.
-    assert PRIMARY_TCPA_MARGIN_S > 0.5
     assert plan(o, (20.0, 0.0), 2).waypoints_m.tolist() != plain.waypoints_m.tolist()
+    # A margin below the 0.5 s between them: the ranking stands.
+    narrow = replace(cfg, primary_margin_s=0.4)
+    assert (plan(o, (20.0, 0.0), 2, narrow).waypoints_m.tolist()
+            == plan(o, (20.0, 0.0), None, narrow).waypoints_m.tolist())
     # Far beyond the margin the most imminent one is first again.
     far = others([[3, 0.3], [12, -0.3]], [[-1, 0], [-1, 0]])
     assert (plan(far, (30.0, 0.0), 2).waypoints_m.tolist()
