@@ -211,7 +211,7 @@ class PlannerConfig:
             A and D and raises B, C and E, and the effect is not monotonic in the count,
             so it is an option until that is understood (README, "Results"; at 100 ms
             latency with 10 % loss, 3 parts: F and G 0/20 runs touch).
-        reference_lines_arcs: the reference follows the waypoint legs with arcs at the
+        reference_lines_arcs: eIFP-MPC's reference follows the waypoint legs with arcs at the
             corners and a start arc along the heading (`agent.spline.LineArcPath`), with
             no turn-rate feed-forward, instead of the paper's cubic spline through the
             waypoints (False: the spline, with `spline_clamp_heading` and

@@ -166,7 +166,8 @@ def test_lines_arcs_reference_is_the_default_and_reaches_the_reference(monkeypat
     standing = observation(0.0, 0.0, 0.0, 0.0, [[6.0, 0.2]], [[-1.0, 0.0]])
     make_planner("eifp-mpc", PlannerConfig(path_corner_radius_m=2.0)).plan(standing, 0.0)
     # Defaults R = 1 m, start arc 5 m; a standing robot turns on the spot (no start arc).
-    assert seen == [(True, 1.0, 5.0), (False, 1.0, 5.0), (True, 2.0, 0.0)]
+    make_planner("eifp", PlannerConfig()).plan(moving, 0.0)  # the tracking law: the spline
+    assert seen == [(True, 1.0, 5.0), (False, 1.0, 5.0), (True, 2.0, 0.0), (False, 1.0, 5.0)]
     np.testing.assert_array_equal(arcs.waypoints_m, spline.waypoints_m)  # same via-points
     assert (arcs.v_mps, arcs.omega_radps) != (spline.v_mps, spline.omega_radps)
 
