@@ -190,8 +190,9 @@ class ViaPointPlanner:
             clamp_heading=cfg.spline_clamp_heading and ego.v_mps >= CLAMP_MIN_SPEED_MPS,
             first_leg_segments=cfg.spline_first_leg_segments,
             # eIFP-MPC only: the tracking law of eifp and ifp cuts the arcs' corners into
-            # contact (stop 22, lockstep, 3 seeds: eifp touched in E 3/3, F 1/3, G 2/3
-            # runs; ifp in B, C, D), so they keep the spline.
+            # contact (stop 22, lockstep, 5 cm jitter, seeds 0-2, runs with contact on the
+            # lines and arcs / on the spline: eifp E 3/3 / 0, F 1/3 / 0, G 2/3 / 0; ifp
+            # B, C, D 2/3 each / 0, F 3/3 / 2/3, G 3/3 / 3/3), so they keep the spline.
             lines_arcs=cfg.reference_lines_arcs and self.name == "eifp-mpc",
             corner_radius_m=cfg.path_corner_radius_m,
             start_radius_m=cfg.path_start_radius_m if ego.v_mps >= CLAMP_MIN_SPEED_MPS else 0.0,
