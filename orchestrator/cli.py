@@ -473,6 +473,8 @@ def cmd_report(args: argparse.Namespace) -> int:
         aggregate,
         collect,
         paper_table,
+        reversal_causes,
+        reversal_table,
         summary_table,
     )
     from orchestrator.rundir import write_json
@@ -488,6 +490,10 @@ def cmd_report(args: argparse.Namespace) -> int:
     stats = aggregate(records, ALL_METRICS)
     print(f"{len(records)} runs")
     print(summary_table(stats))
+    causes = reversal_causes(records)
+    if causes:
+        print("\noscillations per robot by cause (README, \"Metrics\"):")
+        print(reversal_table(causes))
     if args.paper:
         print()
         print(paper_table(stats))
@@ -500,7 +506,8 @@ def cmd_report(args: argparse.Namespace) -> int:
         "runs": [str(r.path) for r in records],
         "groups": [{"setup": k[0], "planner": k[1],
                     **{m: {"mean": _finite(v[0]), "std": _finite(v[1]), "n": v[2]}
-                       for m, v in s.items()}} for k, s in stats.items()],
+                       for m, v in s.items()},
+                    "reversal_causes_per_robot": causes.get(k)} for k, s in stats.items()],
     })
     with open(out / "report.csv", "w", newline="") as f:
         w = csv.writer(f)

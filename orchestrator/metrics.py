@@ -26,6 +26,17 @@ end of the trajectory if it never arrives):
   change |sum r_k dt_k| is >= 0.1 rad. A *reversal* is a turn that follows the previous
   turn (runs that are not turns are skipped) of the opposite sign and starts within 3 s of
   that turn's end. Counted over the robot's run.
+- **reversal causes** (`reversal_causes`; a diagnostic, not a target): each reversal is
+  put in the first class that fits, from the speed at the start of the reversing turn and
+  the plans in force (the last command applied at or before each turn's start):
+  `slow` (speed below 0.5 m/s: turning nearly on the spot, in a crowd or while escaping);
+  `escape` (either plan was an escape); `no_via_point` (either plan had no via-point:
+  heading for the goal, or a planner that does not report one, such as ORCA);
+  `side_flip` (the same threat, resolved on the other side); `threat_switch` (the first
+  via-point resolves another threat); `same_via_point` (the same threat on the same side:
+  the two halves of one swerve, turning towards the via-point and back, or the tracker
+  settling). Without the `side` and `resolved` command columns every reversal that is
+  not `slow` or `escape` is `unknown`. The counts of a robot sum to its oscillations.
 - **side flips** (needs the optional `side` and `resolved` command columns): consecutive
   commands of one robot (by `seq`) that both resolve a threat (`resolved` present, `side`
   LEFT (+1) or RIGHT (-1)) with opposite sides. `side_flips_same_threat` additionally
@@ -57,6 +68,10 @@ CONTACT_OVERLAP_M = 1.0e-3
 TURN_RATE_MIN_RADPS = 0.05
 TURN_ANGLE_MIN_RAD = 0.1
 REVERSAL_WINDOW_S = 3.0
+# Below this speed a reversal is `slow` (module docstring, reversal causes) [m/s].
+SLOW_REVERSAL_MPS = 0.5
+REVERSAL_CAUSES = ("slow", "escape", "no_via_point", "side_flip", "threat_switch",
+                   "same_via_point", "unknown")
 NOT_PLANNING_STATUSES = frozenset({"arrived", "stale"})
 _TIME_EPS_S = 1.0e-6
 _CHUNK_TICKS = 2048
@@ -211,6 +226,7 @@ class RobotMetrics:
     straight_m: float
     path_ratio: float | None
     oscillations: int
+    reversal_causes: dict[str, int]
     side_flips: int | None
     side_flips_same_threat: int | None
     contacts: int
@@ -240,6 +256,7 @@ class RunMetrics:
     makespan_s: float | None
     oscillations_per_robot: float
     oscillations_total: int
+    reversal_causes_per_robot: dict[str, float]
     side_flips_per_robot: float | None
     plan_ms_mean: float | None
     plan_ms_p50: float | None
@@ -296,12 +313,81 @@ def find_turns(t_s: np.ndarray, heading_rad: np.ndarray, *,
     return turns
 
 
+def find_reversals(turns: Sequence[Turn], window_s: float = REVERSAL_WINDOW_S
+                   ) -> list[tuple[Turn, Turn]]:
+    """(previous turn, reversing turn) for every turn that follows a turn of the opposite
+    sign and starts within window_s of its end."""
+    return [
+        (prev, cur) for prev, cur in zip(turns, turns[1:])
+        if cur.sign == -prev.sign and cur.start_s - prev.end_s <= window_s + _TIME_EPS_S
+    ]
+
+
 def count_reversals(turns: Sequence[Turn], window_s: float = REVERSAL_WINDOW_S) -> int:
     """Turns that follow a turn of the opposite sign and start within window_s of its end."""
-    return sum(
-        1 for prev, cur in zip(turns, turns[1:])
-        if cur.sign == -prev.sign and cur.start_s - prev.end_s <= window_s + _TIME_EPS_S
-    )
+    return len(find_reversals(turns, window_s))
+
+
+@dataclass(frozen=True)
+class PlanInForce:
+    """One robot's applied commands as a step function of time, for `reversal_causes`.
+
+    Args:
+        t_applied_s: (C,) increasing application times.
+        status: (C,) `PlanStatus` values.
+        side: (C,) -1 RIGHT, 0 NONE, +1 LEFT, or None when not recorded.
+        resolved: (C,) resolved threat id, NaN for none, or None when not recorded.
+    """
+
+    t_applied_s: np.ndarray
+    status: np.ndarray
+    side: np.ndarray | None
+    resolved: np.ndarray | None
+
+    def at(self, t_s: float) -> tuple[str, int, float] | None:
+        """(status, side, resolved id) of the last command applied at or before t_s."""
+        i = int(np.searchsorted(self.t_applied_s, t_s + _TIME_EPS_S, side="right")) - 1
+        if i < 0:
+            return None
+        side = int(self.side[i]) if self.side is not None else 0
+        resolved = float(self.resolved[i]) if self.resolved is not None else math.nan
+        return str(self.status[i]), side, resolved
+
+
+def reversal_causes(t_s: np.ndarray, heading_rad: np.ndarray, speed_mps: np.ndarray,
+                    plans: PlanInForce) -> dict[str, int]:
+    """The reversals of one heading history by cause (module docstring).
+
+    Args:
+        t_s, heading_rad, speed_mps: (T,) the robot's run.
+        plans: its applied commands.
+
+    Returns:
+        {cause: count} over `REVERSAL_CAUSES`; the counts sum to `oscillations`.
+    """
+    counts = dict.fromkeys(REVERSAL_CAUSES, 0)
+    t = np.asarray(t_s, dtype=float)
+    speed = np.asarray(speed_mps, dtype=float)
+    known = plans.side is not None and plans.resolved is not None
+    for prev, cur in find_reversals(find_turns(t, heading_rad)):
+        i = min(int(np.searchsorted(t, cur.start_s - _TIME_EPS_S)), t.size - 1)
+        a, b = plans.at(prev.start_s), plans.at(cur.start_s)
+        if abs(float(speed[i])) < SLOW_REVERSAL_MPS:
+            cause = "slow"
+        elif a is None or b is None:
+            cause = "unknown"
+        elif "escape" in (a[0], b[0]):
+            cause = "escape"
+        elif not known:
+            cause = "unknown"
+        elif math.isnan(a[2]) or math.isnan(b[2]) or 0 in (a[1], b[1]):
+            cause = "no_via_point"
+        elif a[2] != b[2]:
+            cause = "threat_switch"
+        else:
+            cause = "side_flip" if a[1] != b[1] else "same_via_point"
+        counts[cause] += 1
+    return counts
 
 
 def oscillations(t_s: np.ndarray, heading_rad: np.ndarray) -> int:
@@ -481,6 +567,14 @@ def compute_metrics(traj: Trajectory, commands: Commands, spec: RunSpec, *,
         misses, cycles = deadline_misses(commands.seq[mine], commands.pose_stamp_s[mine],
                                          control_period_s, world_dt_s)
         plan = commands.plan_ms[mine & planned]
+        order = np.argsort(commands.t_applied_s[mine], kind="stable")
+        in_force = PlanInForce(
+            commands.t_applied_s[mine][order], commands.status[mine][order],
+            commands.side[mine][order] if has_side and commands.side is not None else None,
+            (commands.resolved[mine][order]
+             if has_side and commands.resolved is not None else None),
+        )
+        speed = _run_speed(traj, k, t.size)
         gap_k = float(robot_min_gap[k])
         per_robot.append(RobotMetrics(
             id=int(rid),
@@ -492,6 +586,7 @@ def compute_metrics(traj: Trajectory, commands: Commands, spec: RunSpec, *,
             straight_m=straight,
             path_ratio=(length / reach if idx is not None and reach > 0 else None),
             oscillations=oscillations(t[:end], heading[:end]),
+            reversal_causes=reversal_causes(t[:end], heading[:end], speed[:end], in_force),
             side_flips=flips[0],
             side_flips_same_threat=flips[1],
             contacts=sum(1 for e in episodes if rid in (e.id_a, e.id_b)),
@@ -526,6 +621,10 @@ def compute_metrics(traj: Trajectory, commands: Commands, spec: RunSpec, *,
                     if arrived and len(arrived) == n else None),
         oscillations_per_robot=float(np.mean([r.oscillations for r in per_robot])) if n else 0.0,
         oscillations_total=sum(r.oscillations for r in per_robot),
+        reversal_causes_per_robot={
+            c: (float(np.mean([r.reversal_causes[c] for r in per_robot])) if n else 0.0)
+            for c in REVERSAL_CAUSES
+        },
         side_flips_per_robot=(float(np.mean([r.side_flips or 0 for r in per_robot]))
                               if has_side and n else None),
         plan_ms_mean=float(plan_all.mean()) if plan_all.size else None,
@@ -543,6 +642,13 @@ def compute_metrics(traj: Trajectory, commands: Commands, spec: RunSpec, *,
         world_dt_s=float(world_dt_s),
         per_robot=per_robot,
     )
+
+
+def _run_speed(traj: Trajectory, k: int, size: int) -> np.ndarray:
+    """(size,) applied speed of robot column k on the samples of `_robot_run` (which may
+    have prepended a t = 0 sample: it gets speed 0)."""
+    v = traj.applied[:, k, 0]
+    return np.concatenate([np.zeros(size - v.size), v]) if size > v.size else v
 
 
 def _robot_run(traj: Trajectory, k: int, spec: RunSpec

@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from orchestrator.metrics import REVERSAL_CAUSES
 from orchestrator.rundir import find_run_dirs, read_json
 from world.scenario import ScenarioError, load_scenario
 
@@ -187,3 +188,25 @@ def paper_table(stats: Mapping[tuple[str, str], Mapping[str, tuple[float, float,
     note = ("Paper: Table I (path length in the paper's cm, read as m here; the two "
             "3-robot rows taken as B then C). Ours: mean ± std over seeds.")
     return format_table(header, rows) + "\n" + note
+
+
+def reversal_causes(records: Sequence[RunRecord]) -> dict[tuple[str, str], dict[str, float]]:
+    """(setup, planner) -> cause -> oscillations per robot, mean over the runs whose
+    metrics.json has `reversal_causes_per_robot` (runs written before it existed have
+    not; `orchestrator.metrics`, "reversal causes")."""
+    groups: dict[tuple[str, str], list[Mapping[str, Any]]] = {}
+    for r in records:
+        causes = r.metrics.get("reversal_causes_per_robot")
+        if isinstance(causes, Mapping):
+            groups.setdefault((r.setup, r.planner), []).append(causes)
+    return {key: {c: float(np.mean([_value(g, c) for g in groups[key]]))
+                  for c in REVERSAL_CAUSES}
+            for key in sorted(groups)}
+
+
+def reversal_table(causes: Mapping[tuple[str, str], Mapping[str, float]]) -> str:
+    """Oscillations per robot by cause, one row per setup and planner."""
+    header = ["setup", "planner", "osc/robot", *REVERSAL_CAUSES]
+    rows = [[setup, planner, _cell(sum(by.values())), *(_cell(by[c]) for c in REVERSAL_CAUSES)]
+            for (setup, planner), by in causes.items()]
+    return format_table(header, rows)

@@ -147,6 +147,10 @@ def test_report_over_two_runs_prints_table_and_writes_plots(two_runs, tmp_path, 
     assert "2 runs" in text and "setup_a" in text and "ifp" in text
     assert "±" in text  # mean ± std over the two seeds
     assert "54.286" in text and "502.26" in text  # the paper's Table I
+    assert "oscillations per robot by cause" in text and "threat_switch" in text
+    group = json.loads((out / "report.json").read_text())["groups"][0]
+    assert sum(group["reversal_causes_per_robot"].values()) == pytest.approx(
+        group["oscillations_per_robot"]["mean"])
     for name in ("report_plan_ms_mean.png", "report_oscillations_per_robot.png",
                  "report_path_length_mean_m.png", "report_time_to_goal_mean_s.png",
                  "report_all.png", "report.csv", "report.json"):

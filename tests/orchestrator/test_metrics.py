@@ -10,7 +10,9 @@ import pytest
 
 from agent.config import PlannerConfig, RobotLimits
 from orchestrator.metrics import (
+    REVERSAL_CAUSES,
     Commands,
+    PlanInForce,
     RunSpec,
     Trajectory,
     compute_metrics,
@@ -18,6 +20,7 @@ from orchestrator.metrics import (
     deadline_misses,
     find_turns,
     oscillations,
+    reversal_causes,
     side_flips,
 )
 from orchestrator.rundir import metrics_from_run_dir, read_trajectory, write_metrics
@@ -90,6 +93,70 @@ def test_same_direction_turns_and_skipped_small_runs():
 
 
 # --- side flips and deadline misses ------------------------------------------------
+
+# --- reversal causes --------------------------------------------------------------
+
+# A left turn over [0, 1) s and a right turn over [1.5, 2.5) s: one reversal, whose turns
+# start at 0 and 1.5 s.
+S_TURN = hold(0.5, 1.0) + hold(0.0, 0.5) + hold(-0.5, 1.0)
+
+
+def plans(rows, with_side=True):
+    """PlanInForce from (t_applied, status, side, resolved) rows."""
+    t, status, side, resolved = zip(*rows)
+    return PlanInForce(np.array(t, float), np.array(status, str),
+                       np.array(side) if with_side else None,
+                       np.array(resolved, float) if with_side else None)
+
+
+@pytest.mark.parametrize("second, speed, expected", [
+    (("ok", 1, 7.0), 1.0, "same_via_point"),
+    (("ok", -1, 7.0), 1.0, "side_flip"),
+    (("ok", 1, 8.0), 1.0, "threat_switch"),
+    (("ok", 0, math.nan), 1.0, "no_via_point"),
+    (("escape", 0, 8.0), 1.0, "escape"),
+    (("ok", 1, 7.0), 0.3, "slow"),  # slow wins over everything
+    (("escape", 0, 8.0), 0.49, "slow"),
+])
+def test_each_reversal_gets_the_first_cause_that_fits(second, speed, expected):
+    t, heading = heading_from_rates(S_TURN)
+    # The first plan is in force from t = 0, the second from 1.4 s (before the right turn).
+    in_force = plans([(0.0, "ok", 1, 7.0), (1.4, *second)])
+    counts = reversal_causes(t, heading, np.full(t.size, speed), in_force)
+    assert counts == {c: int(c == expected) for c in REVERSAL_CAUSES}
+
+
+def test_the_plan_in_force_is_the_last_one_applied_at_or_before_the_turn():
+    t, heading = heading_from_rates(S_TURN)
+    # A switch applied after the right turn started does not explain it.
+    late = plans([(0.0, "ok", 1, 7.0), (1.6, "ok", 1, 8.0)])
+    assert reversal_causes(t, heading, np.ones(t.size), late)["same_via_point"] == 1
+    on_time = plans([(0.0, "ok", 1, 7.0), (1.5, "ok", 1, 8.0)])
+    assert reversal_causes(t, heading, np.ones(t.size), on_time)["threat_switch"] == 1
+
+
+def test_without_plan_columns_or_commands_the_cause_is_unknown():
+    t, heading = heading_from_rates(S_TURN)
+    no_side = plans([(0.0, "ok", 1, 7.0), (1.4, "ok", 1, 8.0)], with_side=False)
+    assert reversal_causes(t, heading, np.ones(t.size), no_side)["unknown"] == 1
+    # Escapes are still recognised from the status alone.
+    esc = plans([(0.0, "ok", 1, 7.0), (1.4, "escape", 0, 8.0)], with_side=False)
+    assert reversal_causes(t, heading, np.ones(t.size), esc)["escape"] == 1
+    none = PlanInForce(np.zeros(0), np.zeros(0, str), None, None)
+    assert reversal_causes(t, heading, np.ones(t.size), none)["unknown"] == 1
+
+
+def test_reversal_causes_sum_to_the_oscillations_of_a_random_history():
+    rng = np.random.default_rng(3)
+    rates = rng.choice([-0.6, -0.2, 0.0, 0.2, 0.6], size=600).repeat(3).tolist()
+    t, heading = heading_from_rates(rates)
+    rows = [(float(x), str(rng.choice(["ok", "escape"])), int(rng.choice([-1, 0, 1])),
+             float(rng.choice([1.0, 2.0, math.nan]))) for x in np.arange(0.0, t[-1], 0.1)]
+    counts = reversal_causes(t, heading, rng.uniform(0.0, 1.1, t.size), plans(rows))
+    assert oscillations(t, heading) > 20
+    assert sum(counts.values()) == oscillations(t, heading)
+    assert set(counts) == set(REVERSAL_CAUSES)
+
 
 def test_side_flips_count_consecutive_opposite_sides_while_resolving():
     seq = np.array([5, 0, 1, 2, 3, 4])  # out of order on purpose
@@ -230,6 +297,11 @@ def test_oscillations_counted_per_robot_until_arrival():
     m = metrics(trajectory(t, xy, h), spec([(0, 0), (0, 5)], [(10, 0), (10, 5)]))
     assert [r.oscillations for r in m.per_robot] == [2, 0]
     assert m.oscillations_per_robot == 1.0 and m.oscillations_total == 2
+    # No commands: both of robot 0's reversals have no plan to explain them. The trajectory
+    # applies no speed, so they are slow.
+    assert m.per_robot[0].reversal_causes["slow"] == 2
+    assert m.reversal_causes_per_robot["slow"] == 1.0
+    assert sum(m.reversal_causes_per_robot.values()) == m.oscillations_per_robot
     # Arriving half way cuts the count: only the first reversal happens before arrival.
     m2 = metrics(trajectory(t, xy, h), spec([(0, 0), (0, 5)], [(6.0, 0), (10, 5)]))
     assert m2.per_robot[0].oscillations == 1
@@ -286,7 +358,7 @@ def test_json_has_the_documented_keys_and_no_nan():
     for key in ("robots", "arrived", "success", "contacts", "min_gap_m", "path_ratio_mean",
                 "time_ratio_mean", "oscillations_per_robot", "side_flips_per_robot",
                 "plan_ms_p50", "plan_ms_p99", "latency_ms_p50", "latency_ms_p99",
-                "deadline_miss_rate", "per_robot"):
+                "deadline_miss_rate", "per_robot", "reversal_causes_per_robot"):
         assert key in content, key
     assert isinstance(content["per_robot"], list) and content["per_robot"][0]["id"] == 0
     assert content["path_ratio_mean"] is None and "NaN" not in text
@@ -337,3 +409,25 @@ def test_read_trajectory_pivots_rows_by_robot_id(tmp_path):
     np.testing.assert_allclose(traj.t_s, [0.0, 0.1])
     np.testing.assert_allclose(traj.pose[:, 0, 0], [1.0, 1.5])
     np.testing.assert_allclose(traj.pose[:, 1, 0], [3.0, 3.5])
+
+
+def test_compute_metrics_explains_reversals_with_the_applied_speed_and_commands():
+    t, heading = heading_from_rates(S_TURN)
+    x = np.linspace(0.0, 2.5, t.size)
+    xy = np.stack([x, np.zeros_like(x)], axis=1)[:, None, :]
+    pose = np.concatenate([xy, heading[:, None, None]], axis=2)
+    applied = np.zeros((t.size, 1, 2))
+    applied[..., 0] = 1.0  # moving: not slow
+    traj = Trajectory(t, np.arange(1), pose, applied)
+    c = 2
+    commands = Commands(
+        t_applied_s=[1.4, 0.0], robot=[0] * c, seq=[1, 0], pose_stamp_s=[1.4, 0.0],
+        v=np.ones(c), omega=np.zeros(c), plan_ms=np.ones(c), status=["ok"] * c,
+        side=[1, 1], resolved=[8.0, 7.0],  # out of order on purpose
+    )
+    m = metrics(traj, spec([(0, 0)], [(50, 0)]), commands)
+    assert m.per_robot[0].oscillations == 1
+    assert m.per_robot[0].reversal_causes["threat_switch"] == 1
+    stopped = Trajectory(t, np.arange(1), pose, np.zeros((t.size, 1, 2)))
+    assert metrics(stopped, spec([(0, 0)], [(50, 0)]), commands).per_robot[0] \
+        .reversal_causes["slow"] == 1
