@@ -483,7 +483,7 @@ def cmd_report(args: argparse.Namespace) -> int:
     missing = [str(p) for p in paths if not p.exists()]
     if missing:
         raise BadInput(f"report: no such directory: {', '.join(missing)}")
-    records = collect(paths)
+    records = collect(paths, by_dir=args.by_dir)
     if not records:
         raise BadInput(f"report: no run directories with metrics.json under "
                        f"{', '.join(map(str, paths))}")
@@ -609,6 +609,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("dirs", nargs="+", help="run or sweep directories")
     p.add_argument("--paper", action="store_true", help="print the paper's Table I beside ours")
     p.add_argument("--out", help="where plots and tables go (default: the one DIR, or ./report)")
+    p.add_argument("--by-dir", action="store_true",
+                   help="one row per setup, planner and DIR (compare variants of one setup "
+                        "kept in different directories); default: runs are pooled by setup "
+                        "and planner")
     p.set_defaults(func=cmd_report)
 
     p = sub.add_parser("bench", help="planner benchmarks (orchestrator.bench)")

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -70,8 +70,18 @@ class RunRecord:
     metrics: dict[str, Any]
 
 
-def collect(paths: Iterable[Path]) -> list[RunRecord]:
-    """Every run directory (holding metrics.json) at or below `paths`."""
+def collect(paths: Iterable[Path], by_dir: bool = False) -> list[RunRecord]:
+    """Every run directory (holding metrics.json) at or below `paths`.
+
+    Args:
+        paths: run or sweep directories.
+        by_dir: label each record's planner "planner [name of the path it was found
+            under]", so that runs of the same setup and planner under different paths (two
+            variants of one scenario, two commits) are aggregated apart.
+    """
+    if by_dir:
+        return [replace(r, planner=f"{r.planner} [{Path(p).name}]")
+                for p in paths for r in collect([p])]
     records = []
     for run_dir in find_run_dirs(paths):
         metrics = read_json(run_dir / "metrics.json")

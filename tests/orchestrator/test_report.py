@@ -1,14 +1,16 @@
-"""Aggregation of run records: the reversal-cause table (the rest is exercised through the
-CLI in test_cli.py)."""
+"""Aggregation of run records: the reversal-cause table and grouping by directory (the rest
+is exercised through the CLI in test_cli.py)."""
 
 from __future__ import annotations
 
+import json
+import math
 from pathlib import Path
 
 import pytest
 
 from orchestrator.metrics import REVERSAL_CAUSES
-from orchestrator.report import RunRecord, reversal_causes, reversal_table
+from orchestrator.report import RunRecord, aggregate, collect, reversal_causes, reversal_table
 
 
 def record(setup: str, causes: dict[str, float] | None) -> RunRecord:
@@ -35,3 +37,25 @@ def test_causes_are_averaged_per_setup_and_old_runs_are_left_out():
     header, _rule, row = table.splitlines()
     assert header.split()[3:] == list(REVERSAL_CAUSES)
     assert row.split()[:4] == ["setup_f", "eifp-mpc", "2", "0.5"]
+
+
+def write_run(path: Path, osc: float) -> None:
+    path.mkdir(parents=True)
+    (path / "run.json").write_text(json.dumps(
+        {"scenario": "setup_f", "planner": "eifp-mpc", "seed": 0, "mode": "lockstep"}))
+    (path / "metrics.json").write_text(json.dumps({"oscillations_per_robot": osc}))
+
+
+def test_by_dir_keeps_variants_of_one_setup_apart(tmp_path):
+    write_run(tmp_path / "default" / "s0", 2.0)
+    write_run(tmp_path / "default" / "s1", 4.0)
+    write_run(tmp_path / "variant" / "s0", 10.0)
+    paths = [tmp_path / "default", tmp_path / "variant"]
+    pooled = aggregate(collect(paths))
+    assert list(pooled) == [("setup_f", "eifp-mpc")]
+    assert pooled[("setup_f", "eifp-mpc")]["oscillations_per_robot"][0] == pytest.approx(16 / 3)
+    apart = aggregate(collect(paths, by_dir=True))
+    assert list(apart) == [("setup_f", "eifp-mpc [default]"), ("setup_f", "eifp-mpc [variant]")]
+    assert apart[("setup_f", "eifp-mpc [default]")]["oscillations_per_robot"][:2] == \
+        pytest.approx((3.0, math.sqrt(2.0)))
+    assert apart[("setup_f", "eifp-mpc [variant]")]["runs"][2] == 1
