@@ -77,10 +77,14 @@ def collect(paths: Iterable[Path], by_dir: bool = False) -> list[RunRecord]:
         paths: run or sweep directories.
         by_dir: label each record's planner "planner [name of the path it was found
             under]", so that runs of the same setup and planner under different paths (two
-            variants of one scenario, two commits) are aggregated apart.
+            variants of one scenario, two commits) are aggregated apart. When two paths
+            share a name (runs/a/x, runs/b/x) the labels use the paths as given.
     """
     if by_dir:
-        return [replace(r, planner=f"{r.planner} [{Path(p).name}]")
+        paths = [Path(p) for p in paths]
+        names = [p.name for p in paths]
+        unique = len(set(names)) == len(names)
+        return [replace(r, planner=f"{r.planner} [{p.name if unique else p}]")
                 for p in paths for r in collect([p])]
     records = []
     for run_dir in find_run_dirs(paths):

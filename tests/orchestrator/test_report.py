@@ -59,3 +59,13 @@ def test_by_dir_keeps_variants_of_one_setup_apart(tmp_path):
     assert apart[("setup_f", "eifp-mpc [default]")]["oscillations_per_robot"][:2] == \
         pytest.approx((3.0, math.sqrt(2.0)))
     assert apart[("setup_f", "eifp-mpc [variant]")]["runs"][2] == 1
+
+
+def test_by_dir_uses_the_paths_when_two_directories_share_a_name(tmp_path):
+    write_run(tmp_path / "a" / "x" / "s0", 2.0)
+    write_run(tmp_path / "b" / "x" / "s0", 6.0)
+    apart = aggregate(collect([tmp_path / "a" / "x", tmp_path / "b" / "x"], by_dir=True))
+    assert sorted(apart) == [("setup_f", f"eifp-mpc [{tmp_path / 'a' / 'x'}]"),
+                             ("setup_f", f"eifp-mpc [{tmp_path / 'b' / 'x'}]")]
+    assert apart[("setup_f", f"eifp-mpc [{tmp_path / 'b' / 'x'}]")][
+        "oscillations_per_robot"][0] == pytest.approx(6.0)
