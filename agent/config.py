@@ -231,6 +231,8 @@ class PlannerConfig:
             README) it is the lead for the dense crossings, not yet measured enough to be a
             default: lockstep, seeds 0-3, F / G per robot: off 2.48 / 3.91; margin 1 s
             2.06 / 4.59 (10 seeds); 2 s 2.00 / 3.66; 2.5 s and 3 s 4.15 and 3.96 / 1.98.
+            Stop 23, seeds 0-9: off 2.73 / 3.94, 3 s 3.72 / 1.99 (F's centre jams); no
+            variant tried brought both under 2 (README, "Stop 23").
         primary_margin_s: see `primary_hysteresis` [s].
         estimation_window_s: history length used to estimate others' velocity and linearity.
             0.75 s (was 0.5): measured, it cut the reversals in the dense crossings
