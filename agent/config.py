@@ -234,6 +234,31 @@ class PlannerConfig:
             Stop 23, seeds 0-9: off 2.73 / 3.94, 3 s 3.72 / 1.99 (F's centre jams); no
             variant tried brought both under 2 (README, "Stop 23").
         primary_margin_s: see `primary_hysteresis` [s].
+        threats_within_inflated: eIFP-MPC counts an other as a threat (Eq. 5) only when its
+            DCPA falls inside the pair's inflated radius L (Eq. 7), a predicted incursion,
+            instead of within the paper's D_thresh = 5 r + d_safety (2.8 m against L = 1.3 m
+            for two 0.5 m robots); the legs are checked against L either way, and a set
+            `d_thresh_m` still wins. eIFP-MPC only (`agent.ifp.CycleRules`; ifp and eifp
+            keep the paper's). On by default with the three fields below (not in the
+            paper): D_thresh alone was non-monotonic in the dense crossings (lockstep, 5 cm
+            jitter, seeds 0-9, F / G per robot: 1.3 m 2.69 / 3.28 with one G run stuck,
+            1.6 m 3.01 / 2.76, 2.0 m 4.67 / 2.45, 2.8 m 2.73 / 3.94); with the four
+            together 1.84 / 1.90 (README, "Stop 24").
+        via_margin_m: how far outside its inflated disc eIFP-MPC places a via-point (ifp and
+            eifp: `agent.ifp.VIA_MARGIN_M`, 0.05 m). The reference's arc at a via-point
+            cuts the corner towards the disc it turns round, so a via-point on the disc
+            put the robot inside it, and into an escape, at about every corner (with the
+            other three: 0.05 m F 2.38 / G 1.91; 0.2 m 1.94 / 2.26; 0.3 m 1.84 / 1.90).
+        escape_hysteresis_m: an eIFP-MPC escape goes on from the same disc until the robot
+            is this far outside it, towards a point that far out (0: only while inside).
+            Two robots standing on each other's disc boundary otherwise switched between
+            escaping and planning round each other every cycle and turned on the spot
+            until the time limit (G, seed 8, with `threats_within_inflated`).
+        head_on_hold_s: eIFP-MPC resolves a head-on threat (course within
+            `agent.ifp.HEAD_ON_MAX_DEG` of reciprocal) that it resolved first last cycle
+            first again while its TCPA is within this of the most imminent one's
+            (`primary_hysteresis` for head-on threats only; 0: off). Stop 23 measured it
+            alone: F 2.73 -> 2.22, G 3.94 -> 4.03.
         estimation_window_s: history length used to estimate others' velocity and linearity.
             0.75 s (was 0.5): measured, it cut the reversals in the dense crossings
             (lockstep, 5 cm jitter, seeds 0-9: F 4.28 -> 3.09, G 8.30 -> 6.75 per robot;
@@ -279,6 +304,10 @@ class PlannerConfig:
     path_start_radius_m: float = 5.0
     primary_hysteresis: bool = False
     primary_margin_s: float = 1.0
+    threats_within_inflated: bool = True
+    via_margin_m: float = 0.3
+    escape_hysteresis_m: float = 0.1
+    head_on_hold_s: float = 3.0
     stand_on_emergency_s: float = 2.0
     estimation_window_s: float = 0.75
     command_hold_periods: float = 1.5

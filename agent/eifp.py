@@ -56,9 +56,9 @@ import numpy as np
 
 from agent.config import PlannerConfig
 from agent.encounters import Role, encounter_roles, update_role_memory
-from agent.ifp import CandidateSelector, ViaPlan, plan_via_points
+from agent.ifp import PAPER_RULES, CandidateSelector, CycleRules, ViaPlan, plan_via_points
 from agent.threats import as_complex
-from agent.types import Observation, Others, Side
+from agent.types import Observation, Others, PlanStatus, Side
 from agent.viapoints import SIDES, inflated_radius
 
 # Floor on the distance to a predicted path in Eq. (14) [m].
@@ -290,9 +290,12 @@ def plan_eifp(
     side_memory: Mapping[int, Side] | None = None,
     timer: Callable[[], float] | None = None,
     primary_id: int | None = None,
+    rules: CycleRules = PAPER_RULES,
+    escape_id: int | None = None,
 ) -> ViaPlan:
     """One eIFP cycle as the paper has it (no encounter rules); see `plan_eifp_encounters`."""
-    return _plan_eifp(observation, config, side_memory, timer, None, primary_id)[0]
+    return _plan_eifp(observation, config, side_memory, timer, None, primary_id, rules,
+                      escape_id)[0]
 
 
 def plan_eifp_encounters(
@@ -302,9 +305,12 @@ def plan_eifp_encounters(
     role_memory: Mapping[int, Role],
     timer: Callable[[], float] | None = None,
     primary_id: int | None = None,
+    rules: CycleRules = PAPER_RULES,
+    escape_id: int | None = None,
 ) -> tuple[ViaPlan, dict[int, Role]]:
     """One eIFP cycle with the encounter rules; returns (plan, role memory for next cycle)."""
-    plan, roles = _plan_eifp(observation, config, side_memory, timer, role_memory, primary_id)
+    plan, roles = _plan_eifp(observation, config, side_memory, timer, role_memory, primary_id,
+                             rules, escape_id)
     return plan, roles or {}
 
 
@@ -315,6 +321,8 @@ def _plan_eifp(
     timer: Callable[[], float] | None,
     role_memory: Mapping[int, Role] | None,
     primary_id: int | None,
+    rules: CycleRules = PAPER_RULES,
+    escape_id: int | None = None,
 ) -> tuple[ViaPlan, dict[int, Role] | None]:
     """One eIFP cycle: IFP's iteration with cost-based candidate selection (Eqs. 14-16).
 
@@ -328,6 +336,8 @@ def _plan_eifp(
             (`agent.encounters`); None: the rules are not applied (the paper's eIFP).
         primary_id: the threat the previous cycle resolved first (kept first while it is
             nearly as imminent as the most imminent one; `ifp.plan_via_points`).
+        rules: eIFP-MPC's changes to the cycle (`ifp.CycleRules`).
+        escape_id: the other the previous cycle escaped from, if any.
 
     Returns:
         The plan, and (with `role_memory`) the role memory for the next cycle, else None.
@@ -355,7 +365,8 @@ def _plan_eifp(
         return cost_selector(observation, config, others, memory, give_way)
 
     plan = plan_via_points(observation, config, make_selector, committed, timer,
-                           primary_id=primary_id, encounter_rule=rule)
+                           primary_id=primary_id, encounter_rule=rule, rules=rules,
+                           escape_id=escape_id)
     if role_memory is None:
         return plan, None
     enc = found.get("encounters")
@@ -435,13 +446,17 @@ class EifpSelector:
 
     Args:
         config: planner parameters.
+        rules: changes to the cycle (`ifp.CycleRules`): eIFP-MPC passes
+            `CycleRules.from_config(config)`, eifp the paper's.
     """
 
-    def __init__(self, config: PlannerConfig) -> None:
+    def __init__(self, config: PlannerConfig, rules: CycleRules = PAPER_RULES) -> None:
         self.config = config
+        self.rules = rules
         self._memory: dict[int, Side] = {}
         self._roles: dict[int, Role] = {}
         self._primary: int | None = None
+        self._escaping: int | None = None
 
     @property
     def side_memory(self) -> dict[int, Side]:
@@ -452,14 +467,18 @@ class EifpSelector:
         self, observation: Observation, timer: Callable[[], float] | None = None
     ) -> ViaPlan:
         """Plan one cycle and remember the sides chosen (see `plan_eifp`)."""
-        primary = self._primary if self.config.primary_hysteresis else None
+        holds = self.config.primary_hysteresis or self.rules.head_on_hold_s > 0.0
+        primary = self._primary if holds else None
         if self.config.encounter_rules:
             plan, self._roles = plan_eifp_encounters(observation, self.config, self._memory,
-                                                     self._roles, timer, primary)
+                                                     self._roles, timer, primary, self.rules,
+                                                     self._escaping)
         else:
-            plan = plan_eifp(observation, self.config, self._memory, timer, primary)
+            plan = plan_eifp(observation, self.config, self._memory, timer, primary,
+                             self.rules, self._escaping)
         self._memory = update_side_memory(self._memory, plan, observation.others.ids)
         self._primary = plan.resolved_id
+        self._escaping = plan.resolved_id if plan.status == PlanStatus.ESCAPE else None
         return plan
 
     def reset(self) -> None:
@@ -467,3 +486,4 @@ class EifpSelector:
         self._memory.clear()
         self._roles.clear()
         self._primary = None
+        self._escaping = None

@@ -42,6 +42,13 @@ Choices the paper leaves open (documented here, tested in tests/agent/test_ifp.p
   its goal. Such others still count on the legs of step 4.
 - `ViaPlan.via_point_m` is the first via-point after P (where the robot heads now), with
   the side and the id of the threat that via-point resolves.
+
+`CycleRules` holds eIFP-MPC's changes to this cycle (not in the paper; the default
+`PAPER_RULES` is the cycle above, which `ifp` and `eifp` run): threats are only the others
+whose DCPA falls inside the pair's inflated radius L; via-points lie further out of their
+discs; an escape, once begun, goes on until the robot is a band clear of the disc; and a
+head-on threat resolved first last cycle is kept first for a while. Why, and what each did
+to the dense crossings, is in `agent.config.PlannerConfig` and the README ("Stop 24").
 """
 
 from __future__ import annotations
@@ -93,6 +100,62 @@ VIA_MARGIN_M = 0.05
 # A leg start within L * (1 + this) of a disc centre is on the disc: no tangent from it.
 ON_DISC_REL_TOL = 1.0e-6
 
+HEAD_ON_MAX_DEG = 45.0
+"""`CycleRules.head_on_hold_s` holds a threat whose course lies within this angle of the
+reciprocal of the robot's heading."""
+
+HEAD_ON_MIN_SPEED_MPS = 0.2
+"""Below this speed (the robot's or the other's) a course has no direction: not head-on."""
+
+_HEAD_ON_COS = math.cos(math.radians(HEAD_ON_MAX_DEG))
+
+
+@dataclass(frozen=True)
+class CycleRules:
+    """eIFP-MPC's changes to the IFP cycle (not in the paper); the defaults are the paper's.
+
+    Args:
+        threats_within_inflated: a threat of Eq. (5) needs DCPA <= L, the pair's inflated
+            radius (Eq. 7), instead of D_thresh (an explicit `PlannerConfig.d_thresh_m`
+            still wins).
+        via_margin_m: how far outside its inflated disc a via-point is placed [m].
+        escape_hysteresis_m: an escape goes on, from the same disc, until the robot is this
+            far outside it, and heads for a point that far out (0: escape only while inside).
+        head_on_hold_s: a head-on threat (course within `HEAD_ON_MAX_DEG` of reciprocal)
+            that the previous cycle resolved first is resolved first again while its TCPA
+            is within this of the most imminent one's (0: off) [s].
+    """
+
+    threats_within_inflated: bool = False
+    via_margin_m: float = VIA_MARGIN_M
+    escape_hysteresis_m: float = 0.0
+    head_on_hold_s: float = 0.0
+
+    @staticmethod
+    def from_config(config: PlannerConfig) -> CycleRules:
+        """The rules `config` sets for eIFP-MPC."""
+        return CycleRules(
+            threats_within_inflated=config.threats_within_inflated,
+            via_margin_m=config.via_margin_m,
+            escape_hysteresis_m=config.escape_hysteresis_m,
+            head_on_hold_s=config.head_on_hold_s,
+        )
+
+
+PAPER_RULES = CycleRules()
+"""The paper's cycle (IFP and eIFP)."""
+
+
+def is_head_on(heading_rad: float, speed_mps: float, other_velocity_mps: np.ndarray) -> bool:
+    """Whether an other's course lies within `HEAD_ON_MAX_DEG` of the reciprocal of the
+    robot's heading, both moving at least `HEAD_ON_MIN_SPEED_MPS`."""
+    vx, vy = float(other_velocity_mps[0]), float(other_velocity_mps[1])
+    other_speed = math.hypot(vx, vy)
+    if speed_mps < HEAD_ON_MIN_SPEED_MPS or other_speed < HEAD_ON_MIN_SPEED_MPS:
+        return False
+    towards = -(vx * math.cos(heading_rad) + vy * math.sin(heading_rad)) / other_speed
+    return towards >= _HEAD_ON_COS
+
 # rule(others, index, tcpa, dcpa, inflated) -> (ignored ids, committed ids): eIFP's encounter
 # rules, given the cycle's neighbours and their Eq. (5) assessment (threat indices ranked,
 # TCPA, DCPA, inflated radii L), so the assessment is made once per cycle.
@@ -121,7 +184,7 @@ class ViaPlan:
         side: side of `via_point_m` relative to the threat it resolves (NONE for escape).
         resolved_id: id of the other `via_point_m` resolves, or None.
         threats: the threats of Eq. (5) at the measured velocity, ranked by TCPA.
-        resolved_sides: (other id, side) for every via-point, in the order they were chosen.
+        resolved_sides: (other id, side) for every via-point, in travel order.
         threats_s: wall time of the threat assessment, when a timer was given (else 0).
     """
 
@@ -210,6 +273,8 @@ def plan_via_points(
     ignored_ids: frozenset[int] = frozenset(),
     primary_id: int | None = None,
     encounter_rule: EncounterRule | None = None,
+    rules: CycleRules = PAPER_RULES,
+    escape_id: int | None = None,
 ) -> ViaPlan:
     """The IFP cycle (module docstring) with a pluggable candidate selector.
 
@@ -233,6 +298,11 @@ def plan_via_points(
             more than `config.primary_margin_s` smaller (hysteresis on the ranking).
         encounter_rule: eIFP's encounter rules (`EncounterRule`): their ignored ids join
             `ignored_ids`, their committed ids `committed_ids`.
+        rules: eIFP-MPC's changes to the cycle (`CycleRules`); the paper's by default.
+            With `head_on_hold_s` > 0 a head-on `primary_id` is held that long, and
+            without `config.primary_hysteresis` only a head-on one is held.
+        escape_id: the other the previous cycle escaped from, if it did
+            (`CycleRules.escape_hysteresis_m`).
 
     Raises:
         ValueError: on non-finite inputs or configuration.
@@ -248,9 +318,10 @@ def plan_via_points(
     # Eqs. (3)-(6) at the measured velocity.
     t_start = timer() if timer is not None else 0.0
     v_r = ego.v_mps * np.array([math.cos(ego.heading_rad), math.sin(ego.heading_rad)])
-    index, tcpa, dcpa = rank_threats(
-        p, v_r, others, config.dcpa_threshold_m(observation.radius_m), config.t_max_s
-    )
+    d_thresh: float | np.ndarray = config.dcpa_threshold_m(observation.radius_m)
+    if rules.threats_within_inflated and config.d_thresh_m is None:
+        d_thresh = radius
+    index, tcpa, dcpa = rank_threats(p, v_r, others, d_thresh, config.t_max_s)
     if encounter_rule is not None and len(others):
         more_ignored, more_committed = encounter_rule(others, index, tcpa, dcpa, radius)
         ignored_ids = ignored_ids | more_ignored
@@ -271,8 +342,16 @@ def plan_via_points(
         index = index[~ignored[index]]
     if primary_id is not None and index.size > 1:
         hit = (others.ids[index] == primary_id).nonzero()[0]
-        if hit.size and tcpa[index[hit[0]]] <= tcpa[index[0]] + config.primary_margin_s:
-            index = np.concatenate((index[hit[:1]], np.delete(index, hit[0])))
+        if hit.size:
+            j = int(index[hit[0]])
+            margin_s = config.primary_margin_s
+            if rules.head_on_hold_s > 0.0:
+                if not config.primary_hysteresis:
+                    margin_s = -math.inf  # the head-on hold alone
+                if is_head_on(ego.heading_rad, ego.v_mps, others.velocity_mps[j]):
+                    margin_s = max(margin_s, rules.head_on_hold_s)
+            if tcpa[j] <= tcpa[index[0]] + margin_s:
+                index = np.concatenate((index[hit[:1]], np.delete(index, hit[0])))
     threats_s = timer() - t_start if timer is not None else 0.0
     if len(others) == 0:
         return ViaPlan(status=PlanStatus.OK, waypoints_m=np.stack((p, goal)), threats=threats,
@@ -281,10 +360,16 @@ def plan_via_points(
     # Inside an inflated disc: no tangent exists, steer straight out of the deepest one.
     position = as_complex(others.position_m)
     gap = np.abs(position - complex(ego.x_m, ego.y_m)) - radius
+    band = rules.escape_hysteresis_m
+    if escape_id is not None and band > 0.0:
+        # Still escaping from the same disc until a band clear of it: a robot that left
+        # by a centimetre would plan round the disc, graze it and escape again.
+        held = (others.ids == escape_id) & (gap <= band)
+        gap = np.where(held, np.minimum(gap, 0.0), gap)
     inside = (gap <= 0.0).nonzero()[0]
     if inside.size:
         j = int(inside[np.lexsort((others.ids[inside], gap[inside]))[0]])
-        out = escape_point(p, others.position_m[j], float(radius[j]), ego.heading_rad)
+        out = escape_point(p, others.position_m[j], float(radius[j]) + band, ego.heading_rad)
         return ViaPlan(
             status=PlanStatus.ESCAPE,
             waypoints_m=np.stack((p, out) if ego.v_mps < ESCAPE_STANDING_MPS else (p, out, goal)),
@@ -296,7 +381,7 @@ def plan_via_points(
         )
 
     # Waypoints as complex numbers x + iy while the list changes.
-    world = _World(others, radius, speed, select)
+    world = _World(others, radius, speed, select, rules.via_margin_m)
     wps = [complex(ego.x_m, ego.y_m), complex(goal[0], goal[1])]
     excluded = [-1]  # per leg: index of the other the leg is tangent to, or -1
     chosen: list[tuple[int, Side] | None] = [None, None]  # per waypoint: (index, side)
@@ -394,13 +479,15 @@ class _World:
     """The others of one cycle in plain floats, to build candidates one disc at a time."""
 
     def __init__(
-        self, others: Others, radius: np.ndarray, speed: float, select: CandidateSelector
+        self, others: Others, radius: np.ndarray, speed: float, select: CandidateSelector,
+        via_margin_m: float = VIA_MARGIN_M,
     ) -> None:
         self.position = others.position_m.tolist()
         self.velocity = others.velocity_mps.tolist()
         self.radius = radius.tolist()
         self.speed = speed
         self.select = select
+        self.via_margin_m = via_margin_m
 
     def resolve(
         self, a: complex, start_time_s: float, b: complex, k: int
@@ -416,7 +503,7 @@ class _World:
         ax, ay = a.real, a.imag
         if (cx - ax) ** 2 + (cy - ay) ** 2 <= (l_k * (1.0 + ON_DISC_REL_TOL)) ** 2:
             return None
-        pair = candidate_pair(ax, ay, cx, cy, vx, vy, l_k, self.speed, VIA_MARGIN_M)
+        pair = candidate_pair(ax, ay, cx, cy, vx, vy, l_k, self.speed, self.via_margin_m)
         if pair is None:
             return None
         (xr, yr, tr), (xl, yl, tl) = pair

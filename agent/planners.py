@@ -128,7 +128,7 @@ class ViaPointPlanner:
                  control_period_s: float = CONTROL_PERIOD_S,
                  timer: Timer = time.perf_counter) -> None:
         from agent.eifp import EifpSelector
-        from agent.ifp import plan_ifp
+        from agent.ifp import PAPER_RULES, CycleRules, plan_ifp
 
         if name not in ("ifp", "eifp", "eifp-mpc"):
             raise ValueError(f"not a via-point planner: {name!r}")
@@ -136,7 +136,10 @@ class ViaPointPlanner:
         self.config = config
         self.control_period_s = control_period_s
         self._timer = timer
-        self._selector = EifpSelector(config) if name != "ifp" else None
+        # eIFP-MPC's changes to the cycle (threats inside L, via-point margin, escape
+        # hysteresis, head-on hold): measured on eIFP-MPC only; eifp keeps the paper's cycle.
+        rules = CycleRules.from_config(config) if name == "eifp-mpc" else PAPER_RULES
+        self._selector = EifpSelector(config, rules) if name != "ifp" else None
         self._plan_ifp = plan_ifp
         self._trackers: dict[object, object] = {}
 

@@ -117,7 +117,7 @@ def rank_threats(
     position_m: np.ndarray,
     velocity_mps: np.ndarray,
     others: Others,
-    d_thresh_m: float,
+    d_thresh_m: float | np.ndarray,
     t_max_s: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Indices of the others that are threats (Eq. 5), ranked by TCPA (Eq. 6).
@@ -129,7 +129,7 @@ def rank_threats(
         position_m: (2,) robot position p_r [m].
         velocity_mps: (2,) robot velocity v_r [m/s].
         others: the K sensed others (validated on construction).
-        d_thresh_m: D_thresh of Eq. (5) [m].
+        d_thresh_m: D_thresh of Eq. (5), one for all or (K,) one per other [m].
         t_max_s: T_max of Eq. (5) [s].
 
     Returns:
@@ -142,7 +142,7 @@ def rank_threats(
     """
     px, py = float(position_m[0]), float(position_m[1])
     vx, vy = float(velocity_mps[0]), float(velocity_mps[1])
-    require_finite("rank_threats", px, py, vx, vy, float(d_thresh_m), float(t_max_s))
+    require_finite("rank_threats", px, py, vx, vy, d_thresh_m, float(t_max_s))
     if len(others) == 0:
         return _EMPTY_INDEX, _EMPTY_FLOAT, _EMPTY_FLOAT
     tcpa, dcpa = _tcpa_dcpa(

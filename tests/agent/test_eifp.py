@@ -349,3 +349,34 @@ def test_committed_threat_is_released_once_passed():
     obs = observe(o, heading=-0.5, goal=(20.0, 0.0))
     plan = plan_eifp(obs, PlannerConfig(threat_commitment=True), {1: Side.RIGHT})
     assert plan.resolved_id is None and plan.threats == ()
+
+
+def test_selector_carries_an_escape_into_the_next_cycle_under_the_band():
+    from agent.eifp import EifpSelector
+    from agent.ifp import PAPER_RULES, CycleRules
+
+    inflated = 2 * R + CFG.d_safety_m
+    inside = observe(others([[0.0, inflated - 0.02]]))
+    just_out = observe(others([[0.0, inflated + 0.05]]))
+    banded = EifpSelector(CFG, CycleRules(escape_hysteresis_m=0.1))
+    assert banded.select(inside).status is PlanStatus.ESCAPE
+    assert banded.select(just_out).status is PlanStatus.ESCAPE  # still in the band
+    far = observe(others([[0.0, inflated + 0.2]]))
+    assert banded.select(far).status is PlanStatus.OK
+    assert banded.select(just_out).status is PlanStatus.OK  # not escaping any more
+    banded.select(inside)
+    banded.reset()
+    assert banded.select(just_out).status is PlanStatus.OK  # reset forgets the escape
+    paper = EifpSelector(CFG, PAPER_RULES)
+    paper.select(inside)
+    assert paper.select(just_out).status is PlanStatus.OK
+
+
+def test_only_eifp_mpc_runs_the_changed_cycle():
+    from agent.ifp import PAPER_RULES, CycleRules
+    from agent.planners import make_planner
+
+    mpc = make_planner("eifp-mpc", CFG)
+    assert mpc._selector.rules == CycleRules.from_config(CFG)
+    assert mpc._selector.rules != PAPER_RULES  # the defaults change the cycle
+    assert make_planner("eifp", CFG)._selector.rules == PAPER_RULES

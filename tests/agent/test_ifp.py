@@ -304,3 +304,119 @@ def test_primary_threat_keeps_its_rank_within_the_margin(margin_s):
     far = others([[3, 0.3], [12, -0.3]], [[-1, 0], [-1, 0]])
     assert (plan(far, (30.0, 0.0), 2).waypoints_m.tolist()
             == plan(far, (30.0, 0.0), None).waypoints_m.tolist())
+
+
+# eIFP-MPC's changes to the cycle (`CycleRules`): each against the paper's cycle.
+
+
+def _rules(**kw):
+    from agent.ifp import CycleRules
+
+    return CycleRules(**kw)
+
+
+def _plan(obs, rules, config=CFG, **kw):
+    from agent.ifp import plan_via_points
+
+    return plan_via_points(obs, config, lambda _o: select_earliest, rules=rules, **kw)
+
+
+def test_threats_within_inflated_drops_a_pass_outside_l_but_inside_d_thresh():
+    from dataclasses import replace
+
+    from agent.ifp import PAPER_RULES
+
+    # Head-on, DCPA 1.0 m: outside L = 0.7, inside the paper's D_thresh = 5 r + d = 1.3.
+    wide = observe(others([[5.0, 1.0]], [[-1.0, 0.0]]), v=1.0)
+    assert [t.other_id for t in _plan(wide, PAPER_RULES).threats] == [1]
+    inside_l = _plan(wide, _rules(threats_within_inflated=True))
+    assert inside_l.threats == () and inside_l.waypoints_m.shape == (2, 2)
+    # DCPA 0.5 m < L: a threat either way, resolved by a via-point.
+    near = observe(others([[5.0, 0.5]], [[-1.0, 0.0]]), v=1.0)
+    plan = _plan(near, _rules(threats_within_inflated=True))
+    assert [t.other_id for t in plan.threats] == [1] and plan.resolved_id == 1
+    # A configured D_thresh still wins.
+    set_thresh = replace(CFG, d_thresh_m=1.2)
+    assert [t.other_id for t in _plan(wide, _rules(threats_within_inflated=True),
+                                      set_thresh).threats] == [1]
+
+
+def test_threats_within_inflated_uses_each_pairs_own_l():
+    # Two head-on others at DCPA 1.0 m: radius 0.2 (L = 0.7) and 0.6 (L = 1.1).
+    o = Others(ids=np.array([1, 2]), position_m=np.array([[5.0, 1.0], [8.0, -1.0]]),
+               velocity_mps=np.array([[-1.0, 0.0], [-1.0, 0.0]]),
+               radius_m=np.array([0.2, 0.6]), linearity=np.ones(2),
+               track_start_m=np.array([[5.5, 1.0], [8.5, -1.0]]), is_robot=np.ones(2, bool))
+    plan = _plan(observe(o, v=1.0), _rules(threats_within_inflated=True))
+    assert [t.other_id for t in plan.threats] == [2]
+
+
+@pytest.mark.parametrize("margin_m", [0.05, 0.3])
+def test_via_margin_sets_how_far_out_of_the_disc_the_via_point_lies(margin_m):
+    obs = observe(others([[5.0, 0.0]]), v=1.0)
+    plan = _plan(obs, _rules(via_margin_m=margin_m))
+    assert plan.resolved_id == 1
+    assert math.hypot(plan.via_point_m[0] - 5.0, plan.via_point_m[1]) == pytest.approx(
+        L + margin_m, abs=1e-9)
+
+
+def test_escape_hysteresis_keeps_escaping_until_a_band_clear():
+    band = 0.1
+    rules = _rules(escape_hysteresis_m=band)
+    # 0.05 m outside the disc of other 1 (L = 0.7), beside the robot's path.
+    o = others([[0.0, L + 0.05]])
+    obs = observe(o, v=1.0)
+    assert _plan(obs, rules).status is PlanStatus.OK  # not escaping before: plans on
+    held = _plan(obs, rules, escape_id=1)
+    assert held.status is PlanStatus.ESCAPE and held.resolved_id == 1
+    # The escape point lies the band further out, straight away from the centre.
+    np.testing.assert_allclose(held.via_point_m, [0.0, (L + 0.05) - (L + band + ESCAPE_MARGIN_M)],
+                               atol=1e-9)
+    # Past the band, or escaping from someone else: the plain cycle.
+    far = observe(others([[0.0, L + 0.15]]), v=1.0)
+    assert _plan(far, rules, escape_id=1).status is PlanStatus.OK
+    assert _plan(obs, rules, escape_id=7).status is PlanStatus.OK
+    # The paper's cycle has no band.
+    assert _plan(obs, _rules(), escape_id=1).status is PlanStatus.OK
+
+
+def test_head_on_hold_keeps_a_head_on_primary_first_and_no_other():
+    def wps(plan):
+        return plan.waypoints_m.tolist()
+
+    # Head-on, TCPA 2.0 s (id 1) and 4.5 s (id 2): 2.5 s apart, outside primary_margin_s.
+    head_on = others([[4, 0.3], [9, -0.3]], [[-1, 0], [-1, 0]])
+    obs = observe(head_on, v=1.0, goal=(30.0, 0.0))
+    rules = _rules(head_on_hold_s=3.0)
+    plain = _plan(obs, rules)
+    assert wps(_plan(obs, rules, primary_id=1)) == wps(plain)
+    # Id 2 taken first: another plan (the leg to its via-point then meets id 1).
+    assert wps(_plan(obs, rules, primary_id=2)) != wps(plain)
+    # Without the hold (the paper's rules), or a hold shorter than the 2.5 s between them:
+    # the ranking stands.
+    assert wps(_plan(obs, _rules(), primary_id=2)) == wps(plain)
+    assert wps(_plan(obs, _rules(head_on_hold_s=2.0), primary_id=2)) == wps(plain)
+    # Id 2 crossing from the right (course 90 degrees off reciprocal), TCPA 4.5 s: not held.
+    crossing = others([[4, 0.3], [4.5, -4.5]], [[-1, 0], [0, 1]])
+    obs = observe(crossing, v=1.0, goal=(30.0, 0.0))
+    assert [t.other_id for t in _plan(obs, rules).threats] == [1, 2]
+    assert wps(_plan(obs, rules, primary_id=2)) == wps(_plan(obs, rules))
+    # ... unless every primary is held (`primary_hysteresis`, margin 3 s).
+    from dataclasses import replace
+
+    every = replace(CFG, primary_hysteresis=True, primary_margin_s=3.0)
+    assert wps(_plan(obs, rules, every, primary_id=2)) != wps(_plan(obs, rules))
+
+
+def test_is_head_on():
+    from agent.ifp import HEAD_ON_MAX_DEG, is_head_on
+
+    def course(deg):
+        return np.array([math.cos(math.radians(deg)), math.sin(math.radians(deg))])
+
+    assert is_head_on(0.0, 1.0, course(180.0))
+    assert is_head_on(0.0, 1.0, course(180.0 - HEAD_ON_MAX_DEG + 1.0))
+    assert not is_head_on(0.0, 1.0, course(180.0 - HEAD_ON_MAX_DEG - 1.0))
+    assert not is_head_on(0.0, 1.0, course(0.0))
+    assert not is_head_on(0.0, 0.1, course(180.0))  # the robot barely moves
+    assert not is_head_on(0.0, 1.0, 0.1 * course(180.0))  # nor does the other
