@@ -242,8 +242,13 @@ class PlannerConfig:
             keep the paper's). On by default with the three fields below (not in the
             paper): D_thresh alone was non-monotonic in the dense crossings (lockstep, 5 cm
             jitter, seeds 0-9, F / G per robot: 1.3 m 2.69 / 3.28 with one G run stuck,
-            1.6 m 3.01 / 2.76, 2.0 m 4.67 / 2.45, 2.8 m 2.73 / 3.94); with the four
-            together 1.84 / 1.90 (README, "Stop 24").
+            1.6 m 3.01 / 2.76, 2.0 m 4.67 / 2.45, 2.8 m 2.73 / 3.94); with the rules
+            below 1.81 / 1.72 (README, "Stop 24").
+        threat_release_margin_m: with `threats_within_inflated`, an other that eIFP-MPC's
+            plan resolved last cycle stays a threat while its DCPA is within L + this, so a
+            threat that the robot's own swerve pushes just past L is not dropped and picked
+            up again next cycle (lockstep, seeds 0-9, with the other rules, F / G per
+            robot: 0 1.84 / 1.90; 0.5 m 1.81 / 1.72; 1.5 m, out at D_thresh, 1.94 / 1.72).
         via_margin_m: how far outside its inflated disc eIFP-MPC places a via-point (ifp and
             eifp: `agent.ifp.VIA_MARGIN_M`, 0.05 m). The reference's arc at a via-point
             cuts the corner towards the disc it turns round, so a via-point on the disc
@@ -305,6 +310,7 @@ class PlannerConfig:
     primary_hysteresis: bool = False
     primary_margin_s: float = 1.0
     threats_within_inflated: bool = True
+    threat_release_margin_m: float = 0.5
     via_margin_m: float = 0.3
     escape_hysteresis_m: float = 0.1
     head_on_hold_s: float = 3.0

@@ -292,10 +292,11 @@ def plan_eifp(
     primary_id: int | None = None,
     rules: CycleRules = PAPER_RULES,
     escape_id: int | None = None,
+    resolved_ids: frozenset[int] = frozenset(),
 ) -> ViaPlan:
     """One eIFP cycle as the paper has it (no encounter rules); see `plan_eifp_encounters`."""
     return _plan_eifp(observation, config, side_memory, timer, None, primary_id, rules,
-                      escape_id)[0]
+                      escape_id, resolved_ids)[0]
 
 
 def plan_eifp_encounters(
@@ -307,10 +308,11 @@ def plan_eifp_encounters(
     primary_id: int | None = None,
     rules: CycleRules = PAPER_RULES,
     escape_id: int | None = None,
+    resolved_ids: frozenset[int] = frozenset(),
 ) -> tuple[ViaPlan, dict[int, Role]]:
     """One eIFP cycle with the encounter rules; returns (plan, role memory for next cycle)."""
     plan, roles = _plan_eifp(observation, config, side_memory, timer, role_memory, primary_id,
-                             rules, escape_id)
+                             rules, escape_id, resolved_ids)
     return plan, roles or {}
 
 
@@ -323,6 +325,7 @@ def _plan_eifp(
     primary_id: int | None,
     rules: CycleRules = PAPER_RULES,
     escape_id: int | None = None,
+    resolved_ids: frozenset[int] = frozenset(),
 ) -> tuple[ViaPlan, dict[int, Role] | None]:
     """One eIFP cycle: IFP's iteration with cost-based candidate selection (Eqs. 14-16).
 
@@ -338,6 +341,7 @@ def _plan_eifp(
             nearly as imminent as the most imminent one; `ifp.plan_via_points`).
         rules: eIFP-MPC's changes to the cycle (`ifp.CycleRules`).
         escape_id: the other the previous cycle escaped from, if any.
+        resolved_ids: the others the previous cycle's plan resolved.
 
     Returns:
         The plan, and (with `role_memory`) the role memory for the next cycle, else None.
@@ -366,7 +370,7 @@ def _plan_eifp(
 
     plan = plan_via_points(observation, config, make_selector, committed, timer,
                            primary_id=primary_id, encounter_rule=rule, rules=rules,
-                           escape_id=escape_id)
+                           escape_id=escape_id, resolved_ids=resolved_ids)
     if role_memory is None:
         return plan, None
     enc = found.get("encounters")
@@ -457,6 +461,7 @@ class EifpSelector:
         self._roles: dict[int, Role] = {}
         self._primary: int | None = None
         self._escaping: int | None = None
+        self._resolved: frozenset[int] = frozenset()
 
     @property
     def side_memory(self) -> dict[int, Side]:
@@ -472,13 +477,14 @@ class EifpSelector:
         if self.config.encounter_rules:
             plan, self._roles = plan_eifp_encounters(observation, self.config, self._memory,
                                                      self._roles, timer, primary, self.rules,
-                                                     self._escaping)
+                                                     self._escaping, self._resolved)
         else:
             plan = plan_eifp(observation, self.config, self._memory, timer, primary,
-                             self.rules, self._escaping)
+                             self.rules, self._escaping, self._resolved)
         self._memory = update_side_memory(self._memory, plan, observation.others.ids)
         self._primary = plan.resolved_id
         self._escaping = plan.resolved_id if plan.status == PlanStatus.ESCAPE else None
+        self._resolved = frozenset(i for i, _ in plan.resolved_sides)
         return plan
 
     def reset(self) -> None:
@@ -487,3 +493,4 @@ class EifpSelector:
         self._roles.clear()
         self._primary = None
         self._escaping = None
+        self._resolved = frozenset()

@@ -118,6 +118,9 @@ class CycleRules:
         threats_within_inflated: a threat of Eq. (5) needs DCPA <= L, the pair's inflated
             radius (Eq. 7), instead of D_thresh (an explicit `PlannerConfig.d_thresh_m`
             still wins).
+        threat_release_margin_m: with `threats_within_inflated`, an other that the
+            previous cycle's plan resolved stays a threat while its DCPA is within
+            L + this (a Schmitt trigger: in at L, out at L + margin) [m].
         via_margin_m: how far outside its inflated disc a via-point is placed [m].
         escape_hysteresis_m: an escape goes on, from the same disc, until the robot is this
             far outside it, and heads for a point that far out (0: escape only while inside).
@@ -127,6 +130,7 @@ class CycleRules:
     """
 
     threats_within_inflated: bool = False
+    threat_release_margin_m: float = 0.0
     via_margin_m: float = VIA_MARGIN_M
     escape_hysteresis_m: float = 0.0
     head_on_hold_s: float = 0.0
@@ -136,6 +140,7 @@ class CycleRules:
         """The rules `config` sets for eIFP-MPC."""
         return CycleRules(
             threats_within_inflated=config.threats_within_inflated,
+            threat_release_margin_m=config.threat_release_margin_m,
             via_margin_m=config.via_margin_m,
             escape_hysteresis_m=config.escape_hysteresis_m,
             head_on_hold_s=config.head_on_hold_s,
@@ -275,6 +280,7 @@ def plan_via_points(
     encounter_rule: EncounterRule | None = None,
     rules: CycleRules = PAPER_RULES,
     escape_id: int | None = None,
+    resolved_ids: frozenset[int] = frozenset(),
 ) -> ViaPlan:
     """The IFP cycle (module docstring) with a pluggable candidate selector.
 
@@ -303,6 +309,8 @@ def plan_via_points(
             without `config.primary_hysteresis` only a head-on one is held.
         escape_id: the other the previous cycle escaped from, if it did
             (`CycleRules.escape_hysteresis_m`).
+        resolved_ids: the others the previous cycle's plan resolved
+            (`CycleRules.threat_release_margin_m`).
 
     Raises:
         ValueError: on non-finite inputs or configuration.
@@ -321,6 +329,10 @@ def plan_via_points(
     d_thresh: float | np.ndarray = config.dcpa_threshold_m(observation.radius_m)
     if rules.threats_within_inflated and config.d_thresh_m is None:
         d_thresh = radius
+        if resolved_ids and rules.threat_release_margin_m > 0.0 and len(others):
+            kept = np.fromiter((i in resolved_ids for i in others.ids.tolist()), dtype=bool,
+                               count=len(others))
+            d_thresh = np.where(kept, radius + rules.threat_release_margin_m, radius)
     index, tcpa, dcpa = rank_threats(p, v_r, others, d_thresh, config.t_max_s)
     if encounter_rule is not None and len(others):
         more_ignored, more_committed = encounter_rule(others, index, tcpa, dcpa, radius)

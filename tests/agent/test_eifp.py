@@ -380,3 +380,17 @@ def test_only_eifp_mpc_runs_the_changed_cycle():
     assert mpc._selector.rules == CycleRules.from_config(CFG)
     assert mpc._selector.rules != PAPER_RULES  # the defaults change the cycle
     assert make_planner("eifp", CFG)._selector.rules == PAPER_RULES
+
+
+def test_selector_remembers_what_it_resolved_for_the_release_margin():
+    from agent.eifp import EifpSelector
+    from agent.ifp import CycleRules
+
+    rules = CycleRules(threats_within_inflated=True, threat_release_margin_m=0.5)
+    selector = EifpSelector(CFG, rules)
+    # DCPA 0.3 m < L = 0.7: resolved; then DCPA 1.0 m (< L + 0.5): still a threat.
+    selector.select(observe(others([[5.0, 0.3]], [[-1.0, 0.0]])))
+    wide = observe(others([[4.9, 1.0]], [[-1.0, 0.0]]))
+    assert [t.other_id for t in selector.select(wide).threats] == [1]
+    selector.reset()
+    assert selector.select(wide).threats == ()

@@ -420,3 +420,18 @@ def test_is_head_on():
     assert not is_head_on(0.0, 1.0, course(0.0))
     assert not is_head_on(0.0, 0.1, course(180.0))  # the robot barely moves
     assert not is_head_on(0.0, 1.0, 0.1 * course(180.0))  # nor does the other
+
+
+def test_threat_release_margin_keeps_a_resolved_threat_until_past_l_plus_margin():
+    rules = _rules(threats_within_inflated=True, threat_release_margin_m=0.5)
+    # Head-on, DCPA 1.0 m: outside L = 0.7, inside L + 0.5.
+    obs = observe(others([[5.0, 1.0]], [[-1.0, 0.0]]), v=1.0)
+    assert _plan(obs, rules).threats == ()  # not resolved last cycle: not a threat
+    kept = _plan(obs, rules, resolved_ids=frozenset({1}))
+    assert [t.other_id for t in kept.threats] == [1]
+    # Past L + margin (DCPA 1.3 m) it is released; another id's record does not count.
+    far = observe(others([[5.0, 1.3]], [[-1.0, 0.0]]), v=1.0)
+    assert _plan(far, rules, resolved_ids=frozenset({1})).threats == ()
+    assert _plan(obs, rules, resolved_ids=frozenset({2})).threats == ()
+    # Without threats_within_inflated the margin has nothing to act on: D_thresh rules.
+    assert [t.other_id for t in _plan(obs, _rules(threat_release_margin_m=0.5)).threats] == [1]
