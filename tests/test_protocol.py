@@ -64,7 +64,8 @@ def make_config() -> RunConfigMsg:
     spec = RobotSpec(id=2, start=(-4.0, 0.5, 0.1), goal=(4.0, -0.5), radius_m=0.4,
                      limits=RobotLimits(v_max_mps=0.8, omega_max_radps=1.2), planner="eifp")
     planner = PlannerConfig(d_safety_m=0.25, d_thresh_m=2.0, ghost_clearance_m=None,
-                            max_neighbors=7, mpc=MpcConfig(horizon_steps=15, r_v=0.7))
+                            max_neighbors=7, threats_within_inflated=False, via_margin_m=0.2,
+                            head_on_hold_s=1.5, mpc=MpcConfig(horizon_steps=15, r_v=0.7))
     return RunConfigMsg(run_id="run-1", robot=spec, planner=planner, goal_tolerance_m=0.2,
                         control_rate_hz=10.0, world_rate_hz=50.0, time_scale=1.0, time_limit_s=60.0,
                         cmd_timeout_s=0.5, known_ids=(0, 1, 2, -1))
@@ -164,6 +165,9 @@ def test_config_round_trip_rebuilds_nested_dataclasses() -> None:
     assert isinstance(back.planner.mpc, MpcConfig)
     assert back.planner.mpc.horizon_steps == 15 and back.planner.d_thresh_m == 2.0
     assert back.planner.ghost_clearance_m is None
+    # eIFP-MPC's cycle rules (stop 24) reach a distributed robot as set in the scenario.
+    assert back.planner.threats_within_inflated is False
+    assert back.planner.via_margin_m == 0.2 and back.planner.head_on_hold_s == 1.5
     assert back.robot.start == (-4.0, 0.5, 0.1) and back.robot.goal == (4.0, -0.5)
 
 
