@@ -17,6 +17,7 @@ POSITIVE_FIELDS = frozenset({
     "d_thresh_m", "t_max_s", "sensing_radius_m", "max_neighbors", "max_depth",
     "estimation_window_s", "command_hold_periods", "lookahead_s", "heading_gain",
     "orca_time_horizon_s", "horizon_steps", "dt_s", "max_iter", "spline_first_leg_segments",
+    "via_time_max_s",
 })
 """Numeric config fields that must be > 0 (by field name, over the three classes)."""
 SIGNED_FIELDS = frozenset({"v_min_mps"})
@@ -264,6 +265,20 @@ class PlannerConfig:
             first again while its TCPA is within this of the most imminent one's
             (`primary_hysteresis` for head-on threats only; 0: off). Stop 23 measured it
             alone: F 2.73 -> 2.22, G 3.94 -> 4.03.
+        via_time_max_s: eIFP-MPC drops a via-point candidate that the robot would reach
+            only after this long at top speed (the velocity cone's lambda*, Eq. 13); None:
+            no cap (ifp and eifp keep none). 8 s is the threat horizon `t_max_s`. With the
+            others as fast as the robot, a tangent point that recedes nearly as fast as
+            the robot closes on it is met after tens to thousands of seconds: the
+            via-point lay far down the other's track (measured: 2.2 km away), and the
+            robot turned along that track. Stop 25 (README): with `primary_fallback`,
+            F / G per robot, lockstep with the distributed runs' staggered planning
+            slots, seeds 0-9: 2.09 / 1.94 -> 1.45 / 1.14.
+        primary_fallback: when eIFP-MPC's first-ranked threat has no feasible via-point
+            (both candidates past `via_time_max_s`, say), the next threat in rank order
+            that has one is resolved first; without it the cycle gives up (NO_FEASIBLE,
+            straight to the goal) and the next cycle swerves again. The cap alone: F / G
+            1.45 / 2.44 (G's robots flipped between the goal and a via-point).
         estimation_window_s: history length used to estimate others' velocity and linearity.
             0.75 s (was 0.5): measured, it cut the reversals in the dense crossings
             (lockstep, 5 cm jitter, seeds 0-9: F 4.28 -> 3.09, G 8.30 -> 6.75 per robot;
@@ -314,6 +329,8 @@ class PlannerConfig:
     via_margin_m: float = 0.3
     escape_hysteresis_m: float = 0.1
     head_on_hold_s: float = 3.0
+    via_time_max_s: float | None = 8.0
+    primary_fallback: bool = True
     stand_on_emergency_s: float = 2.0
     estimation_window_s: float = 0.75
     command_hold_periods: float = 1.5

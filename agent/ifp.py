@@ -127,6 +127,12 @@ class CycleRules:
         head_on_hold_s: a head-on threat (course within `HEAD_ON_MAX_DEG` of reciprocal)
             that the previous cycle resolved first is resolved first again while its TCPA
             is within this of the most imminent one's (0: off) [s].
+        via_time_max_s: a via-point candidate reached later than this at top speed
+            (lambda*, Eq. 13) is infeasible (`agent.viapoints.candidate_pair`) [s].
+        primary_fallback: when the first-ranked threat has no feasible via-point, the next
+            threat in rank order that has one is resolved first, instead of the cycle
+            giving up with NO_FEASIBLE (a plan straight to the goal); the MPC's
+            constraints still keep the robot off every disc.
     """
 
     threats_within_inflated: bool = False
@@ -134,6 +140,8 @@ class CycleRules:
     via_margin_m: float = VIA_MARGIN_M
     escape_hysteresis_m: float = 0.0
     head_on_hold_s: float = 0.0
+    via_time_max_s: float = math.inf
+    primary_fallback: bool = False
 
     @staticmethod
     def from_config(config: PlannerConfig) -> CycleRules:
@@ -144,6 +152,9 @@ class CycleRules:
             via_margin_m=config.via_margin_m,
             escape_hysteresis_m=config.escape_hysteresis_m,
             head_on_hold_s=config.head_on_hold_s,
+            via_time_max_s=(math.inf if config.via_time_max_s is None
+                            else config.via_time_max_s),
+            primary_fallback=config.primary_fallback,
         )
 
 
@@ -393,7 +404,7 @@ def plan_via_points(
         )
 
     # Waypoints as complex numbers x + iy while the list changes.
-    world = _World(others, radius, speed, select, rules.via_margin_m)
+    world = _World(others, radius, speed, select, rules.via_margin_m, rules.via_time_max_s)
     wps = [complex(ego.x_m, ego.y_m), complex(goal[0], goal[1])]
     excluded = [-1]  # per leg: index of the other the leg is tangent to, or -1
     chosen: list[tuple[int, Side] | None] = [None, None]  # per waypoint: (index, side)
@@ -401,6 +412,12 @@ def plan_via_points(
     if index.size:
         k = int(index[0])
         split = world.resolve(wps[0], 0.0, wps[1], k)
+        if split is None and rules.primary_fallback:
+            for other_k in index[1:].tolist():
+                split = world.resolve(wps[0], 0.0, wps[1], other_k)
+                if split is not None:
+                    k = other_k
+                    break
         if split is None:
             return ViaPlan(
                 status=PlanStatus.NO_FEASIBLE, waypoints_m=np.stack((p, goal)), threats=threats,
@@ -492,7 +509,7 @@ class _World:
 
     def __init__(
         self, others: Others, radius: np.ndarray, speed: float, select: CandidateSelector,
-        via_margin_m: float = VIA_MARGIN_M,
+        via_margin_m: float = VIA_MARGIN_M, via_time_max_s: float = math.inf,
     ) -> None:
         self.position = others.position_m.tolist()
         self.velocity = others.velocity_mps.tolist()
@@ -500,6 +517,7 @@ class _World:
         self.speed = speed
         self.select = select
         self.via_margin_m = via_margin_m
+        self.via_time_max_s = via_time_max_s
 
     def resolve(
         self, a: complex, start_time_s: float, b: complex, k: int
@@ -515,7 +533,8 @@ class _World:
         ax, ay = a.real, a.imag
         if (cx - ax) ** 2 + (cy - ay) ** 2 <= (l_k * (1.0 + ON_DISC_REL_TOL)) ** 2:
             return None
-        pair = candidate_pair(ax, ay, cx, cy, vx, vy, l_k, self.speed, self.via_margin_m)
+        pair = candidate_pair(ax, ay, cx, cy, vx, vy, l_k, self.speed, self.via_margin_m,
+                              self.via_time_max_s)
         if pair is None:
             return None
         (xr, yr, tr), (xl, yl, tl) = pair

@@ -17,7 +17,12 @@ Candidates without a positive real root are dropped (time = inf, feasible = Fals
 static obstacle gives lambda* = M / r; an obstacle exactly as fast as the cone (|v_o| = r)
 makes the quadratic linear, handled by the cancellation-free root formula (`cone_time`).
 Planners may push the via-point a margin further out of the moving disc (`margin_m`, see
-`agent.ifp`).
+`agent.ifp`), and may cap lambda* (`max_time_s`): a candidate reached later is infeasible.
+The cap is ours, for eIFP-MPC (`agent.ifp.CycleRules.via_time_max_s`). With the others as
+fast as the robot the quadratic is nearly linear, and a tangent point that recedes almost
+as fast as the robot closes on it is met only after tens or thousands of seconds: the
+via-point then lies far down the other's track (measured: 2.2 km), and the robot heads
+along that track instead of round the disc.
 
 Inside an inflated disc (Q <= L) there is no tangent; `escape_point` gives the defined way
 out instead.
@@ -170,6 +175,7 @@ def via_point_candidates(
     inflated_radius_m: np.ndarray,
     cone_speed_mps: float,
     margin_m: float = 0.0,
+    max_time_s: float = math.inf,
 ) -> ViaCandidates:
     """Tangent candidates for K moving discs, filtered by the velocity cone (Eqs. 8-13).
 
@@ -186,9 +192,10 @@ def via_point_candidates(
         inflated_radius_m: (K,) inflated radii L (Eq. 7) [m] (> 0).
         cone_speed_mps: cone aperture r, the robot's top speed [m/s] (> 0).
         margin_m: radial push of feasible via-points out of the disc [m].
+        max_time_s: candidates with lambda* above this are infeasible [s] (> 0; inf: none).
 
     Raises:
-        ValueError: on a non-finite input or a non-positive cone speed.
+        ValueError: on a non-finite input or a non-positive cone speed or cap.
     """
     p = np.asarray(position_m, dtype=float)
     c = np.asarray(centre_m, dtype=float).reshape(-1, 2)
@@ -197,11 +204,14 @@ def via_point_candidates(
     require_finite("via_point_candidates", p, c, v, radius, cone_speed_mps, margin_m)
     if not cone_speed_mps > 0.0:
         raise ValueError("via_point_candidates: cone speed must be positive")
+    if not max_time_s > 0.0:
+        raise ValueError("via_point_candidates: max_time_s must be positive")
     points, outside = _tangent_points(p, c - p, radius)
     k = c.shape[0]
     time = cone_time((points - p).reshape(2 * k, 2), np.repeat(v, 2, axis=0), cone_speed_mps)
     time = time.reshape(k, 2)
     time[~outside] = np.inf
+    time[time > max_time_s] = np.inf
     feasible = np.isfinite(time)
     lam = np.where(feasible, time, 0.0)[:, :, None]
     # c + lam v + (1 + margin / L) (s - c): on the moving boundary, pushed out by margin.
@@ -220,6 +230,7 @@ def candidate_pair(
     radius_m: float,
     cone_speed_mps: float,
     margin_m: float = 0.0,
+    max_time_s: float = math.inf,
 ) -> tuple[tuple[float, float, float], tuple[float, float, float]] | None:
     """`via_point_candidates` for one disc, in plain floats (the planners' inner loop).
 
@@ -233,6 +244,7 @@ def candidate_pair(
         radius_m: inflated radius L [m].
         cone_speed_mps: cone aperture r [m/s] (> 0).
         margin_m: radial push of feasible via-points out of the disc [m].
+        max_time_s: candidates with lambda* above this are infeasible [s].
 
     Returns:
         None if P is inside the disc (Q <= L); else ((x, y, lambda*) RIGHT,
@@ -266,6 +278,8 @@ def candidate_pair(
                 lam = q / a
             if q != 0.0 and 0.0 < c / q < lam:
                 lam = c / q
+            if lam > max_time_s:
+                lam = math.inf
         if lam < math.inf:
             sx, sy = ox - rx, oy - ry  # tangent point relative to the centre
             out.append(

@@ -65,7 +65,8 @@ def make_config() -> RunConfigMsg:
                      limits=RobotLimits(v_max_mps=0.8, omega_max_radps=1.2), planner="eifp")
     planner = PlannerConfig(d_safety_m=0.25, d_thresh_m=2.0, ghost_clearance_m=None,
                             max_neighbors=7, threats_within_inflated=False, via_margin_m=0.2,
-                            head_on_hold_s=1.5, mpc=MpcConfig(horizon_steps=15, r_v=0.7))
+                            head_on_hold_s=1.5, via_time_max_s=None, primary_fallback=False,
+                            mpc=MpcConfig(horizon_steps=15, r_v=0.7))
     return RunConfigMsg(run_id="run-1", robot=spec, planner=planner, goal_tolerance_m=0.2,
                         control_rate_hz=10.0, world_rate_hz=50.0, time_scale=1.0, time_limit_s=60.0,
                         cmd_timeout_s=0.5, known_ids=(0, 1, 2, -1))
@@ -168,6 +169,8 @@ def test_config_round_trip_rebuilds_nested_dataclasses() -> None:
     # eIFP-MPC's cycle rules (stop 24) reach a distributed robot as set in the scenario.
     assert back.planner.threats_within_inflated is False
     assert back.planner.via_margin_m == 0.2 and back.planner.head_on_hold_s == 1.5
+    # ... and stop 25's (None: no cap on lambda*).
+    assert back.planner.via_time_max_s is None and back.planner.primary_fallback is False
     assert back.robot.start == (-4.0, 0.5, 0.1) and back.robot.goal == (4.0, -0.5)
 
 

@@ -22,7 +22,8 @@ File format (YAML, SI units: metres, seconds, radians)::
       #                              side_hysteresis, estimation_window, lookahead,
       #                              heading_gain, orca_time_horizon,
       #                              threats_within_inflated, via_margin,
-      #                              escape_hysteresis, head_on_hold
+      #                              escape_hysteresis, head_on_hold, via_time_max,
+      #                              primary_fallback
       mpc:                       # MpcConfig, same rule: horizon_steps, dt, q_position,
         horizon_steps: 20        #   q_heading, q_terminal, r_v, r_omega, r_dv, r_domega,
         dt: 0.1                  #   max_constraints, slack_weight, max_iter, eps_abs, eps_rel,

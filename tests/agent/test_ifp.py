@@ -435,3 +435,59 @@ def test_threat_release_margin_keeps_a_resolved_threat_until_past_l_plus_margin(
     assert _plan(obs, rules, resolved_ids=frozenset({2})).threats == ()
     # Without threats_within_inflated the margin has nothing to act on: D_thresh rules.
     assert [t.other_id for t in _plan(obs, _rules(threat_release_margin_m=0.5)).threats] == [1]
+
+
+
+def _alongside_and_head_on():
+    """Ego at the origin heading +x at 1.08 m/s; both others' discs give L = 1.6 m.
+
+    Other 1 runs alongside, just ahead, at nearly the robot's speed: TCPA 1.6 s, DCPA 2.1 m
+    (a threat only while a release margin of 0.6 m keeps it); its tangent points recede
+    almost as fast as the robot can close, so its candidates take 24 s and 11 s to meet.
+    Other 2 comes head-on: TCPA 4.4 s, DCPA 0.3 m, candidates at about 4.3 s.
+    """
+    o = others([[2.20, 0.04], [9.5, -0.3]], [[0.97, -0.38], [-1.1, 0.0]], radius=1.1)
+    return observe(o, v=1.08, goal=(30.0, 0.0), v_max=1.1)
+
+
+def test_via_time_max_drops_far_candidates_and_the_fallback_resolves_the_next_threat():
+    obs = _alongside_and_head_on()
+    base = dict(threats_within_inflated=True, threat_release_margin_m=0.6, via_margin_m=0.3)
+    kept = frozenset({1})
+    # Without a cap, other 1 is resolved (after other 2, which its first leg met) by a
+    # via-point over 10 m away, down its track.
+    plan = _plan(obs, _rules(**base), resolved_ids=kept)
+    assert [t.other_id for t in plan.threats] == [1, 2]
+    assert plan.status is PlanStatus.OK
+    assert [i for i, _ in plan.resolved_sides] == [2, 1]
+    assert math.hypot(*plan.waypoints_m[2]) > 10.0
+    # Capped at 8 s, other 1 has no candidate: the paper's cycle gives up (to the goal) ...
+    capped = _plan(obs, _rules(**base, via_time_max_s=8.0), resolved_ids=kept)
+    assert capped.status is PlanStatus.NO_FEASIBLE and capped.via_point_m is None
+    np.testing.assert_array_equal(capped.waypoints_m, [[0, 0], [30, 0]])
+    # ... the fallback resolves the next threat in rank order that has a candidate.
+    rules = _rules(**base, via_time_max_s=8.0, primary_fallback=True)
+    fallback = _plan(obs, rules, resolved_ids=kept)
+    assert fallback.status is PlanStatus.OK and fallback.resolved_id == 2
+    assert [i for i, _ in fallback.resolved_sides] == [2]
+    assert fallback.waypoints_m.shape == (3, 2) and math.hypot(*fallback.via_point_m) < 5.0
+    assert [t.other_id for t in fallback.threats] == [1, 2]  # still reported
+    # With no threat resolvable within the cap the cycle still gives up.
+    none = _plan(obs, _rules(**base, via_time_max_s=4.0, primary_fallback=True),
+                 resolved_ids=kept)
+    assert none.status is PlanStatus.NO_FEASIBLE
+
+
+def test_via_time_max_and_fallback_come_from_the_config():
+    from dataclasses import replace
+
+    from agent.ifp import PAPER_RULES, CycleRules
+
+    rules = CycleRules.from_config(PlannerConfig())
+    assert rules.via_time_max_s == 8.0 and rules.primary_fallback is True
+    off = CycleRules.from_config(replace(PlannerConfig(), via_time_max_s=None,
+                                         primary_fallback=False))
+    assert math.isinf(off.via_time_max_s) and off.primary_fallback is False
+    assert math.isinf(PAPER_RULES.via_time_max_s) and PAPER_RULES.primary_fallback is False
+    with pytest.raises(ValueError, match="via_time_max_s"):
+        PlannerConfig(via_time_max_s=0.0)

@@ -147,8 +147,9 @@ def test_candidate_pair_matches_the_vectorised_form():
         v = rng.uniform(-2, 2, 2)
         radius, speed = rng.uniform(0.3, 1.5), rng.uniform(0.2, 2.0)
         margin = 0.0 if i % 2 else 0.05
-        vec = via_point_candidates(p, c[None], v[None], [radius], speed, margin)
-        pair = candidate_pair(*p, *c, *v, radius, speed, margin)
+        cap = math.inf if i % 3 else rng.uniform(0.5, 8.0)
+        vec = via_point_candidates(p, c[None], v[None], [radius], speed, margin, cap)
+        pair = candidate_pair(*p, *c, *v, radius, speed, margin, cap)
         if pair is None:
             assert not vec.outside[0]
             continue
@@ -156,6 +157,25 @@ def test_candidate_pair_matches_the_vectorised_form():
             x, y, lam = pair[idx]
             assert lam == pytest.approx(vec.time_s[0, idx], rel=1e-9)
             np.testing.assert_allclose([x, y], vec.point_m[0, idx], atol=1e-9)
+
+
+def test_max_time_drops_a_tangent_point_that_recedes_almost_as_fast_as_the_robot():
+    # A neighbour converging from the left at nearly the robot's speed (1.0 of 1.1 m/s):
+    # its RIGHT tangent point is met only after 460 s, 462 m away down its track.
+    args = (0.0, 0.0, 1.5, 2.5, 1.0, -0.45, 1.6, 1.1, 0.3)
+    (xr, yr, tr), (xl, yl, tl) = candidate_pair(*args)
+    assert tr == pytest.approx(460.03, abs=0.01) and math.hypot(xr, yr) > 400.0
+    assert tl == pytest.approx(2.467, abs=0.001)
+    (xr8, yr8, tr8), left8 = candidate_pair(*args, max_time_s=8.0)
+    assert math.isinf(tr8)
+    assert math.hypot(xr8, yr8) < 3.0  # the raw tangent point, as for any infeasible one
+    assert left8 == (xl, yl, tl)  # under the cap: unchanged
+    (_, _, tr2), (_, _, tl2) = candidate_pair(*args, max_time_s=2.0)
+    assert math.isinf(tr2) and math.isinf(tl2)
+    vec = via_point_candidates([0, 0], [[1.5, 2.5]], [[1.0, -0.45]], [1.6], 1.1, 0.3, 8.0)
+    assert vec.feasible[0].tolist() == [False, True]
+    with pytest.raises(ValueError, match="max_time_s"):
+        via_point_candidates([0, 0], [[1.5, 2.5]], [[1.0, -0.45]], [1.6], 1.1, 0.3, 0.0)
 
 
 @pytest.mark.parametrize("bad", [math.nan, math.inf])

@@ -182,8 +182,8 @@ def test_latency_compensation_makes_a_measurable_difference(tmp_path):
 
 
 def stop23_cycle(cfg):
-    """`cfg` with eIFP-MPC's stop-24 cycle rules off (the paper's threat test, via-point
-    margin and escape). The two ablations below were measured on that cycle; with the
+    """`cfg` with eIFP-MPC's stop-24 and stop-25 cycle rules off (the paper's threat test,
+    via-point margin, escape, no cap on lambda* and no primary fallback). The two ablations below were measured on that cycle; with the
     rules on (via-points 0.3 m out of the discs) setup D keeps clear at these latencies
     without the feature under test too (150 ms, link seed 2: +0.07 m with the half-planes'
     latency term off; 200 ms, link seeds 8 and 7: +0.14 m without the braking guard, and
@@ -191,7 +191,8 @@ def stop23_cycle(cfg):
     from dataclasses import replace
 
     return replace(cfg, threats_within_inflated=False, threat_release_margin_m=0.0,
-                   via_margin_m=0.05, escape_hysteresis_m=0.0, head_on_hold_s=0.0)
+                   via_margin_m=0.05, escape_hysteresis_m=0.0, head_on_hold_s=0.0,
+                   via_time_max_s=None, primary_fallback=False)
 
 
 def test_latency_aware_half_planes_keep_setup_d_clear_at_150_ms(tmp_path, monkeypatch):
