@@ -46,9 +46,12 @@ Choices the paper leaves open (documented here, tested in tests/agent/test_ifp.p
 `CycleRules` holds eIFP-MPC's changes to this cycle (not in the paper; the default
 `PAPER_RULES` is the cycle above, which `ifp` and `eifp` run): threats are only the others
 whose DCPA falls inside the pair's inflated radius L; via-points lie further out of their
-discs; an escape, once begun, goes on until the robot is a band clear of the disc; and a
-head-on threat resolved first last cycle is kept first for a while. Why, and what each did
-to the dense crossings, is in `agent.config.PlannerConfig` and the README ("Stop 24").
+discs; an escape, once begun, goes on until the robot is a band clear of the disc; a
+head-on threat resolved first last cycle is kept first for a while (stop 24); a candidate
+reached only after `via_time_max_s` is infeasible, and in step 3 a first threat without a
+feasible candidate hands the first via-point to the next threat in rank order that has
+one, instead of giving up (stop 25). Why, and what each did to the dense crossings, is in
+`agent.config.PlannerConfig` and the README ("Stop 24", "Stop 25").
 """
 
 from __future__ import annotations
