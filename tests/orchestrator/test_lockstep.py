@@ -183,11 +183,13 @@ def test_latency_compensation_makes_a_measurable_difference(tmp_path):
 
 def stop23_cycle(cfg):
     """`cfg` with eIFP-MPC's stop-24 and stop-25 cycle rules off (the paper's threat test,
-    via-point margin, escape, no cap on lambda* and no primary fallback). The two ablations below were measured on that cycle; with the
-    rules on (via-points 0.3 m out of the discs) setup D keeps clear at these latencies
-    without the feature under test too (150 ms, link seed 2: +0.07 m with the half-planes'
-    latency term off; 200 ms, link seeds 8 and 7: +0.14 m without the braking guard, and
-    none of the three cases touched), so they would no longer show what the feature does."""
+    via-point margin, escape, no cap on lambda* and no primary fallback).
+
+    The two ablations below were measured on that cycle. With the stop-24 rules on
+    (via-points 0.3 m out of the discs) setup D keeps clear at these latencies without the
+    feature under test too (150 ms, link seed 2: +0.07 m with the half-planes' latency term
+    off; 200 ms, link seeds 8 and 7: +0.14 m without the braking guard, and none of the
+    three cases touched), so they would no longer show what the feature does."""
     from dataclasses import replace
 
     return replace(cfg, threats_within_inflated=False, threat_release_margin_m=0.0,
