@@ -21,7 +21,8 @@ File format (YAML, SI units: metres, seconds, radians)::
       #                              w_angle, ghost_horizon, ghost_clearance,
       #                              side_hysteresis, estimation_window, lookahead,
       #                              heading_gain, orca_time_horizon,
-      #                              threats_within_inflated, via_margin,
+      #                              threats_within_inflated, threat_release_margin,
+      #                              via_margin,
       #                              escape_hysteresis, head_on_hold, via_time_max,
       #                              primary_fallback
       mpc:                       # MpcConfig, same rule: horizon_steps, dt, q_position,
