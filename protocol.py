@@ -39,9 +39,14 @@ from typing import Any, Literal
 import msgpack
 import numpy as np
 
-from agent.config import PLANNER_NAMES, PlannerConfig
-from agent.types import PlanStatus, PoseSnapshot, Side
-from world.scenario import RobotSpec
+from agent.core.config import PLANNER_NAMES, PlannerConfig
+from agent.core.scenario import RobotSpec
+from agent.core.types import PlanStatus, PoseSnapshot, Side
+from world.sim.schedule import LINK_LEASE_MS as LINK_LEASE_MS  # re-exported: the schedule
+from world.sim.schedule import MAX_POSE_SLOTS as MAX_POSE_SLOTS  # is part of the wire
+from world.sim.schedule import plan_pose_slot as plan_pose_slot  # contract
+from world.sim.schedule import pose_slot_count as pose_slot_count
+from world.sim.schedule import pose_slot_of_tick as pose_slot_of_tick
 
 SCHEMA_VERSION = 2
 """Bumped on any incompatible change of a message schema (2: `CommandMsg` gained ``hold``)."""
@@ -63,7 +68,6 @@ MAX_HOLD_S = 60.0
 MAX_REASON_CHARS = 256
 MAX_SEQ = 2**63 - 1
 MAX_RUN_ID_CHARS = 64
-MAX_POSE_SLOTS = 1000
 """Upper bound on `pose_slot_count` (a world ticking 1000 times per control period)."""
 
 _RUN_ID_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")
@@ -198,59 +202,6 @@ class RunKeys:
 # ---------------------------------------------------------------------------------------------
 # Shared transport settings (JSON5 values for zenoh.Config.insert_json5; no zenoh import)
 # ---------------------------------------------------------------------------------------------
-
-def pose_slot_count(world_rate_hz: float, control_rate_hz: float) -> int:
-    """K, the number of pose slots: world ticks per control period if that is a whole number.
-
-    The world publishes tick t's poses on ``poses/<t mod K>``. With K world ticks per control
-    period, a robot planning once a period on a fixed tick phase needs only the poses of one
-    slot, a K-th of the stream (K = 5 at 50 Hz world, 10 Hz control). If the ratio is not a
-    whole number (within 1e-6) there is one slot, every tick on ``poses/0``.
-    """
-    if not (math.isfinite(world_rate_hz) and math.isfinite(control_rate_hz)
-            and world_rate_hz > 0.0 and control_rate_hz > 0.0):
-        raise ValueError("rates must be positive and finite")
-    ratio = world_rate_hz / control_rate_hz
-    k = round(ratio)
-    if k < 1 or abs(ratio - k) > 1e-6 * max(1.0, ratio):
-        return 1
-    return min(k, MAX_POSE_SLOTS)
-
-
-def pose_slot_of_tick(tick: int, slots: int) -> int:
-    """The slot a world tick's poses are published on."""
-    return int(tick) % int(slots)
-
-
-def plan_pose_slot(period_s: float, phase_s: float, tick_s: float, slots: int) -> int | None:
-    """The one pose slot that holds every plan slot ``phase_s + k * period_s`` (k integer).
-
-    Returns None when the plan slots do not all fall on world ticks of one slot (a phase
-    between ticks, a period that is not a multiple of the tick, or one that cycles through
-    several slots): such a robot needs every tick's poses (``poses/*``).
-
-    Args:
-        period_s: planning period [sim s].
-        phase_s: offset of the planning slots [sim s].
-        tick_s: world tick [sim s].
-        slots: K, from `pose_slot_count`.
-    """
-    if not (period_s > 0.0 and tick_s > 0.0 and slots >= 1):
-        raise ValueError("period_s and tick_s must be positive, slots >= 1")
-    ticks_per_period = period_s / tick_s
-    phase_ticks = phase_s / tick_s
-    if (abs(ticks_per_period - round(ticks_per_period)) > 1e-6
-            or abs(phase_ticks - round(phase_ticks)) > 1e-6):
-        return None
-    step = round(ticks_per_period) % slots
-    if step != 0:  # successive plans land on different slots
-        return None
-    return round(phase_ticks) % slots
-
-
-LINK_LEASE_MS = 1000
-"""Transport lease: a hung (SIGSTOPped) peer is noticed after about this long."""
-
 
 def session_settings(
     *,
@@ -638,8 +589,8 @@ class CommandMsg:
         pose_stamp_s: sim time of the pose the plan was made from.
         v_mps, omega_radps: the command (the world clamps it to the robot's limits).
         plan_ms: wall time the plan took.
-        status: a `agent.types.PlanStatus` value.
-        side: a `agent.types.Side` value.
+        status: a `agent.core.types.PlanStatus` value.
+        side: a `agent.core.types.Side` value.
         resolved_id: id of the threat the chosen via-point resolves, or None.
         hold_s: how long (sim s, in (0, `MAX_HOLD_S`]) the world may apply this command
             if no newer one arrives; after that it brakes the robot (a command is good for

@@ -37,7 +37,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import ctypes
 import gc
 import logging
 import multiprocessing
@@ -50,9 +49,10 @@ from collections.abc import Sequence
 from pathlib import Path
 from types import FrameType
 
+from agent.process import die_with_parent
+
 log = logging.getLogger("fleet")
 
-PR_SET_PDEATHSIG = 1
 FORWARDED = (signal.SIGTERM, signal.SIGINT)
 MAX_STARTING = 8
 """Robots starting at once (connect, fetch the configuration, warm up, declare): 128 started
@@ -109,10 +109,10 @@ def robot_argv(run_id: str, robot_id: int, endpoint: str, startup_timeout_s: str
 
 def warm_up_planners() -> None:
     """Import every planner and plan once with each (a throwaway robot), before forking."""
-    from agent.config import PLANNER_NAMES, PlannerConfig
+    from agent.core.config import PLANNER_NAMES, PlannerConfig
+    from agent.core.scenario import RobotSpec
     from agent.node import warm_up
     from protocol import RunConfigMsg
-    from world.scenario import RobotSpec
 
     for k, name in enumerate(PLANNER_NAMES):
         spec = RobotSpec(k, (0.0, 0.0, 0.0), (10.0, 0.0), planner=name)
@@ -120,14 +120,6 @@ def warm_up_planners() -> None:
             run_id="warm-up", robot=spec, planner=PlannerConfig(), goal_tolerance_m=0.25,
             control_rate_hz=10.0, world_rate_hz=50.0, time_scale=1.0, time_limit_s=10.0,
             cmd_timeout_s=0.5, known_ids=(k, k + 1)), 0.1)
-
-
-def _die_with_parent(parent_pid: int) -> None:
-    # Not Linux: no prctl; the launcher's teardown of the process group still reaches us.
-    with contextlib.suppress(OSError, AttributeError):
-        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
-    if os.getppid() != parent_pid:  # the parent died before prctl took effect
-        os._exit(1)
 
 
 def _child(argv: list[str], log_path: Path, parent_pid: int, nice: int = 0,
@@ -146,7 +138,7 @@ def _child(argv: list[str], log_path: Path, parent_pid: int, nice: int = 0,
                 os.close(ready_fd)
 
     try:
-        _die_with_parent(parent_pid)
+        die_with_parent(parent_pid)
         if nice > 0:
             os.nice(nice)
         fd = os.open(log_path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)

@@ -16,7 +16,7 @@ explicit endpoint). It knows nothing but what arrives on the wire (see `protocol
 
 Faults: a malformed pose or control message raises `ProtocolError`; it is counted, logged
 to stderr (the first few, then every 100th) and the robot keeps running. The robot stops
-commanding and exits with `EXIT_WORLD_LOST` if the world's liveliness token disappears
+commanding and exits with `ExitCode.WORLD_LOST` if the world's liveliness token disappears
 before the end message and is not back within `WORLD_BLIP_GRACE_S` (0.5 s), or no pose
 arrives for ``--pose-timeout-s`` while running. If the process itself was suspended
 (SIGSTOP: a loop iteration more than `SUSPEND_GAP_S` late), its link has been closed by the
@@ -24,7 +24,7 @@ lease and the world's token vanishes from its view; it then sends nothing and wa
 `REJOIN_GRACE_S` for the token to return (the client reconnects by itself) before giving up.
 
 Injected faults (``--latency-ms``, ``--jitter-ms``, ``--drop``, ``--dup``, ``--reorder``,
-``--fault-seed``): every valid pose passes through a seeded `agent.link.FaultyLink` in sim
+``--fault-seed``): every valid pose passes through a seeded `world.sim.link.FaultyLink` in sim
 time before the controller sees it; the controller drops what is stale or out of order.
 The robot's sim clock is the newest pose's stamp *as it arrived from the world*, before the
 injected fault, advanced by wall time x time_scale: it stands for the synchronised clock
@@ -63,21 +63,27 @@ import argparse
 import logging
 import math
 import os
-import signal
 import sys
 import threading
 import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from types import FrameType
 from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 import zenoh
 
-from agent import argtypes
-from agent.link import LINK_POSES, FaultyLink, LinkFaults, link_rng
+from agent import flags as argtypes
+from agent.process import (
+    ExitCode,
+    SessionError,
+    StopFlag,
+    close_session,
+    die_with_launcher,
+    open_session,
+    stop_on_signals,
+)
 from protocol import (
     CommandMsg,
     ControlMsg,
@@ -89,13 +95,10 @@ from protocol import (
     pose_slot_count,
     session_settings,
 )
+from world.sim.link import LINK_POSES, FaultyLink, LinkFaults, link_rng
 
 if TYPE_CHECKING:
-    from agent.controller import RobotController
-
-EXIT_OK = 0
-EXIT_SETUP = 2
-EXIT_WORLD_LOST = 3
+    from agent.planning.controller import RobotController
 
 POSE_RING = 2
 """Capacity of the pose ring: older poses are overwritten, never queued."""
@@ -103,8 +106,6 @@ CONNECT_ATTEMPT_MS = 1000
 QUERY_TIMEOUT_S = 1.0
 STAMP_EPS_S = 1e-6
 """Tolerance on sim-time comparisons (stamps are sums of float ticks)."""
-CLOSE_TIMEOUT_S = 2.0
-"""Wall time allowed for closing the session before the process leaves without it."""
 SUSPEND_GAP_S = 0.5
 """A loop iteration this much later than the previous one means the process was suspended."""
 REJOIN_GRACE_S = 5.0
@@ -187,17 +188,7 @@ def parse_args(argv: list[str] | None = None) -> AgentOptions:
                         help="wall deadline to connect and get the configuration")
     parser.add_argument("--pose-timeout-s", type=argtypes.positive, default=5.0,
                         help="wall time without poses after which the world is gone")
-    faults = parser.add_argument_group("fault injection (sim time; see agent.link)")
-    faults.add_argument("--latency-ms", type=argtypes.non_negative, default=0.0,
-                        help="pose link: fixed delay [ms]")
-    faults.add_argument("--jitter-ms", type=argtypes.non_negative, default=0.0,
-                        help="pose link: uniform jitter half-width [ms]")
-    faults.add_argument("--drop", type=argtypes.probability, default=0.0,
-                        help="pose loss probability")
-    faults.add_argument("--dup", type=argtypes.probability, default=0.0,
-                        help="pose duplication probability")
-    faults.add_argument("--reorder", type=argtypes.probability, default=0.0,
-                        help="probability a pose is held back (overtaken by later ones)")
+    faults = argtypes.add_link_fault_flags(parser, "the pose link")
     faults.add_argument("--fault-seed", type=int, default=0, help="seeds the pose link")
     faults.add_argument("--control-phase-s", type=argtypes.non_negative, default=0.0,
                         help="offset of the planning slots [sim s]")
@@ -210,24 +201,10 @@ def parse_args(argv: list[str] | None = None) -> AgentOptions:
                         control_rate_hz=args.control_rate_hz,
                         startup_timeout_s=args.startup_timeout_s,
                         pose_timeout_s=args.pose_timeout_s,
-                        link=LinkFaults(latency_ms=args.latency_ms, jitter_ms=args.jitter_ms,
-                                        drop=args.drop, dup=args.dup, reorder=args.reorder),
+                        link=argtypes.link_faults(args),
                         fault_seed=args.fault_seed, control_phase_s=args.control_phase_s,
                         plan_delay_ms=args.plan_delay_ms,
                         compensate_latency=not args.no_latency_compensation)
-
-
-class _StopFlag:
-    """Set by SIGTERM/SIGINT; the loops poll it and leave (so the session is closed)."""
-
-    def __init__(self) -> None:
-        self.signum: int | None = None
-
-    def __call__(self, signum: int, frame: FrameType | None) -> None:
-        self.signum = signum
-
-    def __bool__(self) -> bool:
-        return self.signum is not None
 
 
 class _Exit(Exception):
@@ -239,32 +216,27 @@ class _Exit(Exception):
         self.code = code
 
 
-def open_session(options: AgentOptions, stop: _StopFlag, deadline: float) -> zenoh.Session:
+def connect(options: AgentOptions, stop: StopFlag, deadline: float) -> zenoh.Session:
     """Connect as a client, retrying until `deadline` (monotonic); raises `_Exit`."""
-    conf = zenoh.Config()
-    for key, value in session_settings(mode="client", connect=[options.connect],
-                                       connect_timeout_ms=CONNECT_ATTEMPT_MS).items():
-        conf.insert_json5(key, value)
-    last_error = "no attempt"
-    while not stop:
-        try:
-            return zenoh.open(conf)
-        except zenoh.ZError as exc:
-            last_error = str(exc)
-        if time.monotonic() > deadline:
-            raise _Exit(f"cannot connect to {options.connect}: {last_error}", EXIT_SETUP)
-        time.sleep(0.1)
-    raise _Exit("signal", EXIT_OK)
+    settings = session_settings(mode="client", connect=[options.connect],
+                                connect_timeout_ms=CONNECT_ATTEMPT_MS)
+    try:
+        session = open_session(settings, deadline=deadline, stop=stop)
+    except SessionError as exc:
+        raise _Exit(f"cannot connect to {options.connect}: {exc}", ExitCode.TRANSPORT) from exc
+    if session is None:
+        raise _Exit("signal", ExitCode.OK)
+    return session
 
 
-def fetch_config(session: zenoh.Session, keys: RunKeys, robot_id: int, stop: _StopFlag,
+def fetch_config(session: zenoh.Session, keys: RunKeys, robot_id: int, stop: StopFlag,
                  deadline: float) -> RunConfigMsg:
     """Query the world for this robot's configuration until `deadline`; raises `_Exit`."""
     problem = "no reply"
     while not stop:
         remaining = deadline - time.monotonic()
         if remaining <= 0.0:
-            raise _Exit(f"no configuration for robot {robot_id}: {problem}", EXIT_SETUP)
+            raise _Exit(f"no configuration for robot {robot_id}: {problem}", ExitCode.BAD_INPUT)
         replies = session.get(keys.config(robot_id), timeout=min(QUERY_TIMEOUT_S, remaining))
         for reply in replies:
             if reply.ok is None:
@@ -278,7 +250,7 @@ def fetch_config(session: zenoh.Session, keys: RunKeys, robot_id: int, stop: _St
                 problem = f"malformed configuration: {exc}"
                 log.warning("robot %d: %s", robot_id, problem)
         time.sleep(0.1)
-    raise _Exit("signal", EXIT_OK)
+    raise _Exit("signal", ExitCode.OK)
 
 
 class PlanSchedule:
@@ -344,7 +316,7 @@ def plan_phase_s(robot_id: int, period_s: float, tick_s: float) -> float:
 def make_controller(config: RunConfigMsg, period_s: float, *,
                     compensate_latency: bool = True) -> RobotController:
     """The robot's `RobotController`, its planner set up for this control period."""
-    from agent.controller import RobotController
+    from agent.planning.controller import RobotController
 
     return RobotController(config.robot, config.planner, config.goal_tolerance_m,
                            control_period_s=period_s, compensate_latency=compensate_latency)
@@ -357,7 +329,7 @@ def warm_up(config: RunConfigMsg, period_s: float) -> None:
     liveliness token is declared keeps it out of the run. The scene is this robot at its
     start with a phantom disc ahead, so the threat and via-point paths are exercised too.
     """
-    from agent.types import PoseSnapshot
+    from agent.core.types import PoseSnapshot
 
     spec = config.robot
     x, y, heading = spec.start
@@ -386,7 +358,7 @@ class RobotNode:
     """
 
     def __init__(self, session: zenoh.Session, options: AgentOptions, config: RunConfigMsg,
-                 stop: _StopFlag, cpu_tokens: CpuTokens | None = None) -> None:
+                 stop: StopFlag, cpu_tokens: CpuTokens | None = None) -> None:
         self.keys = RunKeys(options.run_id)
         self.options = options
         self.cpu_tokens = cpu_tokens
@@ -472,7 +444,7 @@ class RobotNode:
                 self._reject("control message", exc)
                 continue
             if msg.kind == "end":  # "start" needs no action: planning begins with the poses
-                raise _Exit(f"end ({msg.reason})", EXIT_OK)
+                raise _Exit(f"end ({msg.reason})", ExitCode.OK)
 
     def poll_world(self) -> None:
         """World liveliness; raises `_Exit` if the world is gone before the end.
@@ -504,8 +476,8 @@ class RobotNode:
         if gone is not None and now - gone > self.world_grace_s:
             if self.world_grace_s == REJOIN_GRACE_S:
                 raise _Exit(f"world lost (token not back within {REJOIN_GRACE_S:.0f} s)",
-                            EXIT_WORLD_LOST)
-            raise _Exit("world lost (liveliness token gone)", EXIT_WORLD_LOST)
+                            ExitCode.WORLD_LOST)
+            raise _Exit("world lost (liveliness token gone)", ExitCode.WORLD_LOST)
 
     def sim_now(self) -> float:
         """The robot's sim clock (see `__init__`)."""
@@ -675,14 +647,14 @@ class RobotNode:
                 self.poll_control()
                 self.poll_world()
                 if not self.world_seen and time.monotonic() > startup_deadline:
-                    raise _Exit("world not seen before the startup deadline", EXIT_WORLD_LOST)
+                    raise _Exit("world not seen before the startup deadline", ExitCode.WORLD_LOST)
                 if (not self.sense_and_plan() and self.last_rx_wall is not None
                         and time.monotonic() - max(self.last_rx_wall, self.resumed_wall)
                         > self.options.pose_timeout_s):
                     raise _Exit(f"no poses for {self.options.pose_timeout_s:.1f} s",
-                                EXIT_WORLD_LOST)
+                                ExitCode.WORLD_LOST)
                 self._sleep()
-            return "signal", EXIT_OK
+            return "signal", ExitCode.OK
         except _Exit as stop:
             return stop.reason, stop.code
         finally:
@@ -715,26 +687,6 @@ class RobotNode:
         return " ".join(f"{k}={v}" for k, v in fields.items())
 
 
-def close_session(session: zenoh.Session, timeout_s: float = CLOSE_TIMEOUT_S) -> bool:
-    """Close `session`, waiting at most `timeout_s`; False if the close is still stuck.
-
-    Closing waits for the peer to acknowledge (up to 10 s inside zenoh): with a hung
-    (SIGSTOPped) router that would keep a robot that has already stopped commanding alive.
-    """
-    done = threading.Event()
-
-    def _close() -> None:
-        try:
-            session.close()
-        except zenoh.ZError as exc:
-            log.warning("closing the session: %s", exc)
-        finally:
-            done.set()
-
-    threading.Thread(target=_close, name="zenoh-close", daemon=True).start()
-    return done.wait(timeout_s)
-
-
 def run_agent(options: AgentOptions, on_ready: Callable[[], None] | None = None,
               cpu_tokens: CpuTokens | None = None) -> int:
     """Run one robot process to its end; returns its exit status.
@@ -745,45 +697,46 @@ def run_agent(options: AgentOptions, on_ready: Callable[[], None] | None = None,
     If the session cannot be closed in time (the router hangs), the process leaves with
     `os._exit` after logging: nothing is left to flush but stderr.
     """
-    stop = _StopFlag()
-    previous = {s: signal.signal(s, stop) for s in (signal.SIGTERM, signal.SIGINT)}
+    with stop_on_signals() as stop:
+        return _run_agent(options, stop, on_ready, cpu_tokens)
+
+
+def _run_agent(options: AgentOptions, stop: StopFlag, on_ready: Callable[[], None] | None,
+               cpu_tokens: CpuTokens | None) -> int:
     keys = RunKeys(options.run_id)
     summary = ""
     session: zenoh.Session | None = None
+    deadline = time.monotonic() + options.startup_timeout_s
+    log.info("robot %d: run %s, connecting to %s", options.robot_id, options.run_id,
+             options.connect)
     try:
-        deadline = time.monotonic() + options.startup_timeout_s
-        log.info("robot %d: run %s, connecting to %s", options.robot_id, options.run_id,
-                 options.connect)
-        try:
-            session = open_session(options, stop, deadline)
-            config = fetch_config(session, keys, options.robot_id, stop, deadline)
-            node = RobotNode(session, options, config, stop, cpu_tokens)
-            if on_ready is not None:
-                on_ready()
-            reason, code = node.run(deadline)
-            summary = node.summary()
-        except _Exit as exc:
-            reason, code = exc.reason, exc.code
-        except BaseException:
-            if session is not None:
-                close_session(session)  # an unexpected error: still release the transport
-            raise
-        level = logging.INFO if code == EXIT_OK else logging.ERROR
-        log.log(level, "robot %d exit: reason=%r code=%d %s", options.robot_id, reason, code,
-                summary)
-        if session is not None and not close_session(session):
-            log.error("robot %d: session close timed out; leaving without it", options.robot_id)
-            logging.shutdown()
-            os._exit(code)
-        return code
-    finally:
-        for signum, handler in previous.items():
-            signal.signal(signum, handler)
+        session = connect(options, stop, deadline)
+        config = fetch_config(session, keys, options.robot_id, stop, deadline)
+        node = RobotNode(session, options, config, stop, cpu_tokens)
+        if on_ready is not None:
+            on_ready()
+        reason, code = node.run(deadline)
+        summary = node.summary()
+    except _Exit as exc:
+        reason, code = exc.reason, exc.code
+    except BaseException:
+        if session is not None:
+            close_session(session)  # an unexpected error: still release the transport
+        raise
+    level = logging.INFO if code == ExitCode.OK else logging.ERROR
+    log.log(level, "robot %d exit: reason=%r code=%d %s", options.robot_id, reason, code,
+            summary)
+    if session is not None and not close_session(session):
+        log.error("robot %d: session close timed out; leaving without it", options.robot_id)
+        logging.shutdown()
+        os._exit(code)
+    return code
 
 
 def main(argv: list[str] | None = None, on_ready: Callable[[], None] | None = None,
          cpu_tokens: CpuTokens | None = None) -> int:
     """Entry point of ``python -m agent`` (`on_ready`, `cpu_tokens`: see `run_agent`)."""
+    die_with_launcher()
     logging.basicConfig(level=logging.INFO, stream=sys.stderr,
                         format="%(asctime)s agent %(levelname)s %(message)s")
     return run_agent(parse_args(argv), on_ready, cpu_tokens)

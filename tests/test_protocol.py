@@ -15,8 +15,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import protocol
-from agent.config import MpcConfig, PlannerConfig, RobotLimits
-from agent.types import PlanStatus, PoseSnapshot, Side
+from agent.core.config import MpcConfig, PlannerConfig, RobotLimits
+from agent.core.scenario import RobotSpec
+from agent.core.types import PlanStatus, PoseSnapshot, Side
 from protocol import (
     MAX_MESSAGE_BYTES,
     MAX_ROBOTS,
@@ -33,7 +34,6 @@ from protocol import (
     session_settings,
     validate_run_id,
 )
-from world.scenario import RobotSpec
 
 FUZZ = settings(max_examples=300, deadline=None, database=None,
                 suppress_health_check=[HealthCheck.too_slow])

@@ -1,3 +1,3 @@
-"""The world: ground-truth unicycle dynamics, contacts and arrival (`world.dynamics`, pure),
-scenario files (`world.scenario`), and, in `world.node`, the simulation process over Zenoh.
+"""The world: ground-truth unicycle dynamics, contacts and arrival (`world.sim.dynamics`, pure),
+scenario files (`world.scenario_file`), and, in `world.node`, the simulation process over Zenoh.
 """

@@ -24,7 +24,7 @@ Faults: a malformed command is rejected (`ProtocolError`), counted and logged as
 ``rejected`` event (the first `MAX_REJECT_EVENTS`); the ``end`` event always has the exact
 total (``rejected``) and tallies per key (``rejected_by_key``) and per reason
 (``rejected_by_reason``: the field or kind of error, e.g. ``cmd.v``). Valid commands pass
-through their robot's command link (`agent.link.FaultyLink`, ``--latency-ms`` ...: injected
+through their robot's command link (`world.sim.link.FaultyLink`, ``--latency-ms`` ...: injected
 delay, loss, duplication, reordering, in sim time); a command whose ``seq`` does not
 increase is dropped as stale and counted. A robot whose liveliness
 token disappears (crash, or hang past the 1 s transport lease) is logged as ``robot_lost``
@@ -45,18 +45,24 @@ import argparse
 import logging
 import math
 import os
-import signal
 import sys
-import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from types import FrameType
 
 import zenoh
 
-from agent import argtypes
-from agent.link import LINK_COMMANDS, FaultyLink, LinkFaults, link_rng
+from agent import flags as argtypes
+from agent.core.scenario import Scenario
+from agent.process import (
+    ExitCode,
+    SessionError,
+    StopFlag,
+    close_session,
+    die_with_launcher,
+    open_session,
+    stop_on_signals,
+)
 from protocol import (
     CommandMsg,
     ControlMsg,
@@ -68,13 +74,10 @@ from protocol import (
     pose_slot_of_tick,
     session_settings,
 )
-from world.dynamics import WorldSim
 from world.recorder import RunRecorder
-from world.scenario import Scenario, ScenarioError, load_scenario
-
-EXIT_OK = 0
-EXIT_FAILED = 1
-EXIT_SETUP = 2
+from world.scenario_file import ScenarioError, load_scenario
+from world.sim.dynamics import WorldSim
+from world.sim.link import LINK_COMMANDS, FaultyLink, LinkFaults, link_rng
 
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 MAX_REJECT_EVENTS = 100
@@ -83,8 +86,6 @@ FLUSH_TICKS = 5
 """trajectory.csv and commands.csv are flushed every this many ticks (0.1 s at 50 Hz)."""
 MAX_TALLY_KEYS = 64
 """Distinct keys (and reasons) tallied in the ``end`` event; the rest count as ``other``."""
-CLOSE_TIMEOUT_S = 3.0
-"""Wall time allowed for closing the session before the process leaves without it."""
 IDLE_POLL_S = 0.01
 """Wall period of the waiting and lingering loops."""
 
@@ -148,16 +149,7 @@ def parse_args(argv: list[str] | None = None) -> WorldOptions:
                         help="planning rate served to the robots [1/sim s]")
     parser.add_argument("--linger-s", type=float, default=3.0,
                         help="wall time to wait for robots to leave after the end")
-    faults = parser.add_argument_group("fault injection on the command links (sim time)")
-    faults.add_argument("--latency-ms", type=argtypes.non_negative, default=0.0,
-                        help="fixed delay [ms]")
-    faults.add_argument("--jitter-ms", type=argtypes.non_negative, default=0.0,
-                        help="uniform jitter half-width [ms]")
-    faults.add_argument("--drop", type=argtypes.probability, default=0.0, help="loss probability")
-    faults.add_argument("--dup", type=argtypes.probability, default=0.0,
-                        help="duplication probability")
-    faults.add_argument("--reorder", type=argtypes.probability, default=0.0,
-                        help="probability a command is held back (overtaken)")
+    faults = argtypes.add_link_fault_flags(parser, "the command links")
     faults.add_argument("--fault-seed", type=int, default=0, help="seeds the command links")
     args = parser.parse_args(argv)
     listen = None if args.connect else (args.listen or DEFAULT_ENDPOINT)
@@ -173,25 +165,9 @@ def parse_args(argv: list[str] | None = None) -> WorldOptions:
         wait_robots_s=args.wait_robots_s,
         control_rate_hz=args.control_rate_hz,
         linger_s=max(0.0, args.linger_s),
-        link=LinkFaults(latency_ms=args.latency_ms, jitter_ms=args.jitter_ms, drop=args.drop,
-                        dup=args.dup, reorder=args.reorder),
+        link=argtypes.link_faults(args),
         fault_seed=args.fault_seed,
     )
-
-
-class _StopFlag:
-    """Set by SIGTERM/SIGINT; the loops poll it and leave (so the session is closed)."""
-
-    def __init__(self) -> None:
-        self.signum: int | None = None
-        self.count = 0
-
-    def __call__(self, signum: int, frame: FrameType | None) -> None:
-        self.signum = signum
-        self.count += 1
-
-    def __bool__(self) -> bool:
-        return self.signum is not None
 
 
 def run_configs(scenario: Scenario, options: WorldOptions) -> dict[int, bytes]:
@@ -226,7 +202,7 @@ class WorldNode:
     """
 
     def __init__(self, session: zenoh.Session, scenario: Scenario, options: WorldOptions,
-                 recorder: RunRecorder, stop: _StopFlag) -> None:
+                 recorder: RunRecorder, stop: StopFlag) -> None:
         self.keys = RunKeys(options.run_id)
         self.scenario = scenario
         self.options = options
@@ -463,7 +439,9 @@ class WorldNode:
         while self.alive and time.monotonic() < deadline and self.stop.count == signals:
             self.poll_liveliness()
             time.sleep(IDLE_POLL_S)
-        return EXIT_OK if success else EXIT_FAILED
+        return ExitCode.of_run(contacts=self.sim.contact_count,
+                               all_arrived=self.sim.all_arrived(), robots_lost=bool(self.lost),
+                               interrupted=reason == "signal")
 
     def run(self) -> int:
         """Wait for the robots, run, finish."""
@@ -472,7 +450,7 @@ class WorldNode:
         log.info("run %s: waiting for %d robots", self.options.run_id, len(self.robot_ids))
         if not self.wait_for_robots():
             self.finish("signal" if self.stop else "startup_timeout")
-            return EXIT_FAILED
+            return ExitCode.INTERRUPTED if self.stop else ExitCode.ROBOT_LOST
         self.control_pub.put(ControlMsg("start", self.sim.t_s).encode())
         self._event("start", mode="distributed", n_robots=len(self.robot_ids),
                     cmd_link=self.options.link.as_dict(), fault_seed=self.options.fault_seed,
@@ -490,26 +468,6 @@ def _tally(counts: dict[str, int], name: str) -> None:
     counts[name] = counts.get(name, 0) + 1
 
 
-def close_session(session: zenoh.Session, timeout_s: float = CLOSE_TIMEOUT_S) -> bool:
-    """Close `session`, waiting at most `timeout_s`; False if the close is still stuck.
-
-    Closing waits for peers to acknowledge (up to 10 s inside zenoh); a hung client must not
-    keep the world from exiting once its files are complete.
-    """
-    done = threading.Event()
-
-    def _close() -> None:
-        try:
-            session.close()
-        except zenoh.ZError as exc:
-            log.warning("closing the session: %s", exc)
-        finally:
-            done.set()
-
-    threading.Thread(target=_close, name="zenoh-close", daemon=True).start()
-    return done.wait(timeout_s)
-
-
 def run_world(options: WorldOptions) -> int:
     """Run the world process to the end; returns its exit status.
 
@@ -520,28 +478,23 @@ def run_world(options: WorldOptions) -> int:
         scenario = load_scenario(options.scenario_path)
     except ScenarioError as exc:
         log.error("%s", exc)
-        return EXIT_SETUP
-    stop = _StopFlag()
-    previous = {s: signal.signal(s, stop) for s in (signal.SIGTERM, signal.SIGINT)}
-    try:
+        return ExitCode.BAD_INPUT
+    with stop_on_signals() as stop:
         recorder = RunRecorder(options.out_dir, scenario)
         try:
-            conf = zenoh.Config()
             if options.connect:
                 settings = session_settings(mode="client", connect=[options.connect],
                                             connect_timeout_ms=int(options.wait_robots_s * 1e3))
             else:
                 settings = session_settings(mode="router", listen=[options.listen])
-            for key, value in settings.items():
-                conf.insert_json5(key, value)
             try:
-                session = zenoh.open(conf)
-            except zenoh.ZError as exc:
+                session = open_session(settings)
+            except SessionError as exc:
                 log.error("cannot open the Zenoh session (%s): %s",
                           options.listen or options.connect, exc)
                 recorder.event("end", 0.0, reason="transport_error", success=False,
                                error=str(exc))
-                return EXIT_SETUP
+                return ExitCode.TRANSPORT
             try:
                 code = WorldNode(session, scenario, options, recorder, stop).run()
             except BaseException:
@@ -555,13 +508,11 @@ def run_world(options: WorldOptions) -> int:
             return code
         finally:
             recorder.close()
-    finally:
-        for signum, handler in previous.items():
-            signal.signal(signum, handler)
 
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``python -m world``."""
+    die_with_launcher()
     logging.basicConfig(level=logging.INFO, stream=sys.stderr,
                         format="%(asctime)s world %(levelname)s %(message)s")
     return run_world(parse_args(argv))

@@ -17,7 +17,7 @@ from typing import IO, Any
 
 import numpy as np
 
-from world.scenario import Scenario
+from agent.core.scenario import Scenario
 
 TRAJECTORY_HEADER = "t,robot,x,y,theta,v,omega\n"
 COMMANDS_HEADER = "t_applied,robot,seq,pose_stamp,v,omega,plan_ms,status,side,resolved\n"
@@ -27,7 +27,7 @@ class RunRecorder:
     """Writes one run directory; line-buffered enough that a killed run leaves usable files."""
 
     def __init__(self, out_dir: Path, scenario: Scenario) -> None:
-        from world.scenario import dump_scenario
+        from world.scenario_file import dump_scenario
 
         self.out_dir = Path(out_dir)
         self.out_dir.mkdir(parents=True, exist_ok=True)

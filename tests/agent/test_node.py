@@ -9,7 +9,8 @@ from collections import deque
 import numpy as np
 import pytest
 
-from agent.config import PlannerConfig
+from agent.core.config import PlannerConfig
+from agent.core.scenario import RobotSpec
 from agent.node import (
     AgentOptions,
     PlanSchedule,
@@ -18,8 +19,8 @@ from agent.node import (
     parse_args,
     plan_phase_s,
 )
+from agent.process import ExitCode, StopFlag
 from protocol import RunConfigMsg
-from world.scenario import RobotSpec
 
 
 def test_schedule_plans_on_first_pose_then_every_period() -> None:
@@ -158,7 +159,7 @@ def test_schedule_with_a_phase_plans_on_absolute_slots() -> None:
 
 
 def test_parse_fault_options() -> None:
-    from agent.link import LinkFaults
+    from world.sim.link import LinkFaults
 
     opts = parse_args(["--run", "r", "--id", "1", "--connect", "tcp/h:1", "--latency-ms", "100",
                        "--jitter-ms", "30", "--drop", "0.1", "--dup", "0.05", "--reorder", "0.02",
@@ -184,8 +185,8 @@ def test_a_robot_process_imports_only_what_it_needs() -> None:
 import json, sys
 from agent.node import make_controller, warm_up
 from protocol import RunConfigMsg
-from agent.config import PlannerConfig
-from world.scenario import RobotSpec
+from agent.core.config import PlannerConfig
+from agent.core.scenario import RobotSpec
 spec = RobotSpec(0, (0.0, 0.0, 0.0), (10.0, 0.0), planner="eifp-mpc")
 cfg = RunConfigMsg(run_id="t", robot=spec, planner=PlannerConfig(), goal_tolerance_m=0.25,
                    control_rate_hz=10.0, world_rate_hz=50.0, time_scale=1.0,
@@ -197,8 +198,8 @@ print(json.dumps(sorted(sys.modules)))
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True, cwd=Path(__file__).resolve().parents[2], timeout=60)
     modules = set(json.loads(out.stdout.strip().splitlines()[-1]))
-    assert {"zenoh", "osqp", "agent.mpc", "agent.eifp"} <= modules
-    unneeded = {"yaml", "matplotlib", "PIL", "pyrvo", "agent.orca", "psutil"}
+    assert {"zenoh", "osqp", "agent.planning.mpc", "agent.planning.eifp"} <= modules
+    unneeded = {"yaml", "matplotlib", "PIL", "pyrvo", "agent.planning.orca", "psutil"}
     assert not (modules & unneeded), modules & unneeded
     assert not any(m.startswith("orchestrator") for m in modules)
 
@@ -295,9 +296,9 @@ def test_the_robot_times_the_next_pose_from_when_the_last_one_arrived_not_when_r
     import time
     from types import SimpleNamespace
 
-    from agent.controller import RobotController
-    from agent.link import FaultyLink, LinkFaults
+    from agent.planning.controller import RobotController
     from protocol import PosesMsg
+    from world.sim.link import FaultyLink, LinkFaults
 
     spec = RobotSpec(0, (0.0, 0.0, 0.0), (10.0, 0.0))
     node = object.__new__(RobotNode)
@@ -375,7 +376,8 @@ def test_a_world_token_that_blinks_back_within_the_grace_keeps_the_robot(monkeyp
 
 
 def test_a_world_token_gone_for_longer_than_the_grace_ends_the_robot(monkeypatch) -> None:
-    from agent.node import EXIT_WORLD_LOST, WORLD_BLIP_GRACE_S, _Exit
+    from agent.node import WORLD_BLIP_GRACE_S, _Exit
+    from agent.process import ExitCode
 
     clock = [100.0]
     node, sub = _world_watcher(monkeypatch, clock)
@@ -384,7 +386,7 @@ def test_a_world_token_gone_for_longer_than_the_grace_ends_the_robot(monkeypatch
     clock[0] += 1.01 * WORLD_BLIP_GRACE_S
     with pytest.raises(_Exit) as gone:
         node.poll_world()
-    assert gone.value.code == EXIT_WORLD_LOST
+    assert gone.value.code == ExitCode.WORLD_LOST
     assert gone.value.reason == "world lost (liveliness token gone)"
 
 
@@ -428,15 +430,15 @@ def test_a_configuration_out_of_range_is_refused_and_named_at_start_up() -> None
     asked = []
     session = SimpleNamespace(get=lambda key, timeout: asked.append(key) or [reply])
     with pytest.raises(node._Exit) as caught:
-        node.fetch_config(session, RunKeys("r1"), 3, node._StopFlag(),
+        node.fetch_config(session, RunKeys("r1"), 3, StopFlag(),
                           deadline=time.monotonic() + 0.25)
-    assert caught.value.code == node.EXIT_SETUP
+    assert caught.value.code == ExitCode.BAD_INPUT
     assert "config.planner: command_hold_periods: must be > 0" in caught.value.reason
     assert asked  # it did ask, and kept asking until the deadline
     # the same reply with the field in range is taken
     body["planner"]["command_hold_periods"] = 1.5
     payload = msgpack.packb(body, use_bin_type=True)
-    got = node.fetch_config(session, RunKeys("r1"), 3, node._StopFlag(),
+    got = node.fetch_config(session, RunKeys("r1"), 3, StopFlag(),
                             deadline=time.monotonic() + 1.0)
     assert got.planner.command_hold_periods == 1.5
 

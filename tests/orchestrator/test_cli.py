@@ -7,12 +7,11 @@ import csv
 import json
 import subprocess
 import sys
-import types
 from pathlib import Path
 
 import pytest
 
-from orchestrator import cli
+from agent.process import ExitCode
 from orchestrator.cli import main
 
 METRIC_KEYS = ("robots", "arrived", "success", "contacts", "min_gap_m", "path_ratio_mean",
@@ -107,9 +106,9 @@ def test_run_exit_status_follows_success_and_prints_summary(tmp_path, capsys):
 
 def test_distributed_mode_calls_run_distributed_and_computes_metrics(tmp_path, monkeypatch,
                                                                      capsys):
-    from orchestrator import distributed
-    from orchestrator.lockstep import run_lockstep
-    from world.scenario import load_scenario
+    from orchestrator.experiments import distributed
+    from orchestrator.experiments.lockstep import run_lockstep
+    from world.scenario_file import load_scenario
 
     calls = {}
 
@@ -131,11 +130,11 @@ def test_distributed_mode_calls_run_distributed_and_computes_metrics(tmp_path, m
     assert json.loads((out / "run.json").read_text())["mode"] == "distributed"
 
 
-def test_distributed_world_crash_without_files_exits_3(tmp_path, monkeypatch, capsys):
-    from orchestrator import distributed
+def test_distributed_world_crash_without_files_exits_world_lost(tmp_path, monkeypatch, capsys):
+    from orchestrator.experiments import distributed
 
     monkeypatch.setattr(distributed, "run_distributed", lambda *a, **k: 139)
-    assert main(["run", "setup_a", "--out", str(tmp_path / "x")]) == 3
+    assert main(["run", "setup_a", "--out", str(tmp_path / "x")]) == ExitCode.WORLD_LOST
     assert "world exit status 139" in capsys.readouterr().err
 
 
@@ -181,24 +180,14 @@ def test_sweep_runs_subprocesses_and_writes_tables(tmp_path, capsys):
                  str(tmp_path / "bad")]) == 2
 
 
-def test_bench_hook_calls_orchestrator_bench(monkeypatch):
-    got = {}
-    fake = types.ModuleType("orchestrator.bench")
-    fake.main = lambda args: got.setdefault("args", args) and 0  # type: ignore[attr-defined]
-    monkeypatch.setitem(sys.modules, "orchestrator.bench", fake)
-    import orchestrator
+def test_unexpected_errors_exit_error(monkeypatch, capsys):
+    from orchestrator.cli import catalog
 
-    monkeypatch.setattr(orchestrator, "bench", fake, raising=False)
-    assert main(["bench", "--quick", "x"]) == 0
-    assert got["args"] == ["--quick", "x"]
-
-
-def test_unexpected_errors_exit_3(monkeypatch, capsys):
     def boom(args):
         raise RuntimeError("kaput")
 
-    monkeypatch.setattr(cli, "cmd_list", boom)  # build_parser binds the module's function
-    assert main(["list"]) == 3
+    monkeypatch.setattr(catalog, "run", boom)  # build_parser binds the module's function
+    assert main(["list"]) == ExitCode.ERROR
     assert "RuntimeError: kaput" in capsys.readouterr().err
 
 
@@ -223,7 +212,7 @@ def test_run_with_fault_flags_in_lockstep_records_the_plan(tmp_path, capsys):
     (["--kill-robot", "9@3"], "no robot 9"),
     (["--stop-robot", "0@3"], "expected I@T:DUR"),
     (["--slow-robot", "0"], "expected I:MS"),
-    (["--latency-ms", "-5"], "latency_ms"),
+    (["--latency-ms", "-5"], "--latency-ms"),
     (["--robot-rate", "0:15"], "must divide 50 Hz"),
 ])
 def test_bad_fault_flags_exit_2_with_the_flag_named(tmp_path, capsys, flags, message):
@@ -290,7 +279,7 @@ def test_stress_without_a_sweep_runs_the_base_faults_as_given(tmp_path):
     (["--kill-robot", "9@3"], "no robot 9"),
     (["--stop-robot", "0@3"], "expected I@T:DUR"),
     (["--robot-rate", "0:15"], "must divide 50 Hz"),
-    (["--latency-ms", "-5"], "error: latency_ms: must be"),  # not a --sweep never given
+    (["--latency-ms", "-5"], "argument --latency-ms: must be"),
     (["--sweep", "speed=1,2"], "KEY one of"),
     (["--sweep", "drop=0,3"], "drop"),
     (["--sweep", "latency_ms=a"], "numbers"),

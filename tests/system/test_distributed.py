@@ -25,7 +25,7 @@ import numpy as np
 import psutil
 import pytest
 
-from orchestrator.distributed import (
+from orchestrator.experiments.distributed import (
     free_tcp_endpoint,
     robot_command,
     run_distributed,
@@ -444,7 +444,7 @@ def test_ctrl_c_on_the_launcher_leaves_no_orphans(tmp_path: Path) -> None:
         # A shell's background job inherits SIGINT ignored: give the launcher Ctrl-C back.
         "import signal; signal.signal(signal.SIGINT, signal.default_int_handler); "
         "import sys; from pathlib import Path; "
-        "from orchestrator.distributed import run_distributed; "
+        "from orchestrator.experiments.distributed import run_distributed; "
         f"sys.exit(run_distributed(Path({str(scenario)!r}), Path({str(out_dir)!r}), "
         f"{run_id!r}, startup_timeout_s={STARTUP_S}))"
     )

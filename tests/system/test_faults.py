@@ -21,8 +21,7 @@ import numpy as np
 import psutil
 import pytest
 
-from orchestrator.distributed import free_tcp_endpoint, run_distributed
-from orchestrator.faults import build_plan
+from orchestrator.experiments.distributed import free_tcp_endpoint, run_distributed
 from protocol import CommandMsg, PosesMsg, ProtocolError, RunKeys
 from tests.system.test_distributed import (
     RUN_S,
@@ -39,6 +38,7 @@ from tests.system.test_distributed import (
     wait_matching,
     write_scenario,
 )
+from world.sim.faults import build_plan
 
 pytestmark = [pytest.mark.system, pytest.mark.timeout(240)]
 

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from orchestrator.scale import main
+from orchestrator.cli import main as cli_main
 
 pytestmark = [pytest.mark.system, pytest.mark.timeout(180)]
 
@@ -22,8 +22,9 @@ def test_scale_run_with_robots_connecting_through_a_second_address(tmp_path: Pat
     """The world listens on 0.0.0.0; robots 0, 2 dial 127.0.0.1 and robots 1, 3 dial
     127.0.0.2, as robots on another host would dial the world's address."""
     out = tmp_path / "scale"
-    code = main(["--agents", "4", "--family", "circles", "--hosts", "127.0.0.1,127.0.0.2",
-                 "--startup-timeout-s", "60", "--out", str(out), "--json"])
+    code = cli_main(["scale", "--agents", "4", "--family", "circles",
+                     "--hosts", "127.0.0.1,127.0.0.2", "--startup-timeout-s", "60",
+                     "--out", str(out), "--json"])
     assert code == 0
     row = json.loads(capsys.readouterr().out.strip().splitlines()[-1])["rows"][0]
     run = out / "circles_4"

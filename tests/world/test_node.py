@@ -12,11 +12,12 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from orchestrator.distributed import free_tcp_endpoint
+from agent.process import StopFlag
+from orchestrator.experiments.distributed import free_tcp_endpoint
 from protocol import CommandMsg, ControlMsg, PosesMsg, RunConfigMsg, RunKeys, session_settings
-from world.node import WorldNode, WorldOptions, _StopFlag, parse_args, run_configs
+from world.node import WorldNode, WorldOptions, parse_args, run_configs
 from world.recorder import RunRecorder
-from world.scenario import scenario_from_dict
+from world.scenario_file import scenario_from_dict
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -63,7 +64,7 @@ class Rig:
         self.recorder = RunRecorder(self.options.out_dir, self.scenario)
         self.router = open_session("router", self.endpoint)
         self.node = WorldNode(self.router, self.scenario, self.options, self.recorder,
-                              _StopFlag())
+                              StopFlag())
         self.client = open_session("client", self.endpoint)
 
     def events(self, kind: str) -> list[dict]:
@@ -193,7 +194,7 @@ def test_parse_args_defaults_and_exclusive_endpoints(tmp_path: Path) -> None:
 
 
 def test_parse_command_link_fault_options() -> None:
-    from agent.link import LinkFaults
+    from world.sim.link import LinkFaults
 
     opts = parse_args(["--run", "r1", "--scenario", "s.yaml", "--latency-ms", "50",
                        "--jitter-ms", "15", "--drop", "0.2", "--fault-seed", "3"])

@@ -9,11 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from agent.config import MpcConfig, PlannerConfig, RobotLimits
-from world.scenario import (
-    ObstacleSpec,
-    RobotSpec,
-    Scenario,
+from agent.core.config import MpcConfig, PlannerConfig, RobotLimits
+from agent.core.scenario import ObstacleSpec, RobotSpec, Scenario
+from world.scenario_file import (
     ScenarioError,
     dump_scenario,
     file_key,

@@ -1,0 +1,93 @@
+"""Command-line flags shared by every entry point (`python -m agent`, `python -m world`,
+`orchestrator ...`): argparse types and the one definition of the link-fault flags.
+
+Each raises `argparse.ArgumentTypeError`, so a bad flag is a usage error (exit status 2)
+naming the flag and the value.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+from protocol import ProtocolError, validate_run_id
+from world.sim.link import LinkFaults
+
+
+def positive(text: str) -> float:
+    """A finite number > 0."""
+    value = float(text)
+    if not (math.isfinite(value) and value > 0.0):
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text!r}")
+    return value
+
+
+def non_negative(text: str) -> float:
+    """A finite number >= 0."""
+    value = float(text)
+    if not (math.isfinite(value) and value >= 0.0):
+        raise argparse.ArgumentTypeError(f"must be a number >= 0, got {text!r}")
+    return value
+
+
+def probability(text: str) -> float:
+    """A number in [0, 1]."""
+    value = non_negative(text)
+    if value > 1.0:
+        raise argparse.ArgumentTypeError(f"must be a probability in [0, 1], got {text!r}")
+    return value
+
+
+def run_id(text: str) -> str:
+    """A run id that is safe in a key expression and a directory name."""
+    try:
+        return validate_run_id(text)
+    except ProtocolError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from exc
+
+
+def positive_int(text: str) -> int:
+    """An integer >= 1."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text!r}")
+    return value
+
+
+def robot_counts(text: str) -> list[int]:
+    """A comma-separated list of robot counts, each >= 2 (bench, scale)."""
+    try:
+        counts = [int(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        counts = []
+    if not counts or min(counts) < 2:
+        raise argparse.ArgumentTypeError(f"expected robot counts >= 2 (e.g. 2,8,16), got {text!r}")
+    return counts
+
+
+def add_link_fault_flags(parser: argparse.ArgumentParser, what: str) -> argparse._ArgumentGroup:
+    """The link-fault flags (``--latency-ms``, ``--jitter-ms``, ``--drop``, ``--dup``,
+    ``--reorder``), validated, in a group titled for `what` ("the pose link", ...).
+
+    `link_faults` turns the parsed values into a `world.sim.link.LinkFaults`.
+    """
+    group = parser.add_argument_group(f"injected faults on {what} (sim time)")
+    group.add_argument("--latency-ms", type=non_negative, default=0.0,
+                       help="fixed delay [ms]")
+    group.add_argument("--jitter-ms", type=non_negative, default=0.0,
+                       help="uniform jitter half-width [ms] (100 +- 30: --jitter-ms 30)")
+    group.add_argument("--drop", type=probability, default=0.0, help="loss probability")
+    group.add_argument("--dup", type=probability, default=0.0,
+                       help="duplication probability")
+    group.add_argument("--reorder", type=probability, default=0.0,
+                       help="probability a message is held back (overtaken by later ones)")
+    return group
+
+
+def link_faults(args: argparse.Namespace) -> LinkFaults:
+    """The `LinkFaults` of the flags `add_link_fault_flags` declared."""
+    return LinkFaults(latency_ms=args.latency_ms, jitter_ms=args.jitter_ms, drop=args.drop,
+                      dup=args.dup, reorder=args.reorder)

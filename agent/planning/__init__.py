@@ -1,0 +1,1 @@
+"""Planning: threats, via-points, encounters, reference paths, MPC, ORCA, the controller (pure)."""

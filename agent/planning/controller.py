@@ -1,0 +1,187 @@
+"""One robot's sense -> estimate -> plan cycle, shared by the robot process and lockstep runs.
+
+The controller holds what a robot knows: the newest pose snapshot it accepted, the history
+of the others' poses (`NeighborTracker`), its planner's memory and the command it sent
+last (its odometry for its own speed). It has no transport and no clock: the robot
+process and the lockstep runner feed it snapshots and the current sim time.
+
+Latency compensation (on by default): a snapshot stamped `stamp_s` is `age = now_s -
+stamp_s` old when the robot plans at `now_s`. Before planning, the robot forward-predicts
+its own pose with the command it has been applying (the unicycle arc of Eq. 1) and the
+others' positions with their estimated velocities, both over `age` (capped at
+`MAX_COMPENSATED_AGE_S`). With ``compensate_latency=False`` the robot plans on the poses as
+they were when stamped. The clock behind `now_s` is the world's sim time: in lockstep the
+true sim time, in the robot process a sim clock kept in step with the world (see
+`agent.node`), so the age includes any injected delay.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from agent.core.config import PlannerConfig
+from agent.core.scenario import RobotSpec
+from agent.core.types import EgoState, Observation, Others, PlanResult, PlanStatus, PoseSnapshot
+from agent.planning.estimation import NeighborTracker
+from agent.planning.planners import CONTROL_PERIOD_S, at_goal, make_planner
+
+MAX_COMPENSATED_AGE_S = 1.0
+"""Poses older than this are not extrapolated further (the prediction would be fiction)."""
+ESTIMATION_MARGIN_M = 5.0
+"""Only others within the sensing radius plus this are estimated: farther ones cannot come
+into range during the (<= 1 s) forward prediction below a closing speed of 5 m/s."""
+
+
+class RobotController:
+    """Sense, estimate and plan for one robot.
+
+    Args:
+        spec: the robot (id, goal, radius, limits, planner name).
+        config: planner parameters.
+        goal_tolerance_m: the robot stops when this close to its goal.
+        compensate_latency: forward-predict by the snapshot's age before planning.
+        control_period_s: the robot's planning period; the planner's rate limits (and
+            ORCA's time step) use it.
+
+    Attributes:
+        command_hold_s: how long the world may apply one of this robot's commands before
+            it brakes (`PlannerConfig.command_hold_periods` periods); sent with each command.
+    """
+
+    def __init__(self, spec: RobotSpec, config: PlannerConfig, goal_tolerance_m: float,
+                 *, compensate_latency: bool = True,
+                 control_period_s: float = CONTROL_PERIOD_S) -> None:
+        if not (np.isfinite(control_period_s) and control_period_s > 0.0):
+            raise ValueError(f"control_period_s must be positive, got {control_period_s!r}")
+        self.spec = spec
+        self.config = config
+        self.goal_tolerance_m = float(goal_tolerance_m)
+        self.compensate_latency = compensate_latency
+        self.control_period_s = float(control_period_s)
+        self.command_hold_s = config.command_hold_periods * self.control_period_s
+        self.planner = make_planner(spec.planner, config, control_period_s=self.control_period_s)
+        self.tracker = NeighborTracker(spec.id, config.estimation_window_s)
+        self.snapshot: PoseSnapshot | None = None
+        self.command = (0.0, 0.0)
+        self.rejected_stale = 0
+        self.last_observation: Observation | None = None
+        self._row = -1
+        self._goal = np.asarray(spec.goal, dtype=float)
+
+    def observe(self, snapshot: PoseSnapshot) -> bool:
+        """Accept a snapshot if it is newer than the last one and shows this robot.
+
+        Returns:
+            False (and counts it) for a stale, duplicated or out-of-order snapshot, or one
+            in which this robot does not appear.
+        """
+        last = self.snapshot
+        if last is not None and (snapshot.tick <= last.tick or snapshot.stamp_s < last.stamp_s):
+            self.rejected_stale += 1
+            return False
+        rows = np.flatnonzero(snapshot.ids == self.spec.id)
+        if rows.size == 0:
+            self.rejected_stale += 1
+            return False
+        self.tracker.update(snapshot)
+        self.snapshot = snapshot
+        self._row = int(rows[0])  # this robot's row in `snapshot`
+        return True
+
+    def observation(self, now_s: float, *, with_others: bool | None = True) -> Observation:
+        """What the robot knows at `now_s`, forward-predicted by the snapshot's age.
+
+        Args:
+            now_s: sim time of planning.
+            with_others: False leaves the others out (empty): no estimates are made; None
+                leaves them out only when the robot is parked at its goal
+                (`agent.planning.planners.at_goal`), as `plan` does.
+        """
+        snap = self.snapshot
+        if snap is None:
+            raise RuntimeError("no snapshot observed yet")
+        row = self._row
+        x, y, heading = snap.pose[row].tolist()
+        v, omega = self.command
+        age = min(max(float(now_s - snap.stamp_s), 0.0), MAX_COMPENSATED_AGE_S)
+        if self.compensate_latency and age > 0.0:
+            x, y, heading = _predict_unicycle(x, y, heading, v, omega, age)
+        if with_others is None:
+            with_others = not at_goal(x, y, self._goal, self.goal_tolerance_m)
+        return Observation(
+            robot_id=self.spec.id,
+            ego=EgoState(x_m=x, y_m=y, heading_rad=heading, v_mps=v, omega_radps=omega),
+            goal_m=self._goal,
+            radius_m=self.spec.radius_m,
+            limits=self.spec.limits,
+            goal_tolerance_m=self.goal_tolerance_m,
+            others=self._others(snap.pose[row, :2], age) if with_others else Others.empty(),
+            pose_age_s=age,
+        )
+
+    def _others(self, here_m: np.ndarray, age_s: float) -> Others:
+        """The others' estimates near `here_m`, moved on by `age_s` if compensating."""
+        others = self.tracker.others(
+            near_m=here_m, within_m=self.config.sensing_radius_m + ESTIMATION_MARGIN_M)
+        if self.compensate_latency and age_s > 0.0:
+            others = _advance(others, age_s)
+        return others
+
+    def plan(self, now_s: float) -> PlanResult:
+        """Plan on the newest snapshot; without any snapshot, brake (status STALE).
+
+        A robot at its goal gets the planners' ARRIVED stop, which they decide on the ego
+        state alone (`agent.planning.planners.at_goal`) before looking at anyone: the others
+        are then not estimated (its `last_observation` has none), which makes a parked
+        robot's cycle about 0.25 ms cheaper with 128 robots in the poses.
+        """
+        if self.snapshot is None:
+            return self.brake()
+        observation = self.observation(now_s, with_others=None)
+        self.last_observation = observation
+        result = self.planner.plan(observation, now_s)
+        self.command = (result.v_mps, result.omega_radps)
+        return result
+
+    def brake(self) -> PlanResult:
+        """Stop command used when the robot cannot plan (no fresh poses)."""
+        self.command = (0.0, 0.0)
+        here = np.zeros((2, 2))
+        if self.snapshot is not None:
+            here[:] = self.snapshot.pose[self._row, :2]
+        return PlanResult(v_mps=0.0, omega_radps=0.0, status=PlanStatus.STALE, waypoints_m=here)
+
+
+def _predict_unicycle(x: float, y: float, heading: float, v: float, omega: float,
+                      age_s: float) -> tuple[float, float, float]:
+    """Constant-(v, omega) arc over age_s."""
+    dtheta = omega * age_s
+    if abs(dtheta) < 1e-9:
+        return x + v * age_s * np.cos(heading), y + v * age_s * np.sin(heading), heading
+    r = v / omega
+    new_heading = heading + dtheta
+    return (
+        x + r * (np.sin(new_heading) - np.sin(heading)),
+        y - r * (np.cos(new_heading) - np.cos(heading)),
+        float(np.angle(np.exp(1j * new_heading))),
+    )
+
+
+def _advance(others: Others, age_s: float) -> Others:
+    """The others moved on for age_s at their estimated velocities."""
+    if len(others) == 0:
+        return others
+    shift = others.velocity_mps * age_s
+    return Others.trusted(
+        ids=others.ids,
+        position_m=others.position_m + shift,
+        velocity_mps=others.velocity_mps,
+        radius_m=others.radius_m,
+        linearity=others.linearity,
+        track_start_m=others.track_start_m,
+        is_robot=others.is_robot,
+        heading_rad=others.heading_rad,  # a heading's drift over the age is not predicted
+        recent_speed_mps=others.recent_speed_mps,
+        recent_interval_s=others.recent_interval_s,
+        recent_turn_rate_radps=others.recent_turn_rate_radps,
+    )

@@ -1,0 +1,372 @@
+"""One interface for the four planners: `ifp`, `eifp`, `eifp-mpc` and `orca`.
+
+`make_planner(name, config)` returns an object with `plan(observation, now_s) -> PlanResult`.
+
+- `ifp`: the baseline IFP (`agent.planning.ifp`): earliest feasible via-point, iterated; the spline
+  is followed by the unicycle tracking law (`agent.planning.unicycle.track_reference`).
+- `eifp`: eIFP (`agent.planning.eifp`): TCPA ranking and the cost of Eqs. (14)-(16) with side
+  memory; the spline followed by the same tracking law, as the paper's eIFP (no MPC).
+- `eifp-mpc`: eIFP whose spline is tracked by the OSQP LTV-MPC (`agent.planning.mpc`), with the
+  neighbours' constant-velocity predictions as soft half-plane constraints. Not in the
+  paper: with stale poses (`Observation.pose_age_s` > 0, i.e. a delayed link) each
+  half-plane keeps `LATENCY_CLEARANCE_FACTOR` x age x |v_j - v_r| more clearance, the
+  distance the pair can close before a command planned now takes effect; with fresh poses
+  (an undisturbed lockstep run) nothing changes. Last, the braking guard
+  (`agent.planning.safety`, `MpcConfig.braking_guard`) caps the command's speed so the robot can
+  still stop its own approach to every disc it faces.
+- `orca`: ORCA through `pyrvo` (`agent.planning.orca`) plus a heading controller.
+
+Every planner stops (status ARRIVED) once its centre is within half the goal tolerance of
+the goal: half, so that the world, which judges arrival on ground truth at the full
+tolerance, agrees even when the robot's own pose estimate is slightly off.
+
+Planners keep only the memory the method needs (side per threat for eIFP, the MPC's warm
+start); for the same sequence of inputs they return the same decisions. Stage timings are
+wall time from an injected `timer` (default `time.perf_counter`); they are the only
+non-deterministic output and never influence a decision.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import replace
+from typing import Protocol
+
+import numpy as np
+
+from agent.core.config import PLANNER_NAMES, PlannerConfig
+from agent.core.types import Observation, PlanResult, PlanStatus, Side, StageTimes
+from agent.planning.safety import (
+    braking_speed_limit,
+    heading_sweep_rad,
+    unseen_speed_up_mps,
+    unseen_turn_closing_mps,
+)
+
+Timer = Callable[[], float]
+
+ARRIVAL_FRACTION = 0.5
+"""A planner stops when closer to its goal than this fraction of the goal tolerance."""
+
+CLAMP_MIN_SPEED_MPS = 0.2
+"""Below this speed the reference spline starts natural and the lines-and-arcs path has no
+start arc: a robot that (nearly) stands can turn on the spot, and a reference forced along
+its heading would send it the wrong way."""
+
+CONTROL_PERIOD_S = 0.1
+"""Default command period: the rate limits of the tracking laws use it."""
+
+LATENCY_CLEARANCE_FACTOR = 2.0
+"""eIFP-MPC's half-planes keep this many pose ages of relative motion on top of their
+clearance (pose link plus the command link, assumed as slow); 0 with fresh poses."""
+
+RECENT_SPEED_MAX_AGE_S = 0.05
+"""The braking guard reads the others' recent speeds (`Others.recent_speed_mps`) only from
+poses at most this old; from older ones it keeps the blind bound. The recent-speed bound
+assumes every robot changes speed at most at accel_max, which holds while links are
+healthy. A slow or lossy link breaks it: the world brakes a robot whose command outlived
+its hold and resumes its next command at once (`world.sim.dynamics`), and such a robot's
+speed jumps. Measured (distributed, setup G at 100 +- 30 ms with 10 % loss, stop 16's
+machine): read at every age, 3 of 10 runs touched, one of them a follower into a braking
+leader; the blind bound, 3 of 10 on the same machine. So the gate is not shown to be
+needed, but it keeps the speed terms of every run with a delayed link those of the code
+whose safety envelope was measured (README, "The safety envelope"). Poses are fresh (age 0)
+in an undisturbed lockstep run and a few ms old in a healthy distributed one.
+
+The same age switches the guard's turn allowances on. From poses older than this the
+robot's own heading is swept on through its stop, not only over the reaction time, and
+an other turning towards the robot counts as closing as much faster than its estimate
+shows as its observed turn rate makes it (`agent.planning.safety.unseen_turn_closing_mps`). With
+fresh poses both are left out: no run without link faults has touched, and each cost
+setup G oscillations without faults (the sweep 7.7 -> 9.3 per robot, reading the heading
+instead of the estimate's direction 7.2 -> 10.1; stops 14 and 15)."""
+
+
+class Planner(Protocol):
+    """A collision-avoidance planner for one robot."""
+
+    name: str
+
+    def plan(self, observation: Observation, now_s: float) -> PlanResult:
+        """Decide the command for this cycle from what the robot observed at `now_s`."""
+        ...
+
+    def reset(self) -> None:
+        """Forget all memory (side choices, warm starts)."""
+        ...
+
+
+def at_goal(x_m: float, y_m: float, goal_m: np.ndarray, goal_tolerance_m: float) -> bool:
+    """Whether a robot at (x, y) is parked: within `ARRIVAL_FRACTION` of the tolerance."""
+    gap = math.hypot(float(goal_m[0]) - x_m, float(goal_m[1]) - y_m)
+    return gap <= ARRIVAL_FRACTION * goal_tolerance_m
+
+
+def arrived_result(observation: Observation) -> PlanResult | None:
+    """The stop result when the robot is at its goal, else None (ego state and goal only:
+    every planner returns it before looking at the others)."""
+    ego = observation.ego
+    if not at_goal(ego.x_m, ego.y_m, observation.goal_m, observation.goal_tolerance_m):
+        return None
+    here = np.array([[ego.x_m, ego.y_m], observation.goal_m])
+    return PlanResult(v_mps=0.0, omega_radps=0.0, status=PlanStatus.ARRIVED, waypoints_m=here)
+
+
+class ViaPointPlanner:
+    """IFP, eIFP and eIFP-MPC: via-points -> cubic spline -> tracker.
+
+    Args:
+        name: `ifp`, `eifp` or `eifp-mpc`.
+        config: planner parameters.
+        control_period_s: the command period (rate limits of the tracking law).
+        timer: wall clock for stage timings only.
+    """
+
+    def __init__(self, name: str, config: PlannerConfig, *,
+                 control_period_s: float = CONTROL_PERIOD_S,
+                 timer: Timer = time.perf_counter) -> None:
+        from agent.planning.eifp import EifpSelector
+        from agent.planning.ifp import PAPER_RULES, CycleRules, plan_ifp
+
+        if name not in ("ifp", "eifp", "eifp-mpc"):
+            raise ValueError(f"not a via-point planner: {name!r}")
+        self.name = name
+        self.config = config
+        self.control_period_s = control_period_s
+        self._timer = timer
+        # eIFP-MPC's changes to the cycle (threats inside L, via-point margin, escape
+        # hysteresis, head-on hold): measured on eIFP-MPC only; eifp keeps the paper's cycle.
+        rules = CycleRules.from_config(config) if name == "eifp-mpc" else PAPER_RULES
+        self._selector = EifpSelector(config, rules) if name != "ifp" else None
+        self._plan_ifp = plan_ifp
+        self._trackers: dict[object, object] = {}
+
+    def reset(self) -> None:
+        """Forget side memory and MPC warm starts."""
+        if self._selector is not None:
+            self._selector.reset()
+        for tracker in self._trackers.values():
+            tracker.reset()  # type: ignore[attr-defined]
+
+    def _mpc(self, observation: Observation):
+        from agent.planning.mpc import MpcTracker
+
+        key = observation.limits
+        tracker = self._trackers.get(key)
+        if tracker is None:
+            tracker = MpcTracker(observation.limits, self.config.mpc)
+            self._trackers[key] = tracker
+        return tracker
+
+    def plan(self, observation: Observation, now_s: float) -> PlanResult:
+        """One cycle: threats and via-points, spline, then MPC or the tracking law."""
+        from agent.planning.spline import build_reference
+        from agent.planning.unicycle import track_reference
+
+        clock = self._timer
+        t0 = clock()
+        done = arrived_result(observation)
+        if done is not None:
+            return replace(done, times=StageTimes(total_ms=(clock() - t0) * 1e3))
+        from agent.planning.threats import nearby_others
+
+        cfg = self.config
+        ego = observation.ego
+        limits = observation.limits
+        # Bound the work: the others within the sensing radius, at most max_neighbors,
+        # selected once per cycle for the via-points and the MPC alike.
+        near = nearby_others(np.array([ego.x_m, ego.y_m]), observation.others,
+                             cfg.sensing_radius_m, cfg.max_neighbors)
+        if near is not observation.others:
+            observation = observation.with_others(near)
+        if self._selector is None:
+            via = self._plan_ifp(observation, cfg, clock)
+        else:
+            via = self._selector.select(observation, clock)
+        t1 = clock()
+        mpc_cfg = cfg.mpc
+        ref = build_reference(
+            via.waypoints_m, ego.heading_rad, limits.v_max_mps, limits.accel_max_mps2,
+            mpc_cfg.dt_s, mpc_cfg.horizon_steps, v_start_mps=ego.v_mps,
+            clamp_heading=cfg.spline_clamp_heading and ego.v_mps >= CLAMP_MIN_SPEED_MPS,
+            first_leg_segments=cfg.spline_first_leg_segments,
+            # eIFP-MPC only: the tracking law of eifp and ifp cuts the arcs' corners into
+            # contact (stop 22, lockstep, 5 cm jitter, seeds 0-2, runs with contact on the
+            # lines and arcs / on the spline: eifp E 3/3 / 0, F 1/3 / 0, G 2/3 / 0; ifp
+            # B, C, D 2/3 each / 0, F 3/3 / 2/3, G 3/3 / 3/3), so they keep the spline.
+            lines_arcs=cfg.reference_lines_arcs and self.name == "eifp-mpc",
+            corner_radius_m=cfg.path_corner_radius_m,
+            start_radius_m=cfg.path_start_radius_m if ego.v_mps >= CLAMP_MIN_SPEED_MPS else 0.0,
+        )
+        t2 = clock()
+        last = np.array([ego.v_mps, ego.omega_radps])
+        iterations = 0
+        status = via.status
+        if self.name == "eifp-mpc":
+            preds, clearance = self._predictions(observation, ref.t_s)
+            res = self._mpc(observation).solve(
+                np.array([ego.x_m, ego.y_m, ego.heading_rad]), last, ref, preds, clearance
+            )
+            v, omega, iterations = res.v_mps, res.omega_radps, res.iterations
+            if res.status != PlanStatus.OK:
+                status = res.status
+            if mpc_cfg.braking_guard and len(observation.others):
+                v = self._braking_guard(observation, v, omega)
+        else:
+            v, omega = track_reference(
+                ego.x_m, ego.y_m, ego.heading_rad, ref.x_m, ref.y_m,
+                float(ref.v_mps[min(1, ref.n_steps)]),
+                max(cfg.lookahead_s * limits.v_max_mps, 0.3), limits, cfg.heading_gain,
+                last_command=last, dt_s=self.control_period_s,
+            )
+        t3 = clock()
+        times = StageTimes(
+            threats_ms=via.threats_s * 1e3,
+            viapoints_ms=(t1 - t0 - via.threats_s) * 1e3,
+            spline_ms=(t2 - t1) * 1e3,
+            control_ms=(t3 - t2) * 1e3,
+            total_ms=(t3 - t0) * 1e3,
+        )
+        return PlanResult(
+            v_mps=float(v), omega_radps=float(omega), status=status,
+            waypoints_m=via.waypoints_m, via_point_m=via.via_point_m, side=via.side,
+            resolved_id=via.resolved_id, threats=via.threats, times=times,
+            solver_iterations=int(iterations),
+        )
+
+    def _braking_guard(self, observation: Observation, v_mps: float, omega_radps: float) -> float:
+        """`v_mps` capped by `agent.planning.safety.braking_speed_limit`, braking no harder than the
+        rate limit allows (a cap below reach gives the hardest braking).
+
+        Two passes with one result: first with every other's unseen speed-up at its bound
+        `accel_max x lag` (a scalar: no per-disc trigonometry); the speed limit falls as the
+        speed-up grows, so when that pass lets `v_mps` through, the exact one would too. Only
+        a command the bound limits pays for `unseen_speed_up_mps`, which reads the others'
+        recent speeds from fresh poses only (`RECENT_SPEED_MAX_AGE_S`). From older poses
+        the others' turns count too (`unseen_turn_closing_mps`, the larger of the two per
+        other); the first pass's bound is then at least the largest turn term."""
+        ego, limits, others = observation.ego, observation.limits, observation.others
+        reaction_s = observation.pose_age_s + self.control_period_s
+        # how much an other robot's velocity estimate may trail its velocity now
+        lag_s = 0.5 * self.config.estimation_window_s + observation.pose_age_s
+
+        fresh = observation.pose_age_s <= RECENT_SPEED_MAX_AGE_S
+        # the headings the robot sweeps before it stands: up to when a braking command can
+        # act (fresh poses), or on through the stop (delayed ones: a robot that keeps
+        # turning while it brakes can face a disc it did not face now)
+        turning_s = reaction_s if fresh else reaction_s + max(v_mps, 0.0) / limits.accel_max_mps2
+
+        def limit(unseen_dv: np.ndarray | float) -> float:
+            return braking_speed_limit(
+                (ego.x_m, ego.y_m), ego.heading_rad, observation.radius_m,
+                others.position_m, others.velocity_mps, others.radius_m,
+                reaction_s=reaction_s, decel_mps2=limits.accel_max_mps2,
+                margin_m=self.config.mpc.braking_margin_m,
+                sweep_rad=heading_sweep_rad(omega_radps, turning_s), up_to_mps=v_mps,
+                unseen_dv_mps=unseen_dv,
+            )
+
+        turning = None
+        if not fresh:
+            turning = unseen_turn_closing_mps(
+                (ego.x_m, ego.y_m), others.position_m, others.velocity_mps, others.heading_rad,
+                others.recent_turn_rate_radps, others.is_robot,
+                turn_rate_max_radps=limits.omega_max_radps, age_s=observation.pose_age_s,
+                reaction_s=reaction_s)
+        bound = limits.accel_max_mps2 * lag_s
+        if turning is not None and len(turning):
+            bound = max(bound, float(turning.max()))
+        if v_mps <= limit(bound):
+            return v_mps
+        unseen = unseen_speed_up_mps(
+            (ego.x_m, ego.y_m), others.position_m, others.heading_rad, others.is_robot,
+            accel_mps2=limits.accel_max_mps2, turn_rate_radps=limits.omega_max_radps,
+            lag_s=lag_s, others_speed_mps=np.hypot(*others.velocity_mps.T),
+            v_max_mps=limits.v_max_mps,
+            recent_speed_mps=others.recent_speed_mps if fresh else None,
+            recent_lag_s=0.5 * others.recent_interval_s + observation.pose_age_s)
+        if turning is not None:
+            unseen = np.maximum(unseen, turning)
+        v_safe = limit(unseen)
+        if v_mps <= v_safe:
+            return v_mps
+        hardest = ego.v_mps - limits.accel_max_mps2 * self.control_period_s
+        return max(v_safe, hardest, limits.v_min_mps)
+
+    def _predictions(self, observation: Observation,
+                     t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Constant-velocity predictions (K, N+1, 2) of the sensed others and clearances (K,)."""
+        cfg = self.config
+        near = observation.others
+        preds = near.position_m[:, None, :] + near.velocity_mps[:, None, :] * t_s[None, :, None]
+        clearance = observation.radius_m + near.radius_m + cfg.mpc.clearance_margin_m
+        if observation.pose_age_s > 0.0 and len(near):
+            # Loop delay: the poses are pose_age_s old and the command reaches the wheels
+            # about as late again (links are assumed symmetric), so the pair can close by
+            # up to 2 * age * |v_j - v_r| before our command takes effect.
+            ego = observation.ego
+            v_r = ego.v_mps * np.array([np.cos(ego.heading_rad), np.sin(ego.heading_rad)])
+            rel = np.hypot(*(near.velocity_mps - v_r).T)
+            clearance = clearance + LATENCY_CLEARANCE_FACTOR * observation.pose_age_s * rel
+        return preds, clearance
+
+
+class OrcaPlanner:
+    """ORCA (RVO2 via `pyrvo`) with a heading controller; the same interface as the others.
+
+    Args:
+        config: planner parameters.
+        control_period_s: the command period (ORCA's time step and the rate limits).
+        timer: wall clock for stage timings only.
+    """
+
+    name = "orca"
+
+    def __init__(self, config: PlannerConfig, *, control_period_s: float = CONTROL_PERIOD_S,
+                 timer: Timer = time.perf_counter) -> None:
+        self.config = config
+        self.control_period_s = control_period_s
+        self._timer = timer
+        self._controllers: dict[object, object] = {}
+
+    def reset(self) -> None:
+        """ORCA keeps no memory between cycles."""
+
+    def plan(self, observation: Observation, now_s: float) -> PlanResult:
+        """One ORCA cycle."""
+        from agent.planning.orca import OrcaController
+
+        t0 = self._timer()
+        done = arrived_result(observation)
+        if done is not None:
+            return replace(done, times=StageTimes(total_ms=(self._timer() - t0) * 1e3))
+        controller = self._controllers.get(observation.limits)
+        if controller is None:
+            controller = OrcaController(observation.limits, self.config, self.control_period_s)
+            self._controllers[observation.limits] = controller
+        ego = observation.ego
+        position = np.array([ego.x_m, ego.y_m])
+        cmd = controller.command(
+            position, ego.heading_rad, ego.velocity_mps, observation.goal_m,
+            observation.radius_m, observation.others,
+            last_command=np.array([ego.v_mps, ego.omega_radps]),
+        )
+        elapsed_ms = (self._timer() - t0) * 1e3
+        return PlanResult(
+            v_mps=float(cmd.v_mps), omega_radps=float(cmd.omega_radps), status=PlanStatus.OK,
+            waypoints_m=np.array([position, observation.goal_m]), side=Side.NONE,
+            times=StageTimes(control_ms=elapsed_ms, total_ms=elapsed_ms),
+        )
+
+
+def make_planner(name: str, config: PlannerConfig, *,
+                 control_period_s: float = CONTROL_PERIOD_S,
+                 timer: Timer = time.perf_counter) -> Planner:
+    """The planner called `name` (one of `PLANNER_NAMES`)."""
+    if name == "orca":
+        return OrcaPlanner(config, control_period_s=control_period_s, timer=timer)
+    if name in PLANNER_NAMES:
+        return ViaPointPlanner(name, config, control_period_s=control_period_s, timer=timer)
+    raise ValueError(f"unknown planner {name!r}; expected one of {', '.join(PLANNER_NAMES)}")

@@ -1,0 +1,189 @@
+"""Process plumbing shared by every process of a run: exit codes, stop on signals, Zenoh
+sessions and the parent-death signal.
+
+The robot (`agent.node`), the world (`world.node`), the fleet launcher (`agent.fleet`) and
+the orchestrator's process edges all use these; nothing below the runtime layer imports
+this module (it imports zenoh).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import enum
+import logging
+import os
+import signal
+import threading
+import time
+from collections.abc import Iterator, Mapping
+from types import FrameType
+from typing import Any
+
+import zenoh
+
+log = logging.getLogger(__name__)
+
+CLOSE_TIMEOUT_S = 3.0
+"""Wall time `close_session` waits for Zenoh to close before giving up on it."""
+RETRY_PAUSE_S = 0.1
+"""Wall time between two attempts of `open_session`."""
+PR_SET_PDEATHSIG = 1
+"""Linux prctl option: the signal a process gets when its parent dies."""
+PARENT_PID_ENV = "EIFP_PARENT_PID"
+"""Set by a launcher to its pid: the child dies with it (`die_with_launcher`)."""
+
+
+class ExitCode(enum.IntEnum):
+    """Exit status of every eifp-swarm process and of the `orchestrator` CLI.
+
+    One table for all: a robot, the world and the orchestrator give the same number the same
+    meaning. The README lists them.
+    """
+
+    OK = 0
+    """The run completed: every robot arrived, no contact (a robot: it was told to end)."""
+    CONTACT = 1
+    """The run ended with at least one contact."""
+    BAD_INPUT = 2
+    """A bad flag, scenario file, configuration or output path; the message names it."""
+    INCOMPLETE = 3
+    """The time limit came before every robot arrived (no contact)."""
+    ROBOT_LOST = 4
+    """A robot process was lost during the run (crashed, killed or hung), no contact."""
+    WORLD_LOST = 5
+    """The world process crashed or vanished (a robot: the world's token disappeared)."""
+    TRANSPORT = 6
+    """No Zenoh session could be opened or kept (endpoint unreachable, TLS refused)."""
+    ERROR = 7
+    """An unexpected internal error; the traceback is in the log."""
+    INTERRUPTED = 130
+    """Stopped by SIGINT or SIGTERM."""
+
+    @classmethod
+    def of_run(cls, *, contacts: int, all_arrived: bool, robots_lost: bool,
+               interrupted: bool = False) -> ExitCode:
+        """The status of a run that ended: a contact outranks a lost robot, which outranks
+        an interruption, which outranks a time-out."""
+        if contacts > 0:
+            return cls.CONTACT
+        if robots_lost:
+            return cls.ROBOT_LOST
+        if interrupted:
+            return cls.INTERRUPTED
+        return cls.OK if all_arrived else cls.INCOMPLETE
+
+
+class StopFlag:
+    """Set by SIGTERM/SIGINT; loops poll it and leave, so sessions and files are closed."""
+
+    def __init__(self) -> None:
+        self.signum: int | None = None
+        self.count = 0
+
+    def __call__(self, signum: int, frame: FrameType | None = None) -> None:
+        self.signum = signum
+        self.count += 1
+
+    def __bool__(self) -> bool:
+        return self.signum is not None
+
+
+@contextlib.contextmanager
+def stop_on_signals(
+        signums: tuple[signal.Signals, ...] = (signal.SIGTERM, signal.SIGINT),
+) -> Iterator[StopFlag]:
+    """Route `signums` to a fresh `StopFlag` inside the block; restore the handlers after.
+
+    Without a handler, SIGTERM would kill a process before it closes its session (and, as
+    PID 1 of a container, be ignored); with it, the loop leaves cleanly.
+    """
+    stop = StopFlag()
+    previous = {s: signal.signal(s, stop) for s in signums}
+    try:
+        yield stop
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+
+
+class SessionError(RuntimeError):
+    """No Zenoh session could be opened before the deadline (the message says why)."""
+
+
+def zenoh_config(settings: Mapping[str, Any]) -> zenoh.Config:
+    """A `zenoh.Config` with every (key path -> JSON5 value) of `settings` inserted."""
+    conf = zenoh.Config()
+    for key, value in settings.items():
+        conf.insert_json5(key, value)
+    return conf
+
+
+def open_session(settings: Mapping[str, Any], *, deadline: float | None = None,
+                 stop: StopFlag | None = None) -> zenoh.Session | None:
+    """Open a Zenoh session with `settings` (`protocol.session_settings`).
+
+    Args:
+        settings: key path -> JSON5 value, inserted into a fresh config.
+        deadline: `time.monotonic()` until which a failed open is retried (a router not up
+            yet); None: one attempt.
+        stop: polled between attempts.
+
+    Returns:
+        The session, or None if `stop` was set first.
+
+    Raises:
+        SessionError: the last attempt's error, once the deadline has passed.
+    """
+    conf = zenoh_config(settings)
+    last_error = "no attempt"
+    while not stop:
+        try:
+            return zenoh.open(conf)
+        except zenoh.ZError as exc:
+            last_error = str(exc)
+        if deadline is None or time.monotonic() > deadline:
+            raise SessionError(last_error)
+        time.sleep(RETRY_PAUSE_S)
+    return None
+
+
+def close_session(session: zenoh.Session, timeout_s: float = CLOSE_TIMEOUT_S) -> bool:
+    """Close `session`, waiting at most `timeout_s`; False if the close is still stuck.
+
+    Closing waits for peers to acknowledge (up to 10 s inside zenoh); a hung peer must not
+    keep a process from exiting once its work is done.
+    """
+    done = threading.Event()
+
+    def _close() -> None:
+        try:
+            session.close()
+        except zenoh.ZError as exc:
+            log.warning("closing the session: %s", exc)
+        finally:
+            done.set()
+
+    threading.Thread(target=_close, name="zenoh-close", daemon=True).start()
+    return done.wait(timeout_s)
+
+
+def die_with_parent(parent_pid: int, signum: int = signal.SIGKILL) -> None:
+    """Have the kernel send `signum` to this process when its parent dies (Linux).
+
+    Called first thing in a child (`subprocess.Popen(preexec_fn=...)` or after a fork), so
+    a SIGKILLed orchestrator leaves no orphaned world or robot. If the parent is already
+    gone, exits at once.
+    """
+    # Not Linux: no prctl; the launcher's teardown of the process group still applies.
+    with contextlib.suppress(OSError, AttributeError):
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, int(signum))
+    if os.getppid() != parent_pid:  # the parent died before prctl took effect
+        os._exit(int(ExitCode.ERROR))
+
+
+def die_with_launcher() -> None:
+    """`die_with_parent` if the launcher set `PARENT_PID_ENV` (the orchestrator does)."""
+    text = os.environ.get(PARENT_PID_ENV, "")
+    if text.isdigit():
+        die_with_parent(int(text))

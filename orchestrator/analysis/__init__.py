@@ -1,0 +1,1 @@
+"""Analysis: run directories, metrics, reports and plots."""

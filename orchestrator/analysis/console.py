@@ -1,0 +1,82 @@
+"""Console output of a run for humans: the live progress line and the end-of-run summary."""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from typing import Any, TextIO
+
+from orchestrator.analysis.report import format_table
+
+
+class ProgressLine:
+    """One live status line on stderr: rewritten in place on a terminal, else every 5 s."""
+
+    def __init__(self, label: str, stream: TextIO | None = None, *, quiet: bool = False) -> None:
+        self.label = label
+        self.stream = stream or sys.stderr
+        self.quiet = quiet
+        self.tty = self.stream.isatty()
+        self._last_wall = -math.inf
+        self._width = 0
+
+    def __call__(self, progress: Any) -> None:
+        """Accepts `LockstepProgress` or `DistributedProgress` (same field names)."""
+        if self.quiet:
+            return
+        now = time.monotonic()
+        if not self.tty and now - self._last_wall < 5.0:
+            return
+        self._last_wall = now
+        arrived = getattr(progress, "arrived", ())
+        n_arrived = arrived if isinstance(arrived, int) else len(arrived)
+        sim_t = float(getattr(progress, "sim_t_s", 0.0))
+        wall = float(getattr(progress, "wall_s", 0.0))
+        text = (f"[{self.label}] t = {sim_t:7.1f} s   arrived {n_arrived}/"
+                f"{getattr(progress, 'n_robots', '?')}   contacts "
+                f"{getattr(progress, 'contacts', 0)}   wall {wall:6.1f} s")
+        if not getattr(progress, "started", True):
+            text += "   (waiting for robots)"
+        lost = getattr(progress, "lost", ())
+        if lost:
+            text += f"   lost {sorted(lost)}"
+        if self.tty:
+            self.stream.write("\r" + text.ljust(self._width))
+            self._width = len(text)
+        else:
+            self.stream.write(text + "\n")
+        self.stream.flush()
+
+    def done(self) -> None:
+        if self.tty and self._width and not self.quiet:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+def run_summary(metrics: dict[str, Any], label: str) -> str:
+    """The end-of-run table: run-level metrics, then one row per robot."""
+    keys = [
+        ("success", "success"), ("arrived", "robots arrived"), ("contacts", "contacts"),
+        ("min_gap_m", "min gap [m]"), ("makespan_s", "all arrived at [s]"),
+        ("time_to_goal_mean_s", "time to goal, mean [s]"),
+        ("time_ratio_mean", "time / ideal, mean"),
+        ("path_length_mean_m", "path length, mean [m]"),
+        ("path_ratio_mean", "path / straight, mean"),
+        ("oscillations_per_robot", "oscillations per robot"),
+        ("side_flips_per_robot", "side flips per robot"),
+        ("plan_ms_p50", "planning p50 [ms]"), ("plan_ms_p99", "planning p99 [ms]"),
+        ("plan_ms_max", "planning max [ms]"),
+        ("latency_ms_p50", "latency p50 [ms]"), ("latency_ms_p99", "latency p99 [ms]"),
+        ("deadline_miss_rate", "deadline miss rate"), ("sim_time_s", "sim time [s]"),
+    ]
+    rows = [[label_, metrics.get(k)] for k, label_ in keys]
+    rows[1][1] = f"{metrics.get('arrived')}/{metrics.get('robots')}"
+    top = format_table([label, ""], rows)
+    per = [[r.get("id"), r.get("arrived"), r.get("time_to_goal_s"), r.get("time_ratio"),
+            r.get("path_length_m"), r.get("path_ratio"), r.get("oscillations"),
+            r.get("side_flips"), r.get("contacts"), r.get("min_gap_m"), r.get("plan_ms_p50")]
+           for r in metrics.get("per_robot", [])]
+    robots = format_table(["robot", "arrived", "t_goal s", "t/ideal", "path m", "path/line",
+                           "osc", "flips", "contacts", "min gap m", "plan p50 ms"], per)
+    return top + "\n\n" + robots

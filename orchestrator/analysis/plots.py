@@ -1,0 +1,255 @@
+"""Figures: a run's trajectories (like the paper's Fig. of setups), a GIF of a run, and the
+report's bar plots. Matplotlib's object API with the Agg canvas only: no pyplot, no
+display, no global state.
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.collections import PatchCollection
+from matplotlib.figure import Figure
+from matplotlib.patches import Circle
+
+from orchestrator.analysis.metrics import RunSpec, contact_episodes
+from orchestrator.analysis.rundir import RunData, read_run_dir
+
+DISC_INTERVAL_S = 10.0
+"""Robot discs are drawn every this many seconds along the paths."""
+
+
+def _figure(width_in: float, height_in: float) -> Figure:
+    fig = Figure(figsize=(width_in, height_in), layout="constrained")
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def robot_colours(n: int) -> np.ndarray:
+    """(n, 4) RGBA, distinct for up to 20 robots, then cycling through a colour wheel."""
+    from matplotlib import colormaps
+
+    if n <= 10:
+        return colormaps["tab10"](np.arange(n))
+    if n <= 20:
+        return colormaps["tab20"](np.arange(n))
+    return colormaps["hsv"](np.linspace(0.0, 1.0, n, endpoint=False))
+
+
+def _draw_scene(ax: Axes, data: RunData) -> None:
+    """Obstacles (at t = 0, with their path if moving), starts and goals."""
+    s = data.scenario
+    colours = robot_colours(len(s.robots))
+    t_end = float(data.trajectory.t_s[-1]) if data.trajectory.t_s.size else 0.0
+    for o in s.obstacles:
+        ax.add_patch(Circle(o.center, o.radius_m, color="0.55", alpha=0.6, zorder=1))
+        if any(o.velocity):
+            end = np.asarray(o.center) + np.asarray(o.velocity) * t_end
+            ax.plot([o.center[0], end[0]], [o.center[1], end[1]], ls=":", c="0.55", zorder=1)
+    for r, c in zip(s.robots, colours):
+        ax.plot(*r.start[:2], marker="o", ms=6, mfc="white", mec=c, mew=1.5, zorder=4)
+        ax.plot(*r.goal, marker="*", ms=11, c=c, mec="black", mew=0.4, zorder=4)
+
+
+def _finish_axes(ax: Axes, data: RunData, title: str | None) -> None:
+    s = data.scenario
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.grid(True, lw=0.3, alpha=0.5)
+    planners = sorted({r.planner for r in s.robots})
+    ax.set_title(title or f"{s.name} - {', '.join(planners)} - {len(s.robots)} robots",
+                 fontsize=10)
+
+
+def plot_trajectories(data: RunData, path: Path, *, disc_interval_s: float = DISC_INTERVAL_S,
+                      title: str | None = None, dpi: int = 120) -> Path:
+    """The run's paths: a colour per robot, start (o) and goal (*) markers, robot discs
+    every `disc_interval_s`, and contacts marked with a red x.
+
+    Returns:
+        path, written as PNG (or whatever its suffix names).
+    """
+    traj, s = data.trajectory, data.scenario
+    fig = _figure(7.0, 7.0)
+    ax = fig.add_subplot()
+    _draw_scene(ax, data)
+    colours = robot_colours(len(s.robots))
+    if traj.t_s.size:
+        step = max(1, int(round(disc_interval_s / max(np.median(np.diff(traj.t_s)), 1e-9)))
+                   ) if traj.t_s.size > 1 else 1
+        for k, (r, c) in enumerate(zip(s.robots, colours)):
+            xy = traj.pose[:, k, :2]
+            ax.plot(xy[:, 0], xy[:, 1], c=c, lw=1.4, zorder=3, label=f"robot {r.id}")
+            discs = [Circle(p, r.radius_m) for p in xy[::step]]
+            ax.add_collection(PatchCollection(discs, facecolor=c, edgecolor=c, alpha=0.18,
+                                              lw=0.6, zorder=2))
+        episodes, _ = contact_episodes(traj, RunSpec.from_scenario(s))
+        spots = [_contact_spot(data, e.t_s, e.id_a, e.id_b) for e in episodes]
+        spots = [p for p in spots if p is not None]
+        if spots:
+            pts = np.array(spots)
+            ax.plot(pts[:, 0], pts[:, 1], "x", c="red", ms=10, mew=2.5, zorder=5,
+                    label=f"contact ({len(spots)})")
+    if len(s.robots) <= 16:
+        ax.legend(fontsize=7, loc="best", framealpha=0.7)
+    _finish_axes(ax, data, title)
+    path = Path(path)
+    fig.savefig(path, dpi=dpi)
+    return path
+
+
+def _contact_spot(data: RunData, t_s: float, id_a: int, id_b: int) -> np.ndarray | None:
+    """Midpoint between the two discs' centres at the sample nearest t_s."""
+    traj, s = data.trajectory, data.scenario
+    k = int(np.argmin(np.abs(traj.t_s - t_s)))
+    col = {r.id: i for i, r in enumerate(s.robots)}
+
+    def centre(i: int) -> np.ndarray | None:
+        if i in col:
+            return traj.pose[k, col[i], :2]
+        for o in s.obstacles:
+            if o.id == i:
+                return np.asarray(o.center) + np.asarray(o.velocity) * traj.t_s[k]
+        return None
+
+    a, b = centre(id_a), centre(id_b)
+    return None if a is None or b is None else (a + b) / 2.0
+
+
+def animate(data: RunData, path: Path, *, fps: int = 10, max_frames: int = 200,
+            tail_s: float = 8.0, dpi: int = 80) -> Path:
+    """A GIF of the run: discs moving, a fading trail, sim time in a corner.
+
+    At most `max_frames` frames, evenly spaced in sim time. Frames are rendered by
+    matplotlib (the static background once, then only the moving artists, blitted) and
+    written by Pillow with one shared palette.
+    """
+    from PIL import Image
+
+    traj, s = data.trajectory, data.scenario
+    if traj.t_s.size == 0:
+        raise ValueError("empty trajectory: nothing to animate")
+    fig = Figure(figsize=(6.0, 6.0), dpi=dpi)  # fixed layout: no per-frame layout work
+    canvas = FigureCanvasAgg(fig)
+    ax = fig.add_axes((0.12, 0.1, 0.83, 0.82))
+    _draw_scene(ax, data)
+    colours = robot_colours(len(s.robots))
+    xy_all = traj.pose[:, :, :2].reshape(-1, 2)
+    pts = np.vstack([xy_all, [r.goal for r in s.robots]])
+    lo, hi = pts.min(axis=0) - 2.0, pts.max(axis=0) + 2.0
+    half = (hi - lo).max() / 2.0  # a square view, so that equal aspect needs no adjusting
+    mid = (lo + hi) / 2.0
+    _finish_axes(ax, data, None)
+    ax.set_aspect("equal", adjustable="box")
+    ax.set_xlim(mid[0] - half, mid[0] + half)
+    ax.set_ylim(mid[1] - half, mid[1] + half)
+    discs = [Circle(traj.pose[0, k, :2], r.radius_m, fc=c, ec="black", lw=0.5, alpha=0.85,
+                    zorder=3) for k, (r, c) in enumerate(zip(s.robots, colours))]
+    for d in discs:
+        ax.add_patch(d)
+    trails = [ax.plot([], [], c=c, lw=1.0, zorder=2)[0] for c in colours]
+    clock = ax.text(0.02, 0.97, "", transform=ax.transAxes, va="top", fontsize=9,
+                    bbox={"fc": "white", "ec": "none", "alpha": 0.7})
+    moving = [*trails, *discs, clock]
+
+    for a in moving:  # the background without the moving artists, rendered once
+        a.set_visible(False)
+    canvas.draw()
+    background = canvas.copy_from_bbox(fig.bbox)
+    for a in moving:
+        a.set_visible(True)
+
+    frames = np.unique(np.linspace(0, traj.t_s.size - 1, min(max_frames, traj.t_s.size))
+                       .round().astype(int))
+    dt = float(np.median(np.diff(traj.t_s))) if traj.t_s.size > 1 else 1.0
+    tail = max(1, int(tail_s / dt))
+    size = canvas.get_width_height()
+    images: list[Image.Image] = []
+    for i in frames.tolist():
+        for k, (d, line) in enumerate(zip(discs, trails)):
+            d.set_center(traj.pose[i, k, :2])
+            seg = traj.pose[max(0, i - tail):i + 1, k, :2]
+            line.set_data(seg[:, 0], seg[:, 1])
+        clock.set_text(f"t = {traj.t_s[i]:.1f} s")
+        canvas.restore_region(background)
+        for a in moving:
+            ax.draw_artist(a)
+        rgb = Image.frombuffer("RGBA", size, bytes(canvas.buffer_rgba()), "raw", "RGBA", 0, 1)
+        rgb = rgb.convert("RGB")
+        images.append(rgb.quantize(colors=255) if not images
+                      else rgb.quantize(palette=images[0]))
+    path = Path(path)
+    images[0].save(path, format="GIF", save_all=True, append_images=images[1:],
+                   duration=max(20, round(1000 / fps)), loop=0)
+    return path
+
+
+def plot_report_bars(stats: Mapping[tuple[str, str], Mapping[str, tuple[float, float]]],
+                     metrics: Sequence[tuple[str, str]], out_dir: Path, *,
+                     prefix: str = "report") -> list[Path]:
+    """Grouped bar plots: one bar per planner in each setup, mean with +-std error bars.
+
+    Args:
+        stats: (setup, planner) -> metric key -> (mean, std); missing metrics are skipped.
+        metrics: (metric key, axis label) in plotting order.
+        out_dir: where `<prefix>_<metric>.png` and `<prefix>_all.png` go.
+
+    Returns:
+        the written files (one per metric, then the combined figure).
+    """
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    setups = sorted({k[0] for k in stats})
+    planners = sorted({k[1] for k in stats})
+    written = []
+    cols = 2 if len(metrics) > 1 else 1
+    rows = (len(metrics) + cols - 1) // cols
+    combined = _figure(6.0 * cols, 3.6 * rows)
+    axes = combined.subplots(rows, cols, squeeze=False).ravel()
+    for k, (key, label) in enumerate(metrics):
+        single = _figure(max(5.0, 1.2 * len(setups) + 2.0), 3.6)
+        for ax in (single.add_subplot(), axes[k]):
+            _bars(ax, stats, setups, planners, key, label)
+        path = out_dir / f"{prefix}_{key}.png"
+        single.savefig(path, dpi=110)
+        written.append(path)
+    for ax in axes[len(metrics):]:
+        ax.set_visible(False)
+    path = out_dir / f"{prefix}_all.png"
+    combined.savefig(path, dpi=110)
+    written.append(path)
+    return written
+
+
+def _bars(ax: Axes, stats: Mapping[tuple[str, str], Mapping[str, tuple[float, float]]],
+          setups: Sequence[str], planners: Sequence[str], key: str, label: str) -> None:
+    width = 0.8 / max(1, len(planners))
+    x = np.arange(len(setups))
+    colours = robot_colours(max(1, len(planners)))
+    for j, planner in enumerate(planners):
+        mean = np.array([stats.get((s, planner), {}).get(key, (np.nan, np.nan))[0]
+                         for s in setups], dtype=float)
+        std = np.array([stats.get((s, planner), {}).get(key, (np.nan, np.nan))[1]
+                        for s in setups], dtype=float)
+        ax.bar(x + (j - (len(planners) - 1) / 2.0) * width, np.nan_to_num(mean), width,
+               yerr=np.nan_to_num(std), capsize=2, color=colours[j], label=planner)
+    ax.set_xticks(x, setups, rotation=30, ha="right", fontsize=8)
+    ax.set_ylabel(label, fontsize=9)
+    ax.grid(True, axis="y", lw=0.3, alpha=0.5)
+    ax.legend(fontsize=7)
+
+
+def write_run_plots(out_dir: Path, *, gif: bool) -> None:
+    """trajectory.png (and trajectory.gif); a plotting failure is reported, not fatal."""
+    try:
+        data = read_run_dir(out_dir)
+        plot_trajectories(data, out_dir / "trajectory.png")
+        if gif:
+            animate(data, out_dir / "trajectory.gif")
+    except Exception as exc:  # noqa: BLE001 - the run itself is done; keep its result
+        print(f"warning: plotting failed: {type(exc).__name__}: {exc}", file=sys.stderr)

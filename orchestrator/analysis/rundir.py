@@ -1,0 +1,267 @@
+"""Reading run directories (the I/O edge of `orchestrator.analysis.metrics`).
+
+A run directory holds `scenario.yaml`, `trajectory.csv`, `commands.csv`, `events.jsonl`
+(written by `world.recorder.RunRecorder`), and, once the run is over, `metrics.json`;
+the CLI adds `run.json` (how the run was started: setup, planner, seed, mode, ...).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import re
+import uuid
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from agent.core.scenario import Scenario
+from orchestrator.analysis.metrics import Commands, RunMetrics, RunSpec, Trajectory, compute_metrics
+from world.scenario_file import load_scenario
+
+REQUIRED_COMMAND_COLUMNS = ("t_applied", "robot", "seq", "pose_stamp", "v", "omega",
+                            "plan_ms", "status")
+TRAJECTORY_COLUMNS = ("t", "robot", "x", "y", "theta", "v", "omega")
+DEFAULT_WORLD_RATE_HZ = 50.0
+DEFAULT_CONTROL_RATE_HZ = 10.0
+
+
+class RunDirError(RuntimeError):
+    """A run directory is missing a file or holds a malformed one."""
+
+
+@dataclass(frozen=True)
+class RunData:
+    """Everything a run directory holds."""
+
+    path: Path
+    scenario: Scenario
+    trajectory: Trajectory
+    commands: Commands
+    events: list[dict[str, Any]]
+
+
+def read_trajectory(path: Path, robot_ids: np.ndarray) -> Trajectory:
+    """`trajectory.csv` as arrays; ticks at which some robot is missing are dropped.
+
+    Args:
+        path: the CSV file.
+        robot_ids: (n,) the scenario's robot ids (column order of the result).
+    """
+    with open(path, encoding="utf-8") as f:
+        header = f.readline().strip().split(",")
+        if tuple(header[:len(TRAJECTORY_COLUMNS)]) != TRAJECTORY_COLUMNS:
+            raise RunDirError(f"{path}: header {header} is not {list(TRAJECTORY_COLUMNS)}")
+        rows = [line for line in f if line.count(",") >= len(TRAJECTORY_COLUMNS) - 1]
+    n = robot_ids.size
+    if not rows:
+        return Trajectory(np.zeros(0), robot_ids, np.zeros((0, n, 3)), np.zeros((0, n, 2)))
+    try:
+        data = np.loadtxt(rows, delimiter=",", ndmin=2, usecols=range(len(TRAJECTORY_COLUMNS)))
+    except ValueError:  # a half-written last line of a killed run
+        data = np.loadtxt(rows[:-1], delimiter=",", ndmin=2,
+                          usecols=range(len(TRAJECTORY_COLUMNS)))
+    times, t_idx = np.unique(data[:, 0], return_inverse=True)
+    order = np.argsort(robot_ids)
+    pos = np.searchsorted(robot_ids[order], data[:, 1].astype(np.int64))
+    pos = np.clip(pos, 0, n - 1)
+    known = robot_ids[order][pos] == data[:, 1].astype(np.int64)
+    col = order[pos]
+    grid = np.full((times.size, n, 5), np.nan)
+    grid[t_idx[known], col[known]] = data[known, 2:7]
+    complete = ~np.isnan(grid).any(axis=(1, 2))
+    grid = grid[complete]
+    return Trajectory(times[complete], robot_ids, grid[:, :, :3], grid[:, :, 3:])
+
+
+def read_commands(path: Path) -> Commands:
+    """`commands.csv` as arrays; the optional `side` and `resolved` columns are kept."""
+    with open(path, encoding="utf-8", newline="") as f:
+        reader = csv.DictReader(f)
+        fields = reader.fieldnames or []
+        missing = [c for c in REQUIRED_COMMAND_COLUMNS if c not in fields]
+        if missing:
+            raise RunDirError(f"{path}: missing columns {missing}")
+        rows = [r for r in reader if r.get("status")]  # skip a half-written last line
+    has_side = "side" in fields and "resolved" in fields
+
+    def col(name: str) -> list[str]:
+        return [r[name] for r in rows]
+
+    try:
+        side = resolved = None
+        if has_side:
+            side = np.array([int(x or 0) for x in col("side")], dtype=np.int64)
+            resolved = np.array([float(x) if x not in ("", None) else math.nan
+                                 for x in col("resolved")])
+        return Commands(
+            t_applied_s=np.array(col("t_applied"), dtype=float),
+            robot=np.array([int(x) for x in col("robot")], dtype=np.int64),
+            seq=np.array([int(x) for x in col("seq")], dtype=np.int64),
+            pose_stamp_s=np.array(col("pose_stamp"), dtype=float),
+            v=np.array(col("v"), dtype=float),
+            omega=np.array(col("omega"), dtype=float),
+            plan_ms=np.array(col("plan_ms"), dtype=float),
+            status=np.array(col("status"), dtype=str),
+            side=side,
+            resolved=resolved,
+        )
+    except (TypeError, ValueError) as exc:
+        raise RunDirError(f"{path}: malformed row: {exc}") from exc
+
+
+def read_events(path: Path) -> list[dict[str, Any]]:
+    """`events.jsonl`; lines that are not JSON objects (a killed run's last) are skipped."""
+    events = []
+    if not path.exists():
+        return events
+    with open(path, encoding="utf-8") as f:
+        for line in f:
+            try:
+                record = json.loads(line)
+            except json.JSONDecodeError:
+                continue
+            if isinstance(record, dict):
+                events.append(record)
+    return events
+
+
+def read_run_dir(run_dir: Path) -> RunData:
+    """Scenario, trajectory, commands and events of a run directory."""
+    run_dir = Path(run_dir)
+    for name in ("scenario.yaml", "trajectory.csv", "commands.csv"):
+        if not (run_dir / name).is_file():
+            raise RunDirError(f"{run_dir}: no {name}")
+    scenario = load_scenario(run_dir / "scenario.yaml")
+    robot_ids = np.array([r.id for r in scenario.robots], dtype=np.int64)
+    return RunData(
+        path=run_dir,
+        scenario=scenario,
+        trajectory=read_trajectory(run_dir / "trajectory.csv", robot_ids),
+        commands=read_commands(run_dir / "commands.csv"),
+        events=read_events(run_dir / "events.jsonl"),
+    )
+
+
+def contact_events(events: Iterable[dict[str, Any]]) -> list[tuple[float, int, int]]:
+    """(t, id_a, id_b) of the `contact` events (fields `a`/`b`, `id_a`/`id_b` or `pair`)."""
+    out = []
+    for e in events:
+        if e.get("kind") != "contact":
+            continue
+        pair = None
+        for ka, kb in (("a", "b"), ("id_a", "id_b"), ("robot_a", "robot_b")):
+            if ka in e and kb in e:
+                pair = (e[ka], e[kb])
+        for key in ("pair", "ids", "robots"):
+            if pair is None and isinstance(e.get(key), list) and len(e[key]) == 2:
+                pair = tuple(e[key])
+        try:
+            if pair is not None:
+                out.append((float(e["t"]), int(pair[0]), int(pair[1])))
+        except (KeyError, TypeError, ValueError):
+            continue
+    return out
+
+
+def run_rates(data: RunData) -> tuple[float, float]:
+    """(control period [s], world tick [s]) of a run.
+
+    From an event carrying `control_rate_hz` / `world_rate_hz` (the runners log one at
+    start) if any, else inferred: the median spacing of trajectory samples and of one
+    robot's consecutive pose stamps; else the defaults (10 Hz, 50 Hz).
+    """
+    control_hz = world_hz = None
+    for e in data.events:
+        control_hz = control_hz or _positive(e.get("control_rate_hz"))
+        world_hz = world_hz or _positive(e.get("world_rate_hz"))
+    world_dt = 1.0 / world_hz if world_hz else None
+    if world_dt is None and data.trajectory.t_s.size > 1:
+        world_dt = float(np.median(np.diff(data.trajectory.t_s)))
+    period = 1.0 / control_hz if control_hz else None
+    cmds = data.commands
+    if period is None and cmds.robot.size > 1:
+        diffs = []
+        for rid in np.unique(cmds.robot):
+            mine = cmds.robot == rid
+            stamps = cmds.pose_stamp_s[mine][np.argsort(cmds.seq[mine])]
+            diffs.extend(np.diff(stamps).tolist())
+        if diffs:
+            period = float(np.median(diffs))
+    return (period or 1.0 / DEFAULT_CONTROL_RATE_HZ, world_dt or 1.0 / DEFAULT_WORLD_RATE_HZ)
+
+
+def _positive(value: object) -> float | None:
+    if isinstance(value, int | float) and not isinstance(value, bool) and value > 0:
+        return float(value)
+    return None
+
+
+def metrics_from_run_dir(run_dir: Path, *, control_period_s: float | None = None,
+                         world_dt_s: float | None = None) -> RunMetrics:
+    """Compute the metrics of a finished (or killed) run directory."""
+    data = read_run_dir(Path(run_dir))
+    period, tick = run_rates(data)
+    return compute_metrics(
+        data.trajectory, data.commands, RunSpec.from_scenario(data.scenario),
+        control_period_s=control_period_s or period,
+        world_dt_s=world_dt_s or tick,
+        contact_events=contact_events(data.events),
+    )
+
+
+def write_json(path: Path, content: Any) -> Path:
+    """Write JSON atomically (readers never see half a file)."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp")
+    try:
+        with open(tmp, "w", encoding="utf-8") as f:
+            json.dump(content, f, indent=2)
+            f.write("\n")
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return path
+
+
+def write_metrics(run_dir: Path, metrics: RunMetrics) -> Path:
+    """`metrics.json` of a run directory."""
+    return write_json(Path(run_dir) / "metrics.json", metrics.to_json_dict())
+
+
+def find_run_dirs(paths: Iterable[Path]) -> list[Path]:
+    """Run directories (holding `metrics.json`) at or below the given paths, sorted."""
+    found: set[Path] = set()
+    for p in map(Path, paths):
+        if (p / "metrics.json").is_file():
+            found.add(p)
+        elif p.is_dir():
+            found.update(m.parent for m in p.rglob("metrics.json"))
+    return sorted(found)
+
+
+def read_json(path: Path) -> dict[str, Any]:
+    """A JSON object file, or {} when absent or malformed."""
+    try:
+        with open(path, encoding="utf-8") as f:
+            content = json.load(f)
+    except (OSError, json.JSONDecodeError):
+        return {}
+    return content if isinstance(content, dict) else {}
+
+
+def safe_name(text: str) -> str:
+    """`text` with every run of unsafe characters replaced by `_` (for file names)."""
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", text).strip("_.-") or "run"
+
+
+def end_event(run_dir: Path) -> dict[str, Any]:
+    """The run's ``end`` event from events.jsonl ({} if there is none)."""
+    events = read_events(Path(run_dir) / "events.jsonl")
+    return next((e for e in reversed(events) if e.get("kind") == "end"), {})

@@ -1,0 +1,75 @@
+"""What the subcommands share: bad-input errors, the progress line, the run summary, the
+run and fault flags, output-name helpers."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+from agent.core.scenario import Scenario
+from agent.flags import add_link_fault_flags
+
+MODES = ("distributed", "lockstep")
+DEFAULT_RUNS_DIR = Path("runs")
+
+
+class BadInput(Exception):
+    """A bad option value (exit status 2)."""
+
+
+def planner_label(scenario: Scenario) -> str:
+    names = sorted({r.planner for r in scenario.robots})
+    return names[0] if len(names) == 1 else "mixed"
+
+
+def split_list(text: str) -> list[str]:
+    """The items of a comma-separated list, stripped, empty ones dropped."""
+    return [x.strip() for x in text.split(",") if x.strip()]
+
+
+def add_link_args(p: argparse.ArgumentParser) -> None:
+    """The link faults of every pose and command link, and the latency compensation switch."""
+    group = add_link_fault_flags(p, "every pose and command link")
+    group.add_argument("--no-latency-compensation", action="store_true",
+                       help="robots plan on poses as stamped (no forward prediction by age)")
+
+
+def add_fault_args(p: argparse.ArgumentParser) -> None:
+    add_link_args(p)
+    g = p.add_argument_group("robot faults (T, DUR in sim seconds)")
+    g.add_argument("--slow-robot", action="append", default=[], metavar="I:MS",
+                   help="robot I's commands leave MS ms late (a CPU-starved robot)")
+    g.add_argument("--robot-rate", action="append", default=[], metavar="I:HZ[:PHASE_S]",
+                   help="robot I plans at HZ, its slots offset by PHASE_S")
+    g.add_argument("--kill-robot", action="append", default=[], metavar="I@T",
+                   help="SIGKILL robot I at T")
+    g.add_argument("--stop-robot", action="append", default=[], metavar="I@T:DUR",
+                   help="SIGSTOP robot I at T, SIGCONT at T + DUR")
+    g.add_argument("--restart-robot", action="append", default=[], metavar="I@T",
+                   help="SIGKILL robot I at T and start it again with the same id")
+
+
+def fault_plan(args: argparse.Namespace, scenario: Scenario, *, links: bool = True) -> Any:
+    """The `FaultPlan` of the fault flags, checked against `scenario` (robot ids, lockstep
+    rates), or None when no fault flag is given. `links=False` leaves the link flags and
+    the seed out: `stress` sets those per level and run, the robot faults apply to all."""
+    from world.sim.faults import FaultSpecError, build_plan
+
+    link_flags = dict(
+        latency_ms=args.latency_ms, jitter_ms=args.jitter_ms, drop=args.drop, dup=args.dup,
+        reorder=args.reorder, seed=args.seed,
+        compensate_latency=not args.no_latency_compensation) if links else {}
+    try:
+        plan = build_plan(slow=args.slow_robot, rates=args.robot_rate, kill=args.kill_robot,
+                          stop=args.stop_robot, restart=args.restart_robot, **link_flags)
+        plan.check([r.id for r in scenario.robots])
+    except FaultSpecError as exc:
+        raise BadInput(str(exc)) from None
+    for rid, timing in plan.timing.items():
+        hz = timing.control_rate_hz
+        if args.mode == "lockstep" and hz is not None and abs(50.0 / hz - round(50.0 / hz)) > 1e-9:
+            raise BadInput(f"--robot-rate {rid}:{hz:g}: in lockstep the rate must divide 50 Hz")
+    return plan if plan.active else None
+
+

@@ -1,0 +1,60 @@
+"""`orchestrator compose`: the steps of the docker-compose demo (scenario, await)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from agent.flags import positive, run_id
+from agent.process import ExitCode
+from orchestrator.experiments.compose import (
+    DEFAULT_CONNECT,
+    DEFAULT_RUNS_DIR,
+    SetupOptions,
+    await_and_report,
+    prepare_scenario,
+)
+
+# --------------------------------------------------------------------------------------
+# command line
+# --------------------------------------------------------------------------------------
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    parser = sub.add_parser(
+        "compose", help="steps of the docker-compose demo",
+        description="Steps of the docker-compose demo (compose.yaml): the world's scenario "
+                    "and the orchestrator's watch and report.")
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument("--setup", required=True,
+                        help="setup_a..setup_g, a family or a scenario .yaml file")
+    common.add_argument("--agents", type=int, help="robot count (scalable setups, families)")
+    common.add_argument("--planner", help="every robot uses this planner")
+    common.add_argument("--seed", type=int, default=0, help="seeds the random family")
+    common.add_argument("--robots", type=int,
+                        help="robot services in the compose file; the scenario must match")
+    common.add_argument("--run", required=True, type=run_id, help="run id")
+    common.add_argument("--runs-dir", type=Path, default=DEFAULT_RUNS_DIR,
+                        help=f"the shared volume (default {DEFAULT_RUNS_DIR})")
+    sub = parser.add_subparsers(dest="step", required=True)
+    sub.add_parser("scenario", parents=[common],
+                   help="write <runs-dir>/<run>/scenario.input.yaml for the world")
+    p = sub.add_parser("await", parents=[common],
+                       help="wait for the robots and the run's end, then write the report")
+    p.add_argument("--connect", default=DEFAULT_CONNECT,
+                   help=f"the world's router (default {DEFAULT_CONNECT})")
+    p.add_argument("--startup-timeout-s", type=positive, default=300.0,
+                   help="wall deadline for the world to come up")
+    p.add_argument("--time-scale", type=positive, default=1.0,
+                   help="the world's sim seconds per wall second (sizes the wait)")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """``orchestrator compose STEP ...``; returns the exit status."""
+    options = SetupOptions(setup=args.setup, agents=args.agents, planner=args.planner,
+                           seed=args.seed, robots=args.robots, run_id=args.run,
+                           runs_dir=args.runs_dir)
+    if args.step == "scenario":
+        prepare_scenario(options)
+        return ExitCode.OK
+    return await_and_report(options, args.connect, args.startup_timeout_s, args.time_scale)

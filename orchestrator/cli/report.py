@@ -1,0 +1,85 @@
+"""`orchestrator report`: mean +- std over seeds per setup and planner, tables and plots."""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+from pathlib import Path
+
+from agent.process import ExitCode
+from orchestrator.cli.common import (
+    BadInput,
+)
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("report", help="mean ± std over seeds per setup and planner, plots")
+    p.add_argument("dirs", nargs="+", help="run or sweep directories")
+    p.add_argument("--paper", action="store_true", help="print the paper's Table I beside ours")
+    p.add_argument("--out", help="where plots and tables go (default: the one DIR, or ./report)")
+    p.add_argument("--by-dir", action="store_true",
+                   help="one row per setup, planner and DIR (compare variants of one setup "
+                        "kept in different directories); default: runs are pooled by setup "
+                        "and planner")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from orchestrator.analysis.plots import plot_report_bars
+    from orchestrator.analysis.report import (
+        ALL_METRICS,
+        PAPER_METRICS,
+        aggregate,
+        collect,
+        paper_table,
+        reversal_causes,
+        reversal_table,
+        summary_table,
+    )
+    from orchestrator.analysis.rundir import write_json
+
+    paths = [Path(p) for p in args.dirs]
+    missing = [str(p) for p in paths if not p.exists()]
+    if missing:
+        raise BadInput(f"report: no such directory: {', '.join(missing)}")
+    records = collect(paths, by_dir=args.by_dir)
+    if not records:
+        raise BadInput(f"report: no run directories with metrics.json under "
+                       f"{', '.join(map(str, paths))}")
+    stats = aggregate(records, ALL_METRICS)
+    print(f"{len(records)} runs")
+    print(summary_table(stats))
+    causes = reversal_causes(records)
+    if causes:
+        print("\noscillations per robot by cause (README, \"Metrics\"):")
+        print(reversal_table(causes))
+    if args.paper:
+        print()
+        print(paper_table(stats))
+    out = Path(args.out) if args.out else (paths[0] if len(paths) == 1 and paths[0].is_dir()
+                                           else Path("report"))
+    out.mkdir(parents=True, exist_ok=True)
+    bar_stats = {k: {m: (v[0], v[1]) for m, v in s.items()} for k, s in stats.items()}
+    written = plot_report_bars(bar_stats, PAPER_METRICS, out)
+    write_json(out / "report.json", {
+        "runs": [str(r.path) for r in records],
+        "groups": [{"setup": k[0], "planner": k[1],
+                    **{m: {"mean": _finite(v[0]), "std": _finite(v[1]), "n": v[2]}
+                       for m, v in s.items()},
+                    "reversal_causes_per_robot": causes.get(k)} for k, s in stats.items()],
+    })
+    with open(out / "report.csv", "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["setup", "planner", "runs"]
+                   + [f"{m}_{x}" for m, _ in ALL_METRICS for x in ("mean", "std")])
+        for (setup, planner), s in stats.items():
+            w.writerow([setup, planner, s["runs"][2]]
+                       + [_finite(s[m][i]) for m, _ in ALL_METRICS for i in (0, 1)])
+    print(f"\nplots: {', '.join(str(p) for p in written)}")
+    print(f"tables: {out / 'report.csv'}, {out / 'report.json'}")
+    return ExitCode.OK
+
+
+def _finite(x: float) -> float | None:
+    return x if math.isfinite(x) else None

@@ -1,0 +1,106 @@
+"""`orchestrator scale`: real-time distributed runs of N robot processes: cost per robot."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from pathlib import Path
+
+from agent.core.config import PLANNER_NAMES
+from agent.flags import positive, robot_counts
+from orchestrator.experiments.scale import (
+    DEFAULT_FAMILY,
+    FAMILIES,
+    ROBOT_NICE,
+    _fmt,
+    format_rows,
+    format_world_rows,
+    run_one,
+    world_tick_costs,
+    write_outputs,
+)
+
+
+def _hosts(text: str) -> list[str]:
+    hosts = [x.strip() for x in text.split(",") if x.strip()]
+    if not hosts:
+        raise argparse.ArgumentTypeError(f"expected addresses, got {text!r}")
+    return hosts
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    parser = sub.add_parser(
+        "scale", help="real-time runs of N robot processes: timing, CPU, memory per robot",
+        description="Real-time distributed runs of N robot processes: timing, CPU, memory, "
+                    "start-up, safety per N.")
+    parser.add_argument("--agents", type=robot_counts, required=True,
+                        help="robot counts, comma-separated (e.g. 16,32,64,128)")
+    parser.add_argument("--family", choices=FAMILIES, default=DEFAULT_FAMILY,
+                        help=f"scenario family (default {DEFAULT_FAMILY})")
+    parser.add_argument("--planner", choices=PLANNER_NAMES, default=None,
+                        help="every robot uses this planner (default: the family's, eifp-mpc)")
+    parser.add_argument("--seed", type=int, default=0, help="seeds the random family")
+    parser.add_argument("--time-scale", type=positive, default=1.0,
+                        help="sim seconds per wall second (default 1: real time)")
+    parser.add_argument("--hosts", type=_hosts, default=["127.0.0.1"],
+                        help="addresses of the world robots connect through, round robin "
+                             "(e.g. 127.0.0.1,127.0.0.2; default 127.0.0.1)")
+    parser.add_argument("--launcher", choices=("fork", "spawn"), default="fork",
+                        help="fork: one agent.fleet process imports once and forks every "
+                             "robot process (default); spawn: one python -m agent each")
+    parser.add_argument("--robot-nice", type=int, choices=range(0, 20), default=ROBOT_NICE,
+                        metavar="N", help="with --launcher fork: robots run N steps nicer "
+                        f"than the world (default {ROBOT_NICE})")
+    parser.add_argument("--cpu-tokens", type=int, default=None, metavar="N",
+                        help="with --launcher fork: robots computing at once (default: no "
+                             "tokens; see agent.fleet)")
+    parser.add_argument("--startup-timeout-s", type=positive, default=60.0,
+                        help="deadline for every robot to be alive (default 60)")
+    parser.add_argument("--out", type=Path, required=True, help="output directory")
+    parser.add_argument("--json", action="store_true",
+                        help="also print {\"rows\": [...]} as the last line")
+    parser.add_argument("--world-bench", action="store_true",
+                        help="instead of runs: time the world's per-tick work in-process for "
+                             "each N (no processes, no transport)")
+    parser.add_argument("--ticks", type=int, default=500,
+                        help="ticks timed per N with --world-bench (default 500)")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Entry point of `orchestrator scale`; returns 0 (figures), 2 for bad arguments."""
+    argv = ["orchestrator", *args.argv]
+    out_root = Path(args.out)
+    out_root.mkdir(parents=True, exist_ok=True)
+    if args.world_bench:
+        from orchestrator.analysis.rundir import write_json
+
+        rows = [world_tick_costs(n, max(1, args.ticks), out_root / f"world_{n}")
+                for n in args.agents]
+        print(format_world_rows(rows))
+        print(write_json(out_root / "world_bench.json", {"argv": argv, "rows": rows}))
+        if args.json:
+            print(json.dumps({"rows": rows}))
+        return 0
+    env_note = os.environ.get("ZENOH_RUNTIME")
+    if env_note:
+        print(f"ZENOH_RUNTIME={env_note}", file=sys.stderr)
+    rows = []
+    for n in args.agents:
+        print(f"scale: {args.family} N={n} ...", file=sys.stderr, flush=True)
+        row = run_one(n, args, out_root)
+        rows.append(row)
+        print(f"scale: N={n}: success {row['success']}, miss rate "
+              f"{_fmt(row['deadline_miss_rate'], 4)}, latency p99 "
+              f"{_fmt(row['latency_ms_p99'], 1)} ms, alive {_fmt(row['alive_s'], 1)} s, "
+              f"PSS total {_fmt(row['mem_total_mib'], 0)} MiB, wall {row['wall_s']:.0f} s",
+              file=sys.stderr, flush=True)
+        write_outputs(rows, out_root, argv)  # after every N: a long sweep keeps its rows
+    print(format_rows(rows))
+    for path in write_outputs(rows, out_root, argv):
+        print(path)
+    if args.json:
+        print(json.dumps({"rows": rows}))
+    return 0

@@ -1,0 +1,111 @@
+"""`orchestrator sweep`: setups x planners x seeds, one `orchestrator run` each."""
+
+from __future__ import annotations
+
+import argparse
+import concurrent.futures
+import csv
+import itertools
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from agent.core.config import PLANNER_NAMES
+from agent.process import ExitCode
+from orchestrator.analysis.rundir import safe_name
+from orchestrator.cli.common import (
+    MODES,
+    BadInput,
+    split_list,
+)
+
+SWEEP_RUN_TIMEOUT_S = 4 * 3600.0
+"""Wall time after which one run of a sweep is abandoned."""
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("sweep", help="many runs: setups x planners x seeds")
+    p.add_argument("--setups", required=True, help="comma-separated names, or 'all' (A-G)")
+    p.add_argument("--planners", required=True, help="comma-separated names, or 'all'")
+    p.add_argument("--seeds", type=int, default=1, help="seeds 0..N-1 (default 1)")
+    p.add_argument("--mode", choices=MODES, default="distributed")
+    p.add_argument("--jobs", type=int, default=1, help="runs at a time (default 1)")
+    p.add_argument("--agents", type=int)
+    p.add_argument("--start-jitter-m", type=float, default=0.0)
+    p.add_argument("--time-scale", type=float, default=None)
+    p.add_argument("--out", required=True)
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from orchestrator.analysis.report import format_table
+    from orchestrator.analysis.rundir import read_json, write_json
+    from orchestrator.experiments.families import SETUPS, resolve
+
+    setups = list(SETUPS) if args.setups == "all" else split_list(args.setups)
+    planners = list(PLANNER_NAMES) if args.planners == "all" else split_list(args.planners)
+    if not setups or not planners:
+        raise BadInput("--setups and --planners must name at least one each")
+    if args.seeds < 1:
+        raise BadInput(f"--seeds: must be >= 1, got {args.seeds}")
+    if args.jobs < 1:
+        raise BadInput(f"--jobs: must be >= 1, got {args.jobs}")
+    for setup, planner in itertools.product(setups, planners):  # fail before starting
+        resolve(setup, agents=args.agents, seed=0, start_jitter_m=args.start_jitter_m,
+                planner=planner)
+    out = Path(args.out)
+    (out / "logs").mkdir(parents=True, exist_ok=True)
+    jobs = []
+    for setup, planner, seed in itertools.product(setups, planners, range(args.seeds)):
+        name = f"{safe_name(setup)}-{planner}-{seed}"
+        cmd = [sys.executable, "-m", "orchestrator", "run", setup, "--planner", planner,
+               "--seed", str(seed), "--mode", args.mode, "--out", str(out / name), "--quiet",
+               "--start-jitter-m", repr(args.start_jitter_m)]
+        if args.agents is not None:
+            cmd += ["--agents", str(args.agents)]
+        if args.time_scale is not None:
+            cmd += ["--time-scale", repr(args.time_scale)]
+        jobs.append((setup, planner, seed, name, cmd))
+    print(f"sweep: {len(jobs)} runs, {args.jobs} at a time, into {out}", file=sys.stderr)
+
+    def launch(job: tuple) -> tuple[tuple, int, float]:
+        t0 = time.monotonic()
+        log = out / "logs" / f"{job[3]}.log"
+        with open(log, "w") as f:
+            try:
+                rc = subprocess.run(job[4], stdout=f, stderr=subprocess.STDOUT,
+                                    timeout=SWEEP_RUN_TIMEOUT_S, check=False).returncode
+            except subprocess.TimeoutExpired:
+                rc = ExitCode.ERROR
+        return job, rc, time.monotonic() - t0
+
+    results = []
+    with concurrent.futures.ThreadPoolExecutor(max_workers=args.jobs) as pool:
+        for job, rc, wall in pool.map(launch, jobs):
+            m = read_json(out / job[3] / "metrics.json")
+            row = {
+                "setup": job[0], "planner": job[1], "seed": job[2], "exit": rc,
+                "success": m.get("success"), "arrived": m.get("arrived"),
+                "robots": m.get("robots"), "contacts": m.get("contacts"),
+                "min_gap_m": m.get("min_gap_m"),
+                "oscillations_per_robot": m.get("oscillations_per_robot"),
+                "path_length_mean_m": m.get("path_length_mean_m"),
+                "time_to_goal_mean_s": m.get("time_to_goal_mean_s"),
+                "plan_ms_mean": m.get("plan_ms_mean"), "plan_ms_p99": m.get("plan_ms_p99"),
+                "wall_s": round(wall, 2), "dir": job[3],
+            }
+            results.append(row)
+            print(f"  {job[3]}: exit {rc} ({wall:.1f} s)", file=sys.stderr)
+    header = list(results[0])
+    print(format_table(header[:-1], [[r[h] for h in header[:-1]] for r in results]))
+    with open(out / "sweep.csv", "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=header)
+        writer.writeheader()
+        writer.writerows(results)
+    write_json(out / "sweep.json", {"args": {k: v for k, v in vars(args).items()
+                                             if k not in ("func", "argv")},
+                                    "runs": results})
+    print(f"\n{out}  (orchestrator report {out} [--paper])")
+    worst = max(r["exit"] for r in results)
+    return worst if worst in (ExitCode.OK, ExitCode.CONTACT, ExitCode.BAD_INPUT) else ExitCode.ERROR

@@ -1,0 +1,1 @@
+"""Experiments: distributed and lockstep runs, sweeps, stress, scale, bench, the compose demo."""

@@ -1,0 +1,500 @@
+"""Launch one distributed run: a world process and one robot process per robot, on loopback.
+
+The launcher never opens a Zenoh session (a session does not survive `fork`, and children
+are started with `subprocess` anyway). Every child gets its own process group so that a
+terminal's Ctrl-C reaches only the launcher, which then tears the children down in order:
+the world first (SIGTERM, so it records the end of the run), then the robots (SIGTERM,
+then SIGKILL after a deadline). Teardown runs in ``finally``: no orphans on exceptions,
+Ctrl-C or SIGTERM to the launcher.
+
+Files written in `out_dir` besides the world's (scenario.yaml, trajectory.csv,
+commands.csv, events.jsonl): ``world.log`` and ``robot_<id>.log`` (each process's stderr
+and stdout; a robot's last line is ``robot <id> exit: reason=... code=... rejected=N ...``),
+``robots.json`` (those exit lines parsed: every robot process's reason, code and counters,
+and the total of poses the robots rejected as malformed) and, with process faults,
+``faults.jsonl`` (one line per signal sent: sim time, wall time, robot, action).
+
+Faults (`world.sim.faults.FaultPlan`): link faults and per-robot timing reach the
+processes as command-line options (``--latency-ms`` ... of ``python -m world`` for the
+command links and of ``python -m agent`` for each robot's pose link, seeded with the plan's
+seed). Process faults are the launcher's: it follows the sim time in trajectory.csv and
+sends SIGKILL (kill), SIGSTOP then SIGCONT (stop) or SIGKILL then a new process with the
+same id (restart, its log ``robot_<id>.restart<N>.log``) at the planned sim time, within
+`FAULT_POLL_S` of wall time.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import os
+import re
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import FrameType
+from typing import IO
+
+from agent.process import PARENT_PID_ENV
+from protocol import validate_run_id
+from world.scenario_file import load_scenario
+from world.sim.faults import FaultPlan, ProcessFault
+
+WORLD_TERM_GRACE_S = 10.0
+"""Wall time the world gets after SIGTERM to record the end and close, before SIGKILL."""
+ROBOT_EXIT_GRACE_S = 5.0
+"""Wall time robots get to leave on their own after the world ends, before SIGTERM."""
+ROBOT_TERM_GRACE_S = 3.0
+"""Wall time robots get after SIGTERM, before SIGKILL."""
+EXIT_MARGIN_S = 60.0
+"""Slack on the world's expected wall duration before the launcher gives up on it."""
+POLL_S = 0.2
+FAULT_POLL_S = 0.02
+"""Wall period of the launcher's loop while process faults are pending."""
+EXIT_LINE = re.compile(r"robot (\d+) exit: reason='([^']*)' code=(\d+)(.*)$", re.MULTILINE)
+
+
+@dataclass(frozen=True)
+class DistributedProgress:
+    """What `run_distributed` reports to `on_progress` about every `POLL_S` of wall time.
+
+    Args:
+        wall_s: wall time since the world was spawned.
+        started: the world has published the start.
+        sim_t_s: the newest sim time seen in the events or the trajectory file.
+        n_robots: robots in the scenario.
+        arrived: robot ids that have arrived.
+        contacts: contacts so far.
+        lost: robot ids whose processes the world has lost (and not seen rejoin).
+        robots_running: robot processes still running.
+        events: every event read so far, in order (parsed JSON lines).
+    """
+
+    wall_s: float
+    started: bool
+    sim_t_s: float
+    n_robots: int
+    arrived: frozenset[int]
+    contacts: int
+    lost: frozenset[int]
+    robots_running: int
+    events: tuple[dict, ...] = field(repr=False, default=())
+
+
+def free_tcp_endpoint(host: str = "127.0.0.1") -> str:
+    """A ``tcp/<host>:<port>`` endpoint on a port that was free a moment ago."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.bind((host, 0))
+        port = sock.getsockname()[1]
+    return f"tcp/{host}:{port}"
+
+
+class _EventTail:
+    """Reads new complete lines of events.jsonl (the world appends and flushes per line)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.offset = 0
+        self.events: list[dict] = []
+
+    def poll(self) -> list[dict]:
+        try:
+            with open(self.path, "rb") as f:
+                f.seek(self.offset)
+                chunk = f.read()
+        except FileNotFoundError:
+            return []
+        end = chunk.rfind(b"\n") + 1
+        self.offset += end
+        new = []
+        for line in chunk[:end].splitlines():
+            try:
+                new.append(json.loads(line))
+            except ValueError:
+                continue
+        self.events.extend(new)
+        return new
+
+
+def _last_trajectory_time(path: Path) -> float:
+    """Sim time of the last complete row of trajectory.csv (0 if none yet)."""
+    try:
+        with open(path, "rb") as f:
+            f.seek(0, os.SEEK_END)
+            size = f.tell()
+            f.seek(max(0, size - 512))
+            tail = f.read()
+    except FileNotFoundError:
+        return 0.0
+    lines = tail.split(b"\n")
+    for line in reversed(lines[:-1]):  # the last piece may be a partial row
+        try:
+            return float(line.split(b",", 1)[0])
+        except ValueError:
+            continue
+    return 0.0
+
+
+def world_command(run_id: str, scenario_path: Path, out_dir: Path, endpoint: str, *,
+                  rate_hz: float = 50.0, time_scale: float = 1.0, wait_robots_s: float = 30.0,
+                  extra_args: Sequence[str] = ()) -> list[str]:
+    """Command line of a world process (a router listening on `endpoint`)."""
+    return [
+        sys.executable, "-m", "world", "--run", run_id,
+        "--scenario", str(Path(scenario_path).resolve()), "--listen", endpoint,
+        "--rate-hz", repr(float(rate_hz)), "--time-scale", repr(float(time_scale)),
+        "--out", str(Path(out_dir).resolve()), "--wait-robots-s", repr(float(wait_robots_s)),
+        *extra_args,
+    ]
+
+
+def robot_command(run_id: str, robot_id: int, endpoint: str, *,
+                  startup_timeout_s: float = 30.0, extra_args: Sequence[str] = ()) -> list[str]:
+    """Command line of one robot process (a client of the router at `endpoint`)."""
+    return [
+        sys.executable, "-m", "agent", "--run", run_id, "--id", str(int(robot_id)),
+        "--connect", endpoint, "--startup-timeout-s", repr(float(startup_timeout_s)),
+        *extra_args,
+    ]
+
+
+def _link_args(plan: FaultPlan) -> list[str]:
+    links = plan.links
+    if not links.active:
+        return []
+    return ["--latency-ms", repr(links.latency_ms), "--jitter-ms", repr(links.jitter_ms),
+            "--drop", repr(links.drop), "--dup", repr(links.dup),
+            "--reorder", repr(links.reorder), "--fault-seed", str(plan.seed)]
+
+
+def world_fault_args(plan: FaultPlan | None) -> list[str]:
+    """Options of ``python -m world`` for the plan's command-link faults."""
+    return [] if plan is None else _link_args(plan)
+
+
+def robot_fault_args(plan: FaultPlan | None, robot_id: int) -> list[str]:
+    """Options of ``python -m agent`` for the plan's pose-link and timing faults."""
+    if plan is None:
+        return []
+    args = _link_args(plan)
+    timing = plan.timing_of(robot_id)
+    if timing.control_rate_hz is not None:
+        args += ["--control-rate-hz", repr(timing.control_rate_hz)]
+    if timing.phase_s:
+        args += ["--control-phase-s", repr(timing.phase_s)]
+    if timing.plan_delay_ms:
+        args += ["--plan-delay-ms", repr(timing.plan_delay_ms)]
+    if not plan.compensate_latency:
+        args.append("--no-latency-compensation")
+    return args
+
+
+class ProcessFaultScheduler:
+    """Sends the plan's process faults to the robot processes at their sim time.
+
+    Args:
+        faults: the process faults.
+        robots: robot id -> its current process (replaced on restart).
+        respawn: starts a new process for a robot id, given the restart count.
+        log_path: ``faults.jsonl``.
+    """
+
+    def __init__(self, faults: Sequence[ProcessFault], robots: dict[int, subprocess.Popen],
+                 respawn: Callable[[int, int], subprocess.Popen], log_path: Path) -> None:
+        self.todo = sorted(faults, key=lambda f: f.at_s)
+        self.resume: list[tuple[float, int]] = []  # (sim time, robot) of pending SIGCONTs
+        self.robots = robots
+        self.respawn = respawn
+        self.log_path = log_path
+        self.restarts: dict[int, int] = {}
+        self.stopped: set[int] = set()
+
+    @property
+    def pending(self) -> bool:
+        return bool(self.todo or self.resume)
+
+    def _log(self, sim_t_s: float, robot_id: int, action: str) -> None:
+        with open(self.log_path, "a") as f:
+            f.write(json.dumps({"t": round(sim_t_s, 4), "wall": time.time(),
+                                "robot": robot_id, "action": action}) + "\n")
+
+    def poll(self, sim_t_s: float) -> None:
+        """Send every fault due by sim time `sim_t_s`."""
+        while self.resume and self.resume[0][0] <= sim_t_s:
+            _, rid = self.resume.pop(0)
+            _signal_group(self.robots[rid], signal.SIGCONT)
+            self.stopped.discard(rid)
+            self._log(sim_t_s, rid, "SIGCONT")
+        while self.todo and self.todo[0].at_s <= sim_t_s:
+            f = self.todo.pop(0)
+            proc = self.robots[f.robot_id]
+            if f.kind == "stop":
+                _signal_group(proc, signal.SIGSTOP)
+                self.stopped.add(f.robot_id)
+                self.resume.append((f.at_s + f.duration_s, f.robot_id))
+                self.resume.sort()
+                self._log(sim_t_s, f.robot_id, "SIGSTOP")
+                continue
+            _signal_group(proc, signal.SIGKILL)
+            proc.wait()
+            self._log(sim_t_s, f.robot_id, "SIGKILL")
+            if f.kind == "restart":
+                n = self.restarts[f.robot_id] = self.restarts.get(f.robot_id, 0) + 1
+                self.robots[f.robot_id] = self.respawn(f.robot_id, n)
+                self._log(sim_t_s, f.robot_id, "restarted")
+
+    def release(self) -> None:
+        """SIGCONT every robot still stopped (before teardown signals it)."""
+        for rid in sorted(self.stopped):
+            _signal_group(self.robots[rid], signal.SIGCONT)
+        self.stopped.clear()
+
+
+def collect_robot_exits(out_dir: Path) -> dict:
+    """Every robot process's exit line, parsed (written as robots.json by the launcher)."""
+    processes = []
+    for log in sorted(Path(out_dir).glob("robot_*.log")):
+        for m in EXIT_LINE.finditer(log.read_text(errors="replace")):
+            counters = {k: int(v) for k, v in re.findall(r"(\w+)=(\d+)", m.group(4))}
+            processes.append({"robot": int(m.group(1)), "log": log.name,
+                              "reason": m.group(2), "code": int(m.group(3)), **counters})
+    return {"processes": processes,
+            "rejected_poses": sum(p.get("rejected", 0) for p in processes),
+            "stale_poses": sum(p.get("stale", 0) for p in processes)}
+def fleet_command(run_id: str, robot_ids: Sequence[int], endpoint: str, log_dir: Path, *,
+                  startup_timeout_s: float = 30.0,
+                  robot_endpoints: Mapping[int, str] | None = None,
+                  nice: int = 0, cpu_tokens: int | None = None) -> list[str]:
+    """Command line of one `agent.fleet` process that forks every robot process
+    (`cpu_tokens` None: the fleet's default, none)."""
+    overrides = [arg for rid, ep in sorted((robot_endpoints or {}).items())
+                 for arg in ("--connect-id", f"{int(rid)}={ep}")]
+    return [
+        sys.executable, "-m", "agent.fleet", "--run", run_id,
+        "--ids", ",".join(str(int(r)) for r in robot_ids), "--connect", endpoint,
+        "--log-dir", str(Path(log_dir).resolve()),
+        "--startup-timeout-s", repr(float(startup_timeout_s)), "--nice", str(int(nice)),
+        *(() if cpu_tokens is None else ("--cpu-tokens", str(int(cpu_tokens)))),
+        *overrides,
+    ]
+
+
+def spawn_logged(args: list[str], log_path: Path) -> subprocess.Popen:
+    """Start `args` in its own process group, stdout and stderr into `log_path`."""
+    log: IO[bytes] = open(log_path, "wb")
+    try:
+        return subprocess.Popen(
+            args, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
+            start_new_session=True,  # own process group: Ctrl-C reaches only the launcher
+            cwd=Path(__file__).resolve().parent.parent,
+            # The child dies with this process (agent.process.die_with_launcher).
+            env={**os.environ, "PYTHONUNBUFFERED": "1", PARENT_PID_ENV: str(os.getpid())},
+        )
+    finally:
+        log.close()  # the child holds its own descriptor
+
+
+def _signal_group(proc: subprocess.Popen, signum: int) -> None:
+    if proc.poll() is not None:
+        return
+    with contextlib.suppress(ProcessLookupError, PermissionError):
+        os.killpg(proc.pid, signum)
+
+
+def stop_processes(procs: Sequence[subprocess.Popen], wait_first_s: float,
+                   term_grace_s: float) -> None:
+    """Let `procs` exit within wait_first_s, then SIGTERM, then SIGKILL; reap all of them."""
+    deadline = time.monotonic() + wait_first_s
+    while any(p.poll() is None for p in procs) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    for p in procs:
+        _signal_group(p, signal.SIGTERM)
+    deadline = time.monotonic() + term_grace_s
+    while any(p.poll() is None for p in procs) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    for p in procs:
+        _signal_group(p, signal.SIGKILL)
+    for p in procs:
+        p.wait()
+
+
+def run_distributed(
+    scenario_path: Path,
+    out_dir: Path,
+    run_id: str,
+    *,
+    rate_hz: float = 50.0,
+    time_scale: float = 1.0,
+    endpoint: str | None = None,
+    startup_timeout_s: float = 30.0,
+    extra_world_args: Sequence[str] = (),
+    on_progress: Callable[[DistributedProgress], None] | None = None,
+    faults: FaultPlan | None = None,
+    robot_endpoints: Mapping[int, str] | None = None,
+    robot_launcher: str = "spawn",
+    robot_nice: int = 0,
+    cpu_tokens: int | None = None,
+) -> int:
+    """Run one scenario as real processes; return the world's exit status.
+
+    Args:
+        scenario_path: scenario YAML file.
+        out_dir: run directory (created); the world writes its files there, the launcher
+            adds world.log and robot_<id>.log.
+        run_id: run id (safe characters; prefixes every key expression).
+        rate_hz: world tick rate in sim time.
+        time_scale: sim seconds per wall second.
+        endpoint: the world's router endpoint; default: a free TCP port on 127.0.0.1.
+        startup_timeout_s: deadline for robots to connect and for all of them to be alive.
+        extra_world_args: appended to the world's command line.
+        on_progress: called with a `DistributedProgress` about every `POLL_S`.
+        faults: link, timing and process faults to inject (see the module docstring).
+        robot_endpoints: robot id -> the endpoint it connects to, for robots that reach
+            the world through another address (as from another host); the others use
+            `endpoint` (which then usually listens on ``0.0.0.0``).
+        robot_launcher: ``"spawn"``: one ``python -m agent`` per robot; ``"fork"``: one
+            ``python -m agent.fleet`` that imports and warms up once and forks every robot
+            process (faster start-up, less memory; its own log is ``fleet.log``).
+        robot_nice: with ``"fork"``, robots run this much nicer than the world (>= 0).
+        cpu_tokens: with ``"fork"``, robots computing at once (None or 0: no tokens).
+
+    Returns:
+        The world's exit status: 0 if every robot arrived with no contact, 1 if not,
+        2 for a setup error; a world killed by signal N gives 128 + N.
+    """
+    validate_run_id(run_id)
+    if robot_launcher == "fork" and faults is not None:
+        raise ValueError("robot_launcher='fork' cannot inject faults: use 'spawn'")
+    if robot_launcher not in ("spawn", "fork"):
+        raise ValueError(f"robot_launcher must be 'spawn' or 'fork', got {robot_launcher!r}")
+    scenario = load_scenario(scenario_path)  # fail early, in the caller's process
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    endpoint = endpoint or free_tcp_endpoint()
+    world_cmd = world_command(run_id, scenario_path, out_dir, endpoint, rate_hz=rate_hz,
+                              time_scale=time_scale, wait_robots_s=startup_timeout_s,
+                              extra_args=[*world_fault_args(faults), *extra_world_args])
+    robot_ids = [spec.id for spec in scenario.robots]
+    if faults is not None:
+        faults.check(robot_ids)
+    # A world that cannot keep pace runs slower than time_scale: be generous before giving up.
+    world_limit_s = (2.0 * startup_timeout_s + 3.0 * scenario.time_limit_s / time_scale
+                     + EXIT_MARGIN_S)
+
+    in_main = threading.current_thread() is threading.main_thread()
+    previous_term = None
+    if in_main:
+        def _on_term(signum: int, frame: FrameType | None) -> None:
+            raise SystemExit(128 + signum)  # unwinds through the teardown below
+        previous_term = signal.signal(signal.SIGTERM, _on_term)
+
+    world: subprocess.Popen | None = None
+    robots: list[subprocess.Popen] = []
+    scheduler: ProcessFaultScheduler | None = None
+    try:
+        t0 = time.monotonic()
+        world = spawn_logged(world_cmd, out_dir / "world.log")
+
+        def spawn_robot(rid: int, restart: int = 0) -> subprocess.Popen:
+            name = f"robot_{rid}.log" if not restart else f"robot_{rid}.restart{restart}.log"
+            address = (robot_endpoints or {}).get(rid, endpoint)
+            proc = spawn_logged(robot_command(run_id, rid, address,
+                                              startup_timeout_s=startup_timeout_s,
+                                              extra_args=robot_fault_args(faults, rid)),
+                                out_dir / name)
+            robots.append(proc)
+            return proc
+
+        current: dict[int, subprocess.Popen] = {}
+        if robot_launcher == "fork":  # one process group: teardown reaches every robot
+            robots.append(spawn_logged(
+                fleet_command(run_id, robot_ids, endpoint, out_dir,
+                              startup_timeout_s=startup_timeout_s,
+                              robot_endpoints=robot_endpoints, nice=robot_nice,
+                              cpu_tokens=cpu_tokens),
+                out_dir / "fleet.log"))
+        else:
+            current = {rid: spawn_robot(rid) for rid in robot_ids}
+        scheduler = ProcessFaultScheduler(faults.process if faults else (), current,
+                                          spawn_robot, out_dir / "faults.jsonl")
+        tail = _EventTail(out_dir / "events.jsonl")
+        while True:
+            try:
+                world.wait(timeout=FAULT_POLL_S if scheduler.pending else POLL_S)
+                break
+            except subprocess.TimeoutExpired:
+                pass
+            if scheduler.pending:
+                scheduler.poll(_last_trajectory_time(out_dir / "trajectory.csv"))
+            if time.monotonic() - t0 > world_limit_s:
+                stop_processes([world], 0.0, WORLD_TERM_GRACE_S)
+                break
+            if on_progress is not None:
+                tail.poll()
+                on_progress(_progress(tail.events, out_dir, t0, len(robot_ids), robots))
+        if on_progress is not None:
+            tail.poll()
+            on_progress(_progress(tail.events, out_dir, t0, len(robot_ids), robots))
+        code = world.returncode
+        return code if code >= 0 else 128 - code
+    finally:
+        # Teardown is bounded (WORLD_TERM_GRACE_S + ROBOT_EXIT_GRACE_S + ROBOT_TERM_GRACE_S);
+        # a second Ctrl-C or SIGTERM must not cut it short and leave orphans.
+        previous_int = None
+        if in_main:
+            previous_int = signal.signal(signal.SIGINT, signal.SIG_IGN)
+            signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        try:
+            if world is not None:
+                stop_processes([world], 0.0, WORLD_TERM_GRACE_S)
+            if scheduler is not None:
+                scheduler.release()
+            stop_processes(robots, ROBOT_EXIT_GRACE_S, ROBOT_TERM_GRACE_S)
+            with contextlib.suppress(OSError):
+                (out_dir / "robots.json").write_text(
+                    json.dumps(collect_robot_exits(out_dir), indent=1) + "\n")
+        finally:
+            if in_main:
+                signal.signal(signal.SIGINT, previous_int or signal.SIG_DFL)
+                signal.signal(signal.SIGTERM, previous_term or signal.SIG_DFL)
+
+
+def _progress(events: list[dict], out_dir: Path, t0: float, n_robots: int,
+              robots: Sequence[subprocess.Popen]) -> DistributedProgress:
+    arrived: set[int] = set()
+    lost: set[int] = set()
+    contacts = 0
+    started = False
+    sim_t = 0.0
+    for e in events:
+        kind = e.get("kind")
+        sim_t = max(sim_t, float(e.get("t", 0.0)))
+        if kind == "start":
+            started = True
+        elif kind == "arrived":
+            arrived.add(int(e["robot"]))
+        elif kind == "contact":
+            contacts += 1
+        elif kind == "robot_lost":
+            lost.add(int(e["robot"]))
+        elif kind == "robot_rejoined":
+            lost.discard(int(e["robot"]))
+    sim_t = max(sim_t, _last_trajectory_time(out_dir / "trajectory.csv"))
+    return DistributedProgress(
+        wall_s=time.monotonic() - t0,
+        started=started,
+        sim_t_s=sim_t if math.isfinite(sim_t) else 0.0,
+        n_robots=n_robots,
+        arrived=frozenset(arrived),
+        contacts=contacts,
+        lost=frozenset(lost),
+        robots_running=sum(p.poll() is None for p in robots),
+        events=tuple(events),
+    )

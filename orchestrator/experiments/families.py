@@ -1,0 +1,467 @@
+"""Scenario generators: the paper's setups A-G, scenario families, scaling and start jitter.
+
+Everything here is pure: generators take their sizes and a `numpy.random.Generator` and
+return a validated `Scenario`; `resolve` is the one entry point the CLI uses (it reads the
+setup files in `orchestrator/setups/`).
+
+Scale (the paper's grid units read as metres): robot radius 0.5 m, v_max 1.1 m/s,
+d_safety 0.3 m; straight start-goal distance 36 m for setups A-E, 76 m for F and G;
+lanes of one cohort 3 m apart (starts >= 2.5 m apart); time limit 4x the ideal time
+(longest straight line / v_max), rounded up to 10 s.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from agent.core.config import PLANNER_NAMES, PlannerConfig, RobotLimits
+from agent.core.scenario import RobotSpec, Scenario
+from world.scenario_file import ScenarioError, load_scenario, validate_scenario
+
+SETUPS_DIR = Path(__file__).resolve().parent.parent / "setups"
+
+ROBOT_RADIUS_M = 0.5
+V_MAX_MPS = 1.1
+OMEGA_MAX_RADPS = 1.5
+D_SAFETY_M = 0.3
+SHORT_RUN_M = 36.0
+"""Straight start-goal distance of setups A-E."""
+LONG_RUN_M = 76.0
+"""Straight start-goal distance of setups F and G."""
+LANE_SPACING_M = 3.0
+"""Distance between neighbouring lanes of one cohort."""
+MIN_START_SPACING_M = 2.5
+"""Smallest centre distance between two starts (or two goals) a generator produces."""
+MIN_CIRCLE_RADIUS_M = 18.0
+TIME_LIMIT_FACTOR = 4.0
+"""Time limit = this many times the ideal time, rounded up to 10 s."""
+COORD_DECIMALS = 4
+HEADING_DECIMALS = 6
+
+# Setup E: five robots, goals near the centre (pairwise >= 2.5 m apart), each start 36 m
+# from its goal in a random direction (approach directions >= 35 deg apart). Drawn once
+# with numpy.random.default_rng(20240505) and hard-coded so the setup never changes.
+_SETUP_E = (
+    # start (x, y), goal (x, y)
+    ((-31.42, -22.37), (-0.86, -3.34)),
+    ((-32.92, 19.28), (-2.85, -0.52)),
+    ((-8.52, 34.69), (1.99, 0.26)),
+    ((5.42, -34.04), (-0.29, 1.5)),
+    ((33.86, -19.33), (1.81, -2.94)),
+)
+
+
+# --------------------------------------------------------------------------------------
+# Building blocks
+# --------------------------------------------------------------------------------------
+
+def _robot(robot_id: int, start_xy: Sequence[float], goal_xy: Sequence[float], *,
+           exact: bool = False) -> RobotSpec:
+    """A robot at the setups' scale, heading straight at its goal.
+
+    Coordinates are rounded to 0.1 mm and headings to 1 urad (short, readable files)
+    unless `exact`. The `+ 0.0` turns -0.0 into 0.0.
+    """
+    def r(value: float, decimals: int) -> float:
+        return float(value) + 0.0 if exact else round(float(value), decimals) + 0.0
+
+    sx, sy = (r(c, COORD_DECIMALS) for c in start_xy)
+    gx, gy = (r(c, COORD_DECIMALS) for c in goal_xy)
+    heading = r(math.atan2(gy - sy, gx - sx), HEADING_DECIMALS)
+    return RobotSpec(
+        id=robot_id,
+        start=(sx, sy, heading),
+        goal=(gx, gy),
+        radius_m=ROBOT_RADIUS_M,
+        limits=RobotLimits(v_max_mps=V_MAX_MPS, omega_max_radps=OMEGA_MAX_RADPS),
+    )
+
+
+def ideal_time_s(robots: Sequence[RobotSpec]) -> float:
+    """Longest straight start-goal line over v_max (the best any planner can do)."""
+    return max(
+        math.hypot(r.goal[0] - r.start[0], r.goal[1] - r.start[1]) / r.limits.v_max_mps
+        for r in robots
+    )
+
+
+def _scenario(name: str, description: str, robots: Sequence[RobotSpec]) -> Scenario:
+    limit = math.ceil(TIME_LIMIT_FACTOR * ideal_time_s(robots) / 10.0) * 10.0
+    scenario = Scenario(
+        name=name,
+        description=description,
+        time_limit_s=float(limit),
+        goal_tolerance_m=0.25,
+        planner_config=PlannerConfig(d_safety_m=D_SAFETY_M),
+        robots=tuple(robots),
+    )
+    return validate_scenario(scenario, name)
+
+
+def _lanes(k: int, spacing_m: float = LANE_SPACING_M, offset_m: float = 0.0) -> np.ndarray:
+    """(k,) lane offsets centred on 0 (plus offset_m), spacing_m apart."""
+    return (np.arange(k) - (k - 1) / 2.0) * spacing_m + offset_m
+
+
+def _half_run(k: int, minimum_m: float) -> float:
+    """Half the crossing distance: the requested one, or more when cohorts are wide."""
+    lanes_half_width = (k - 1) / 2.0 * LANE_SPACING_M
+    return max(minimum_m, lanes_half_width + 2.0 * MIN_START_SPACING_M)
+
+
+# Direction of a cohort -> (start(lane, h), goal(lane, h)).
+_FLOWS: dict[str, Callable[[float, float], tuple[tuple[float, float], tuple[float, float]]]] = {
+    "left_to_right": lambda s, h: ((-h, s), (h, s)),
+    "right_to_left": lambda s, h: ((h, s), (-h, s)),
+    "top_to_bottom": lambda s, h: ((s, h), (s, -h)),
+    "bottom_to_top": lambda s, h: ((s, -h), (s, h)),
+}
+
+
+def _cohorts(flows: Sequence[tuple[str, np.ndarray]], half_run_m: float) -> list[RobotSpec]:
+    robots: list[RobotSpec] = []
+    for flow, lanes in flows:
+        for s in lanes:
+            start, goal = _FLOWS[flow](float(s), half_run_m)
+            robots.append(_robot(len(robots), start, goal))
+    return robots
+
+
+def _require(condition: bool, message: str) -> None:
+    if not condition:
+        raise ScenarioError(message)
+
+
+# --------------------------------------------------------------------------------------
+# The paper's setups A-G
+# --------------------------------------------------------------------------------------
+
+def setup_a() -> Scenario:
+    """Two robots mirrored across the x axis; their paths cross at right angles at (0, 0)."""
+    c = SHORT_RUN_M / 2.0 / math.sqrt(2.0)
+    robots = [_robot(0, (-c, c), (c, -c)), _robot(1, (-c, -c), (c, c))]
+    return _scenario("setup_a", "A: two robots mirrored across the x axis, paths crossing at "
+                     "right angles at the origin (symmetric conflict)", robots)
+
+
+def setup_b() -> Scenario:
+    """Three robots in a T: one from the top, two head-on from the left and right."""
+    h = SHORT_RUN_M / 2.0
+    robots = [_robot(0, (0.0, h), (0.0, -h)), _robot(1, (-h, 0.0), (h, 0.0)),
+              _robot(2, (h, 0.0), (-h, 0.0))]
+    return _scenario("setup_b", "B: three robots T-shaped, one from the top and two from "
+                     "opposite sides, all meeting at the origin", robots)
+
+
+def setup_c() -> Scenario:
+    """Three robots 120 deg apart on a circle, each crossing to the antipodal point."""
+    h = SHORT_RUN_M / 2.0
+    robots = []
+    for k, deg in enumerate((90.0, 210.0, 330.0)):
+        a = math.radians(deg)
+        start = (h * math.cos(a), h * math.sin(a))
+        robots.append(_robot(k, start, (-start[0], -start[1])))
+    return _scenario("setup_c", "C: three robots at 120 deg converging through the origin "
+                     "(radial symmetry)", robots)
+
+
+def setup_d() -> Scenario:
+    """Four robots on a cross swapping with the antipodal robot (mirrored across both axes)."""
+    h = SHORT_RUN_M / 2.0
+    starts = [(h, 0.0), (0.0, h), (-h, 0.0), (0.0, -h)]
+    robots = [_robot(k, s, (-s[0], -s[1])) for k, s in enumerate(starts)]
+    return _scenario("setup_d", "D: four robots in a cross, antipodal swap through the "
+                     "origin (mirrored across both axes)", robots)
+
+
+def setup_e() -> Scenario:
+    """Five robots at seeded random places, goals clustered around the centre."""
+    robots = [_robot(k, s, g) for k, (s, g) in enumerate(_SETUP_E)]
+    return _scenario("setup_e", "E: five robots randomly distributed (seeded), goals "
+                     "clustered within 4 m of the origin", robots)
+
+
+def setup_f(n: int = 12) -> Scenario:
+    """Three groups of n/3: left to right, top to bottom and bottom to top (head-on)."""
+    _require(n >= 3 and n % 3 == 0,
+             f"setup_f: --agents must be a positive multiple of 3 (three groups), got {n}")
+    k = n // 3
+    lanes = _lanes(k)
+    flows = [("left_to_right", lanes), ("top_to_bottom", lanes), ("bottom_to_top", lanes)]
+    robots = _cohorts(flows, _half_run(k, LONG_RUN_M / 2.0))
+    name = "setup_f" if n == 12 else f"setup_f_{n}"
+    return _scenario(name, f"F: {n} robots in three groups of {k}: left to right, top to "
+                     "bottom, bottom to top", robots)
+
+
+def setup_g(n: int = 16) -> Scenario:
+    """Four cohorts of n/4, each crossing to the opposite side (opposing cohorts head-on)."""
+    _require(n >= 4 and n % 4 == 0,
+             f"setup_g: --agents must be a positive multiple of 4 (four cohorts), got {n}")
+    k = n // 4
+    lanes = _lanes(k)
+    flows = [("left_to_right", lanes), ("right_to_left", lanes),
+             ("top_to_bottom", lanes), ("bottom_to_top", lanes)]
+    robots = _cohorts(flows, _half_run(k, LONG_RUN_M / 2.0))
+    name = "setup_g" if n == 16 else f"setup_g_{n}"
+    return _scenario(name, f"G: {n} robots in four cohorts of {k}, each crossing to the "
+                     "opposite side (dense cross-flow)", robots)
+
+
+SETUPS: dict[str, Callable[..., Scenario]] = {
+    "setup_a": setup_a, "setup_b": setup_b, "setup_c": setup_c, "setup_d": setup_d,
+    "setup_e": setup_e, "setup_f": setup_f, "setup_g": setup_g,
+}
+SCALABLE_SETUPS = ("setup_f", "setup_g")
+
+
+# --------------------------------------------------------------------------------------
+# Families
+# --------------------------------------------------------------------------------------
+
+def circle(n: int, rng: np.random.Generator | None = None) -> Scenario:
+    """n robots on a circle, each swapping with its antipode; exactly point-symmetric.
+
+    The radius is the smallest for which neighbouring starts are >= 2.5 m apart, but at
+    least 18 m. For even n the second half of the robots is the exact negation of the
+    first half. `rng` is unused (the family is deterministic).
+    """
+    _require(n >= 2, f"circle: --agents must be >= 2, got {n}")
+    radius_m = max(MIN_CIRCLE_RADIUS_M, MIN_START_SPACING_M / 2.0 / math.sin(math.pi / n))
+    radius_m = math.ceil(radius_m * 10.0) / 10.0
+    half = n // 2 if n % 2 == 0 else n
+    starts = [(radius_m * math.cos(2.0 * math.pi * k / n),
+               radius_m * math.sin(2.0 * math.pi * k / n)) for k in range(half)]
+    if n % 2 == 0:
+        starts += [(-x, -y) for x, y in starts]
+    robots = [_robot(k, (x, y), (-x, -y), exact=True) for k, (x, y) in enumerate(starts)]
+    return _scenario(f"circle_{n}", f"{n} robots on a circle of radius {radius_m:g} m, "
+                     "antipodal swap", robots)
+
+
+CIRCLES_GROUP = 8
+"""Robots per circle of the `circles` family (the last circles may hold fewer, >= 2)."""
+CIRCLES_RADIUS_M = 8.0
+CIRCLES_PITCH_M = 19.0
+"""Centre distance of neighbouring circles: the outermost robots of two neighbours start
+3 m apart, well inside each other's sensing radius, so circles interact at their edges."""
+CIRCLES_TIME_LIMIT_S = 120.0
+"""An 8-robot antipodal swap through one point takes eIFP-MPC up to ~6x the ideal 14.5 s
+(lockstep, 16 robots: all arrived at 83 s), more than the families' 4x rule allows."""
+
+
+def circles(n: int, rng: np.random.Generator | None = None) -> Scenario:
+    """n robots in antipodal circles of up to 8 (radius 8 m), circles on a 19 m grid.
+
+    The scaling family: every circle is the `circle` swap at a small radius, so the
+    density around a robot and the run's duration stay the same for any n, while robots
+    on the rims of neighbouring circles meet each other. Circle g is rotated by
+    g * 22.5 deg / 3 (neighbouring circles are not mirror images). `rng` is unused.
+    """
+    _require(n >= 2, f"circles: --agents must be >= 2, got {n}")
+    groups = math.ceil(n / CIRCLES_GROUP)
+    sizes = [n // groups + (1 if g < n % groups else 0) for g in range(groups)]
+    cols = math.ceil(math.sqrt(groups))
+    rows = math.ceil(groups / cols)
+    robots: list[RobotSpec] = []
+    for g, size in enumerate(sizes):
+        cx = (g % cols - (cols - 1) / 2.0) * CIRCLES_PITCH_M
+        cy = (g // cols - (rows - 1) / 2.0) * CIRCLES_PITCH_M
+        turn = g * math.pi / CIRCLES_GROUP / 3.0
+        for k in range(size):
+            a = turn + 2.0 * math.pi * k / size
+            dx, dy = CIRCLES_RADIUS_M * math.cos(a), CIRCLES_RADIUS_M * math.sin(a)
+            robots.append(_robot(len(robots), (cx + dx, cy + dy), (cx - dx, cy - dy)))
+    scenario = _scenario(f"circles_{n}", f"{n} robots in {groups} antipodal circles of "
+                         f"radius {CIRCLES_RADIUS_M:g} m, {CIRCLES_PITCH_M:g} m apart", robots)
+    return dataclasses.replace(scenario, time_limit_s=CIRCLES_TIME_LIMIT_S)
+
+
+def crossing(n: int, rng: np.random.Generator | None = None, *, flows: int = 2) -> Scenario:
+    """Perpendicular flows of n/flows robots crossing a 36 m square.
+
+    flows=2: left to right and bottom to top. flows=4: all four directions, opposing
+    flows on interleaved lanes (half a lane apart). `rng` is unused.
+    """
+    _require(flows in (2, 4), f"crossing: flows must be 2 or 4, got {flows}")
+    _require(n >= flows and n % flows == 0,
+             f"crossing: --agents must be a positive multiple of {flows}, got {n}")
+    k = n // flows
+    h = _half_run(k + 1, SHORT_RUN_M / 2.0)  # k + 1: interleaved lanes reach half a lane out
+    lanes = _lanes(k)
+    if flows == 2:
+        spec = [("left_to_right", lanes), ("bottom_to_top", lanes)]
+        name = f"crossing_{n}"
+    else:
+        shifted = _lanes(k, offset_m=LANE_SPACING_M / 2.0)
+        spec = [("left_to_right", lanes), ("bottom_to_top", lanes),
+                ("right_to_left", shifted), ("top_to_bottom", shifted)]
+        name = f"crossing4_{n}"
+    return _scenario(name, f"{flows} perpendicular flows of {k} robots", _cohorts(spec, h))
+
+
+def random_scenario(n: int, rng: np.random.Generator, *, max_tries: int = 20_000) -> Scenario:
+    """n robots with seeded random starts and goals in a square.
+
+    The square's side is max(20 m, 4 m * sqrt(n)); starts are pairwise >= 2.5 m apart,
+    goals too, and each goal is at least half the side away from its start.
+    """
+    _require(n >= 1, f"random: --agents must be >= 1, got {n}")
+    side_m = max(20.0, 4.0 * math.sqrt(n))
+    starts: list[np.ndarray] = []
+    goals: list[np.ndarray] = []
+    tries = 0
+    while len(starts) < n:
+        tries += 1
+        if tries > max_tries:
+            raise ScenarioError(f"random: could not place {n} robots in {side_m:g} m square")
+        s, g = rng.uniform(-side_m / 2.0, side_m / 2.0, size=(2, 2))
+        s, g = np.round(s, 2), np.round(g, 2)
+        if np.hypot(*(g - s)) < side_m / 2.0:
+            continue
+        if any(np.hypot(*(s - o)) < MIN_START_SPACING_M for o in starts):
+            continue
+        if any(np.hypot(*(g - o)) < MIN_START_SPACING_M for o in goals):
+            continue
+        starts.append(s)
+        goals.append(g)
+    robots = [_robot(k, s, g) for k, (s, g) in enumerate(zip(starts, goals))]
+    return _scenario(f"random_{n}", f"{n} robots, random starts and goals in a "
+                     f"{side_m:g} m square", robots)
+
+
+FAMILIES: dict[str, tuple[int, str]] = {
+    # name -> (default robot count, what it is)
+    "circle": (8, "N robots on a circle (radius >= 18 m), antipodal swap"),
+    "crossing": (8, "two perpendicular flows of N/2 (left->right, bottom->top)"),
+    "crossing4": (16, "four perpendicular flows of N/4, opposing flows on interleaved lanes"),
+    "random": (8, "N seeded random starts and goals in a square, >= 2.5 m spacing"),
+    "circles": (16, "antipodal circles of 8 (radius 8 m) on a 19 m grid: the scaling family"),
+}
+
+
+def _family(name: str, n: int, rng: np.random.Generator) -> Scenario:
+    if name == "circle":
+        return circle(n, rng)
+    if name == "crossing":
+        return crossing(n, rng, flows=2)
+    if name == "circles":
+        return circles(n, rng)
+    if name == "crossing4":
+        return crossing(n, rng, flows=4)
+    return random_scenario(n, rng)
+
+
+# --------------------------------------------------------------------------------------
+# Perturbation and resolution
+# --------------------------------------------------------------------------------------
+
+def jitter_starts(scenario: Scenario, d_m: float, rng: np.random.Generator, *,
+                  min_gap_m: float = 0.2, tries: int = 100) -> Scenario:
+    """Move every start by up to d_m metres (uniform in a disc); headings are kept.
+
+    Robots are moved one after another; a draw is accepted when the moved disc keeps a
+    gap of at least min_gap_m to every other start (moved or not) and every obstacle at
+    t = 0. After `tries` rejected draws the robot keeps its start, which is always valid
+    because the robots moved before it were checked against it.
+    """
+    if not (math.isfinite(d_m) and d_m >= 0.0):
+        raise ScenarioError(f"{scenario.name}: start jitter must be >= 0 m, got {d_m!r}")
+    if d_m == 0.0:
+        return scenario
+    xy = np.array([r.start[:2] for r in scenario.robots], dtype=float)
+    radius = np.array([r.radius_m for r in scenario.robots], dtype=float)
+    ob_c = np.array([o.center for o in scenario.obstacles], dtype=float).reshape(-1, 2)
+    ob_r = np.array([o.radius_m for o in scenario.obstacles], dtype=float)
+    others = np.ones(len(xy), dtype=bool)
+    for k in range(len(xy)):
+        others[:] = True
+        others[k] = False
+        for _ in range(tries):
+            rho = d_m * math.sqrt(rng.uniform())  # sqrt: uniform over the disc's area
+            phi = rng.uniform(0.0, 2.0 * math.pi)
+            cand = xy[k] + rho * np.array([math.cos(phi), math.sin(phi)])
+            gap_r = np.hypot(*(xy[others] - cand).T) - radius[others] - radius[k]
+            gap_o = np.hypot(*(ob_c - cand).T) - ob_r - radius[k]
+            if np.all(gap_r >= min_gap_m) and np.all(gap_o >= min_gap_m):
+                xy[k] = cand
+                break
+    robots = tuple(
+        dataclasses.replace(r, start=(float(x), float(y), r.start[2]))
+        for r, (x, y) in zip(scenario.robots, xy)
+    )
+    jittered = dataclasses.replace(
+        scenario, robots=robots,
+        description=f"{scenario.description} (starts jittered by up to {d_m:g} m)")
+    return validate_scenario(jittered, scenario.name)
+
+
+def with_planner(scenario: Scenario, planner: str) -> Scenario:
+    """Every robot uses `planner`."""
+    if planner not in PLANNER_NAMES:
+        raise ScenarioError(f"--planner: unknown planner {planner!r}; expected one of "
+                            f"{', '.join(PLANNER_NAMES)}")
+    robots = tuple(dataclasses.replace(r, planner=planner) for r in scenario.robots)
+    return dataclasses.replace(scenario, robots=robots)
+
+
+def setup_path(name: str) -> Path:
+    """The file of a named setup (`setup_a` ... `setup_g`)."""
+    return SETUPS_DIR / f"{name}.yaml"
+
+
+def known_names() -> tuple[str, ...]:
+    """Every name `resolve` accepts besides a file path."""
+    return (*SETUPS, *FAMILIES)
+
+
+def resolve(name_or_path: str, agents: int | None = None, seed: int = 0,
+            start_jitter_m: float = 0.0, planner: str | None = None) -> Scenario:
+    """The scenario the CLI runs.
+
+    Args:
+        name_or_path: `setup_a` ... `setup_g` (also `a` ... `g`), a family (`circle`,
+            `crossing`, `crossing4`, `random`) or a scenario file path.
+        agents: robot count; setups F and G scale (groups of agents/3, cohorts of
+            agents/4), families take any valid count, other setups and files only
+            their own size.
+        seed: seeds the random family and the start jitter (independent streams).
+        start_jitter_m: move starts by up to this much (see `jitter_starts`).
+        planner: if given, every robot uses it.
+
+    Raises:
+        ScenarioError: unknown name, bad size, invalid file or parameters.
+    """
+    family_rng, jitter_rng = np.random.default_rng(seed).spawn(2)
+    key = name_or_path.strip()
+    if len(key) == 1 and f"setup_{key.lower()}" in SETUPS:
+        key = f"setup_{key.lower()}"
+    if agents is not None and agents < 1:
+        raise ScenarioError(f"--agents: must be >= 1, got {agents}")
+    if key in SETUPS:
+        scenario = load_scenario(setup_path(key))
+        if agents is not None and agents != len(scenario.robots):
+            if key not in SCALABLE_SETUPS:
+                raise ScenarioError(
+                    f"{key}: has a fixed size of {len(scenario.robots)} robots; "
+                    f"--agents {agents} is only supported for {', '.join(SCALABLE_SETUPS)} "
+                    "and the families")
+            scenario = SETUPS[key](agents)
+    elif key in FAMILIES:
+        scenario = _family(key, FAMILIES[key][0] if agents is None else agents, family_rng)
+    elif key.endswith((".yaml", ".yml")) or Path(key).is_file():
+        scenario = load_scenario(key)
+        if agents is not None and agents != len(scenario.robots):
+            raise ScenarioError(f"{key}: has {len(scenario.robots)} robots; --agents "
+                                f"{agents} cannot resize a scenario file")
+    else:
+        raise ScenarioError(f"{key}: unknown setup or family; expected one of "
+                            f"{', '.join(known_names())} or a .yaml file")
+    if planner is not None:
+        scenario = with_planner(scenario, planner)
+    return jitter_starts(scenario, start_jitter_m, jitter_rng)

@@ -1,0 +1,570 @@
+"""Scale benchmark: real-time distributed runs of N robot processes, what each one costs.
+
+    orchestrator scale --agents 16,32,64,128 [--family circles] [--planner P] [--seed S]
+                       [--hosts 127.0.0.1,127.0.0.2] [--launcher fork|spawn]
+                       [--time-scale 1] --out DIR [--json]
+
+Every N is one normal distributed run
+(`orchestrator.experiments.distributed.run_distributed`: the world
+process and one robot process per robot, over Zenoh) in ``DIR/<family>_<N>/``, with its
+metrics.json and trajectory.png. While it runs, a sampler thread in this process reads every
+child process once per `SAMPLE_PERIOD_S` (psutil): its CPU time and, every
+`MEMORY_EVERY`-th sample (5 s), its PSS (proportional set size: shared pages split between the
+processes that map them; RSS where the kernel gives no PSS). Per N it reports:
+
+- plan_ms p50/p99, latency_ms p50/p99, deadline_miss_rate, success, contacts, min_gap_m:
+  the run's usual metrics (`orchestrator.analysis.metrics`; the latency is in sim time, quantised to
+  world ticks);
+- cpu_share_robots / cpu_share_world: CPU seconds used by all robot processes (the world)
+  between the start and the end of the control phase (the first ``robot_left``), over that
+  wall time times the
+  number of CPUs (1.0 = the whole machine); cpu_pct_per_robot: the same per robot, in % of
+  one core;
+- mem_robot_mib: a robot process's peak PSS, mean over the robots; mem_total_mib: the
+  largest simultaneous sum over the world, the robots and (``--launcher fork``) the
+  `agent.fleet` parent that forked them (mem_fleet_mib); threads_per_robot: the most
+  threads a robot process had;
+- alive_s: wall time from spawning the processes to the world seeing the last robot's
+  liveliness token (`robot_joined` events carry the wall clock);
+- world_overruns: world ticks that fell more than a tick behind (the world resynchronises);
+- robots_lost: robots whose liveliness token the world saw disappear during the run (a
+  process that missed its 1 s transport lease under overload, or crashed);
+- connections: the world's TCP connections per local address (robots reaching it through
+  each of ``--hosts``);
+- cpu_ms_per_plan_sense / _plan / _send / _loop / _threads: where a robot process's CPU
+  went, per plan it sent: the robots' own thread and process CPU clocks over their loops
+  (`agent.node.RobotNode.cpu_summary`, from their exit lines in robots.json), summed over
+  the robots and divided by all their plans. sense: decoding and observing poses; plan:
+  estimates and the planner; send: encoding and publishing the command; loop: the rest of
+  the main thread; threads: the other threads (Zenoh's runtime, the pose callback's).
+
+``--hosts A,B``: the world listens on ``tcp/0.0.0.0:PORT`` and robot k connects to
+``tcp/<hosts[k % len]>:PORT``, as robots on other hosts would (on Linux every 127.x.y.z
+address is loopback, no set-up needed).
+
+Written to DIR: ``scale.csv``, ``scale.json`` (rows and the command line) and ``scale.png``
+(one subplot per figure against N). Figures only: nothing here asserts a time budget.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import os
+import secrets
+import sys
+import threading
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import psutil
+
+SAMPLE_PERIOD_S = 0.5
+MEMORY_EVERY = 10
+"""Read PSS on every this many samples (reading smaps_rollup costs ~1 ms per process)."""
+FAMILIES = ("circles", "circle", "crossing", "random")
+DEFAULT_FAMILY = "circles"
+"""Tiled 8-robot circles: the same local density and run length for every N (see README)."""
+MIB = float(1 << 20)
+ROBOT_NICE = 0
+"""Default niceness added to the robots (see README, "Scale": a nicer robot's Zenoh threads
+starve too, and a missed 1 s lease loses the robot)."""
+
+CPU_PARTS = ("sense", "plan", "send", "loop", "threads")
+"""Parts of a robot process's CPU time (`agent.node.RobotNode.cpu_summary`)."""
+
+COLUMNS = (
+    "agents", "family", "planner", "success", "arrived", "contacts", "min_gap_m",
+    "plan_ms_p50", "plan_ms_p99", "latency_ms_p50", "latency_ms_p99", "deadline_miss_rate",
+    "cpu_share_robots", "cpu_share_world", "cpu_pct_per_robot", "mem_robot_mib",
+    "mem_world_mib", "mem_fleet_mib", "mem_total_mib", "mem_kind", "threads_per_robot",
+    "alive_s", "sim_time_s", "wall_s", "world_overruns", "robots_lost", "world_status",
+    "connections",
+    "launcher",
+    *(f"cpu_ms_per_plan_{part}" for part in CPU_PARTS),
+)
+PLOTTED = (
+    ("plan_ms_p50", "plan_ms_p99", "planning time [ms]"),
+    ("latency_ms_p50", "latency_ms_p99", "pose->command latency [ms]"),
+    ("deadline_miss_rate", None, "deadline-miss rate"),
+    ("cpu_share_robots", "cpu_share_world", "CPU share of the machine"),
+    ("mem_robot_mib", None, "PSS per robot process [MiB]"),
+    ("mem_total_mib", None, "total PSS [MiB]"),
+    ("alive_s", None, "every robot alive after [s]"),
+    ("contacts", None, "contacts"),
+)
+
+
+@dataclass
+class _Proc:
+    role: str  # "world" or "robot"
+    cpu_s: list[tuple[float, float]] = field(default_factory=list)  # (wall, user + system)
+    mem_peak_b: float = 0.0
+    threads_peak: int = 0
+
+
+class ResourceSampler(threading.Thread):
+    """Samples this process's children (world and robots) until `stop()`.
+
+    Args:
+        period_s: wall time between samples.
+        memory_every: read the memory on every this many samples.
+    """
+
+    def __init__(self, period_s: float = SAMPLE_PERIOD_S, memory_every: int = MEMORY_EVERY
+                 ) -> None:
+        super().__init__(name="scale-sampler", daemon=True)
+        self.period_s = period_s
+        self.memory_every = memory_every
+        self.procs: dict[int, _Proc] = {}
+        self.mem_total_peak_b = 0.0
+        self.mem_kind = "pss"
+        self.connections: dict[str, int] = {}
+        self._handles: dict[int, psutil.Process] = {}
+        self._done = threading.Event()
+
+    def stop(self) -> None:
+        self._done.set()
+        self.join()
+
+    def _role(self, proc: psutil.Process) -> str | None:
+        try:
+            cmd = proc.cmdline()
+        except (psutil.NoSuchProcess, psutil.AccessDenied, psutil.ZombieProcess):
+            return None
+        if "-m" in cmd:
+            module = cmd[cmd.index("-m") + 1] if cmd.index("-m") + 1 < len(cmd) else ""
+            if module in ("world", "agent"):
+                return "world" if module == "world" else "robot"
+            if module == "agent.fleet":  # the launcher is our child, its robots are its
+                return "fleet" if proc.ppid() == os.getpid() else "robot"
+        return None
+
+    def sample(self, k: int) -> None:
+        """One pass over the children."""
+        wall = time.monotonic()
+        mem_sum = 0.0
+        with_memory = k % self.memory_every == 0
+        for child in psutil.Process().children(recursive=True):
+            pid = child.pid
+            if pid not in self._handles:
+                role = self._role(child)
+                if role is None:
+                    continue
+                self._handles[pid] = child
+                self.procs[pid] = _Proc(role)
+            proc, rec = self._handles[pid], self.procs[pid]
+            try:
+                with proc.oneshot():
+                    t = proc.cpu_times()
+                    rec.cpu_s.append((wall, t.user + t.system))
+                    rec.threads_peak = max(rec.threads_peak, proc.num_threads())
+                    if with_memory:
+                        mem = self._memory_b(proc)
+                        rec.mem_peak_b = max(rec.mem_peak_b, mem)
+                        mem_sum += mem
+                    if rec.role == "world" and with_memory:
+                        self._count_connections(proc)
+            except (psutil.NoSuchProcess, psutil.AccessDenied, psutil.ZombieProcess):
+                continue
+        self.mem_total_peak_b = max(self.mem_total_peak_b, mem_sum)
+
+    def _memory_b(self, proc: psutil.Process) -> float:
+        try:
+            info = proc.memory_full_info()
+            pss = getattr(info, "pss", None)
+            if pss is not None:
+                return float(pss)
+        except psutil.AccessDenied:
+            pass
+        self.mem_kind = "rss"
+        return float(proc.memory_info().rss)
+
+    def _count_connections(self, proc: psutil.Process) -> None:
+        counts: dict[str, int] = {}
+        for conn in proc.net_connections(kind="tcp"):
+            if conn.status == psutil.CONN_ESTABLISHED and conn.laddr:
+                counts[conn.laddr.ip] = counts.get(conn.laddr.ip, 0) + 1
+        for ip, count in counts.items():
+            self.connections[ip] = max(self.connections.get(ip, 0), count)
+
+    def run(self) -> None:
+        k = 0
+        while not self._done.is_set():
+            self.sample(k)
+            k += 1
+            self._done.wait(self.period_s)
+
+    def cpu_between(self, role: str, t0: float, t1: float) -> tuple[float, int]:
+        """(CPU seconds of all `role` processes between monotonic t0 and t1, processes)."""
+        total = 0.0
+        count = 0
+        for rec in self.procs.values():
+            if rec.role != role or not rec.cpu_s:
+                continue
+            count += 1
+            total += _cpu_at(rec.cpu_s, t1) - _cpu_at(rec.cpu_s, t0)
+        return total, count
+
+
+def _cpu_at(series: Sequence[tuple[float, float]], t: float) -> float:
+    """Cumulative CPU time at monotonic t, linear between samples, clamped at the ends."""
+    if t <= series[0][0]:
+        return series[0][1] if t >= series[0][0] - SAMPLE_PERIOD_S else 0.0
+    for (w0, c0), (w1, c1) in zip(series, series[1:]):
+        if w0 <= t <= w1:
+            return c0 + (c1 - c0) * (t - w0) / max(w1 - w0, 1e-9)
+    return series[-1][1]
+
+
+# --------------------------------------------------------------------------------------
+# One run per N
+# --------------------------------------------------------------------------------------
+
+def _events(out_dir: Path) -> list[dict]:
+    from orchestrator.analysis.rundir import read_events
+
+    path = out_dir / "events.jsonl"
+    return read_events(path) if path.exists() else []
+
+
+def cpu_per_plan_ms(exits: dict[str, Any]) -> dict[str, float | None]:
+    """The robots' CPU per plan by part (ms), from robots.json's parsed exit lines.
+
+    Sums every process that reported its CPU split and divides by the plans those sent;
+    None for every part if none did (or none planned).
+    """
+    reported = [p for p in exits.get("processes", ())
+                if all(f"cpu_{part}_us" in p for part in CPU_PARTS)]
+    plans = sum(int(p.get("plans", 0)) for p in reported)
+    return {f"cpu_ms_per_plan_{part}":
+            (sum(int(p[f"cpu_{part}_us"]) for p in reported) / plans / 1e3 if plans else None)
+            for part in CPU_PARTS}
+
+
+def scale_row(metrics: dict[str, Any], events: Sequence[dict], sampler: ResourceSampler, *,
+              n: int, family: str, planner: str, spawn_wall: float, spawn_mono: float,
+              wall_s: float, time_scale: float, world_status: int,
+              launcher: str = "spawn", exits: dict[str, Any] | None = None
+              ) -> dict[str, Any]:
+    """One table row from a finished run (see the module docstring for each column).
+
+    `exits`: the run's robots.json (`orchestrator.experiments.distributed.collect_robot_exits`).
+    """
+    first_join: dict[int, float] = {}  # a robot's first token (re-joins come later)
+    for e in events:
+        if e.get("kind") == "robot_joined" and "wall" in e and "robot" in e:
+            first_join.setdefault(int(e["robot"]), float(e["wall"]))
+    joined = list(first_join.values())
+    lost = {int(e["robot"]) for e in events if e.get("kind") == "robot_lost" and "robot" in e}
+    start = next((e for e in events if e.get("kind") == "start"), None)
+    end = next((e for e in reversed(events) if e.get("kind") == "end"), {})
+    alive_s = (max(joined) - spawn_wall) if len(joined) >= n else None
+    sim_time_s = float(metrics.get("sim_time_s") or 0.0)
+    cpu_robots = cpu_world = cpu_per_robot = None
+    if start is not None and "wall" in start:
+        t0 = spawn_mono + (float(start["wall"]) - spawn_wall)
+        # The end: robots leave within milliseconds of the world's end message. A world
+        # that fell behind real time took longer than sim time / time scale.
+        left = [float(e["wall"]) for e in events if e.get("kind") == "robot_left" and "wall" in e]
+        t1 = (spawn_mono + (min(left) - spawn_wall) if left
+              else t0 + sim_time_s / time_scale)
+        span = max(t1 - t0, 1e-9)
+        cpus = psutil.cpu_count() or 1
+        robots_s, n_robots = sampler.cpu_between("robot", t0, t1)
+        world_s, _ = sampler.cpu_between("world", t0, t1)
+        cpu_robots = robots_s / (span * cpus)
+        cpu_world = world_s / (span * cpus)
+        cpu_per_robot = 100.0 * robots_s / span / max(n_robots, 1)
+    robots = [p for p in sampler.procs.values() if p.role == "robot" and p.mem_peak_b > 0]
+    world = [p for p in sampler.procs.values() if p.role == "world"]
+    fleet = [p for p in sampler.procs.values() if p.role == "fleet"]
+    return {
+        "agents": n,
+        "family": family,
+        "planner": planner,
+        "success": bool(metrics.get("success")),
+        "arrived": metrics.get("arrived"),
+        "contacts": metrics.get("contacts"),
+        "min_gap_m": metrics.get("min_gap_m"),
+        "plan_ms_p50": metrics.get("plan_ms_p50"),
+        "plan_ms_p99": metrics.get("plan_ms_p99"),
+        "latency_ms_p50": metrics.get("latency_ms_p50"),
+        "latency_ms_p99": metrics.get("latency_ms_p99"),
+        "deadline_miss_rate": metrics.get("deadline_miss_rate"),
+        "cpu_share_robots": cpu_robots,
+        "cpu_share_world": cpu_world,
+        "cpu_pct_per_robot": cpu_per_robot,
+        "mem_robot_mib": (sum(p.mem_peak_b for p in robots) / len(robots) / MIB
+                          if robots else None),
+        "mem_world_mib": world[0].mem_peak_b / MIB if world else None,
+        "mem_fleet_mib": fleet[0].mem_peak_b / MIB if fleet else None,
+        "launcher": launcher,
+        "mem_total_mib": sampler.mem_total_peak_b / MIB if sampler.mem_total_peak_b else None,
+        "mem_kind": sampler.mem_kind,
+        "threads_per_robot": max((p.threads_peak for p in robots), default=None),
+        "alive_s": alive_s,
+        "sim_time_s": sim_time_s,
+        "wall_s": wall_s,
+        "world_overruns": end.get("overruns"),
+        "robots_lost": len(lost),
+        "world_status": world_status,
+        "connections": dict(sorted(sampler.connections.items())),
+        **cpu_per_plan_ms(exits or {}),
+    }
+
+
+def robot_endpoints(hosts: Sequence[str], port: int, robot_ids: Sequence[int]
+                    ) -> dict[int, str]:
+    """Robot k (in scenario order) connects through hosts[k % len(hosts)]."""
+    return {rid: f"tcp/{hosts[k % len(hosts)]}:{port}" for k, rid in enumerate(robot_ids)}
+
+
+def run_one(n: int, args: argparse.Namespace, out_root: Path) -> dict[str, Any]:
+    """One distributed run of n robots; returns its row."""
+    from orchestrator.analysis.rundir import (
+        RunDirError,
+        metrics_from_run_dir,
+        write_json,
+        write_metrics,
+    )
+    from orchestrator.experiments.distributed import free_tcp_endpoint, run_distributed
+    from orchestrator.experiments.families import resolve
+    from world.scenario_file import dump_scenario
+
+    scenario = resolve(args.family, agents=n, seed=args.seed, planner=args.planner)
+    out_dir = out_root / f"{args.family}_{n}"
+    if (out_dir / "trajectory.csv").exists():
+        raise SystemExit(f"error: {out_dir} already holds a run; choose another --out")
+    out_dir.mkdir(parents=True, exist_ok=True)
+    scenario_path = out_dir / "scenario.input.yaml"
+    dump_scenario(scenario, scenario_path)
+    planner = args.planner or scenario.robots[0].planner
+    write_json(out_dir / "run.json", {
+        "setup": args.family, "scenario": scenario.name, "planner": planner, "seed": args.seed,
+        "mode": "distributed", "agents": n, "time_scale": args.time_scale,
+        "hosts": list(args.hosts), "launcher": args.launcher, "robot_nice": args.robot_nice,
+        "cpu_tokens": args.cpu_tokens,
+        "argv": list(args.argv),
+    })
+    port = int(free_tcp_endpoint().rsplit(":", 1)[1])
+    ids = [r.id for r in scenario.robots]
+    if len(args.hosts) > 1 or args.hosts[0] != "127.0.0.1":
+        endpoint = f"tcp/0.0.0.0:{port}"
+        connect = robot_endpoints(args.hosts, port, ids)
+    else:
+        endpoint, connect = f"tcp/127.0.0.1:{port}", None
+    run_id = f"scale-{n}-{secrets.token_hex(4)}"
+    sampler = ResourceSampler()
+    sampler.start()
+    spawn_wall, spawn_mono = time.time(), time.monotonic()
+    try:
+        status = run_distributed(scenario_path, out_dir, run_id, time_scale=args.time_scale,
+                                 endpoint=endpoint, robot_endpoints=connect,
+                                 startup_timeout_s=args.startup_timeout_s,
+                                 robot_launcher=args.launcher,
+                                 robot_nice=args.robot_nice, cpu_tokens=args.cpu_tokens)
+    finally:
+        sampler.stop()
+    wall_s = time.monotonic() - spawn_mono
+    try:
+        metrics = metrics_from_run_dir(out_dir)
+        write_metrics(out_dir, metrics)
+        content = metrics.to_json_dict()
+    except RunDirError as exc:
+        print(f"warning: {out_dir}: no metrics: {exc}", file=sys.stderr)
+        content = {}
+    _plot_run(out_dir)
+    try:
+        exits = json.loads((out_dir / "robots.json").read_text())
+    except (OSError, ValueError) as exc:
+        print(f"warning: {out_dir}: no robots.json: {exc}", file=sys.stderr)
+        exits = {}
+    return scale_row(content, _events(out_dir), sampler, n=n, family=args.family,
+                     planner=planner, spawn_wall=spawn_wall, spawn_mono=spawn_mono,
+                     wall_s=wall_s, time_scale=args.time_scale, world_status=status,
+                     launcher=args.launcher, exits=exits)
+
+
+def _plot_run(out_dir: Path) -> None:
+    try:
+        from orchestrator.analysis.plots import plot_trajectories
+        from orchestrator.analysis.rundir import read_run_dir
+
+        plot_trajectories(read_run_dir(out_dir), out_dir / "trajectory.png")
+    except Exception as exc:  # noqa: BLE001 - the run is done; keep its figures
+        print(f"warning: plotting {out_dir} failed: {type(exc).__name__}: {exc}",
+              file=sys.stderr)
+
+
+# --------------------------------------------------------------------------------------
+# The world's per-tick cost against N (in-process, no transport)
+# --------------------------------------------------------------------------------------
+
+WORLD_STAGES = ("step", "poses", "record", "commands")
+
+
+def world_tick_costs(n: int, ticks: int, out_dir: Path) -> dict[str, Any]:
+    """Time the world's work per tick for n robots of the `circles` family.
+
+    Per tick, as `world.node.WorldNode.tick` does it: decode and apply the commands that
+    arrive in one tick (n / 5: every robot sends one per 0.1 s), step the dynamics
+    (integration, arrivals, contacts), encode the `PosesMsg`, write the trajectory rows.
+    Robots drive straight at their goals (a constant command). Returns median microseconds
+    per stage and the PosesMsg size.
+    """
+    import numpy as np
+
+    from orchestrator.experiments.families import circles
+    from protocol import CommandMsg, PosesMsg
+    from world.recorder import RunRecorder
+    from world.sim.dynamics import WorldSim
+
+    scenario = circles(n)
+    sim = WorldSim(scenario)
+    ids = [int(r) for r in sim.robot_ids]
+    known = frozenset(ids)
+    per_tick = max(1, n // 5)
+    payloads = [CommandMsg(rid, 0, 0.0, 0.5, 0.0, 1.0, "ok").encode() for rid in ids]
+    times: dict[str, list[float]] = {k: [] for k in WORLD_STAGES}
+    size = 0
+    with RunRecorder(out_dir, scenario) as recorder:
+        for tick in range(ticks):
+            t0 = time.perf_counter()
+            for k in range(per_tick):
+                j = (tick * per_tick + k) % n
+                msg = CommandMsg.decode(payloads[j], known_ids=known, expected_robot_id=ids[j])
+                sim.set_command(msg.robot_id, msg.v_mps, msg.omega_radps)
+                recorder.record_command(sim.t_s, msg.robot_id, tick, 0.0, msg.v_mps,
+                                        msg.omega_radps, msg.plan_ms, msg.status)
+            t1 = time.perf_counter()
+            sim.step(0.02)
+            t2 = time.perf_counter()
+            data = PosesMsg.from_snapshot(sim.snapshot()).encode()
+            t3 = time.perf_counter()
+            recorder.record_tick(sim.t_s, sim.robot_ids, sim.pose, sim.applied)
+            t4 = time.perf_counter()
+            size = len(data)
+            for key, dt in zip(WORLD_STAGES, (t2 - t1, t3 - t2, t4 - t3, t1 - t0)):
+                times[key].append(dt * 1e6)
+    row: dict[str, Any] = {"agents": n, "ticks": ticks, "poses_bytes": size,
+                           "poses_bytes_per_robot": size / n}
+    total = np.sum([times[k] for k in WORLD_STAGES], axis=0)
+    row["tick_us_p50"] = float(np.percentile(total, 50))
+    row["tick_us_per_robot"] = row["tick_us_p50"] / n
+    for key in WORLD_STAGES:
+        row[f"{key}_us_p50"] = float(np.percentile(times[key], 50))
+    return row
+
+
+def format_world_rows(rows: Sequence[dict[str, Any]]) -> str:
+    """The world benchmark's table."""
+    head = ["N", "tick us p50", "us/robot", *(f"{k} us" for k in WORLD_STAGES), "PosesMsg B",
+            "B/robot"]
+    body = [[str(r["agents"]), f"{r['tick_us_p50']:.0f}", f"{r['tick_us_per_robot']:.2f}",
+             *(f"{r[f'{k}_us_p50']:.0f}" for k in WORLD_STAGES), str(r["poses_bytes"]),
+             f"{r['poses_bytes_per_robot']:.1f}"] for r in rows]
+    widths = [max(len(h), *(len(b[i]) for b in body)) for i, h in enumerate(head)]
+    lines = ["  ".join(h.ljust(w) for h, w in zip(head, widths)),
+             "  ".join("-" * w for w in widths)]
+    lines += ["  ".join(c.ljust(w) for c, w in zip(b, widths)) for b in body]
+    return "\n".join(lines)
+
+
+# --------------------------------------------------------------------------------------
+# Output
+# --------------------------------------------------------------------------------------
+
+def _fmt(value: Any, digits: int = 2) -> str:
+    if value is None:
+        return "-"
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    if isinstance(value, float):
+        return "-" if not math.isfinite(value) else f"{value:.{digits}f}"
+    return str(value)
+
+
+def format_rows(rows: Sequence[dict[str, Any]]) -> str:
+    """The printed table, one row per N."""
+    head = ["N", "ok", "arrived", "contacts", "plan p50/p99 ms", "latency p50/p99 ms",
+            "miss %", "CPU robots/world %", "CPU/robot %",
+            "CPU ms/plan sense/plan/send/loop/threads", "PSS/robot MiB", "PSS total MiB",
+            "alive s", "lost", "sim s", "wall s"]
+    body = []
+    for r in rows:
+        miss = r["deadline_miss_rate"]
+        cpu_r, cpu_w = r["cpu_share_robots"], r["cpu_share_world"]
+        body.append([
+            str(r["agents"]), _fmt(r["success"]), f"{_fmt(r['arrived'])}/{r['agents']}",
+            _fmt(r["contacts"]),
+            f"{_fmt(r['plan_ms_p50'])}/{_fmt(r['plan_ms_p99'])}",
+            f"{_fmt(r['latency_ms_p50'], 1)}/{_fmt(r['latency_ms_p99'], 1)}",
+            _fmt(100.0 * miss if miss is not None else None),
+            f"{_fmt(100 * cpu_r if cpu_r is not None else None, 1)}/"
+            f"{_fmt(100 * cpu_w if cpu_w is not None else None, 1)}",
+            _fmt(r["cpu_pct_per_robot"], 1),
+            "/".join(_fmt(r.get(f"cpu_ms_per_plan_{part}")) for part in CPU_PARTS),
+            _fmt(r["mem_robot_mib"], 1),
+            _fmt(r["mem_total_mib"], 0), _fmt(r["alive_s"], 1), _fmt(r["robots_lost"]),
+            _fmt(r["sim_time_s"], 1),
+            _fmt(r["wall_s"], 1),
+        ])
+    widths = [max(len(h), *(len(b[i]) for b in body)) if body else len(h)
+              for i, h in enumerate(head)]
+    lines = ["  ".join(h.ljust(w) for h, w in zip(head, widths)),
+             "  ".join("-" * w for w in widths)]
+    lines += ["  ".join(c.ljust(w) for c, w in zip(b, widths)) for b in body]
+    return "\n".join(lines)
+
+
+def write_outputs(rows: Sequence[dict[str, Any]], out_root: Path, argv: Sequence[str]
+                  ) -> list[Path]:
+    """scale.csv, scale.json and scale.png in out_root."""
+    from orchestrator.analysis.rundir import write_json
+
+    csv_path = out_root / "scale.csv"
+    with open(csv_path, "w", newline="", encoding="utf-8") as f:
+        writer = csv.DictWriter(f, fieldnames=COLUMNS)
+        writer.writeheader()
+        for r in rows:
+            writer.writerow({k: (json.dumps(r[k]) if isinstance(r[k], dict) else r[k])
+                             for k in COLUMNS})
+    json_path = write_json(out_root / "scale.json", {
+        "argv": list(argv), "cpus": psutil.cpu_count(),
+        "memory_total_mib": psutil.virtual_memory().total / MIB, "rows": list(rows)})
+    png_path = plot_scale(rows, out_root / "scale.png")
+    return [csv_path, json_path, png_path]
+
+
+def plot_scale(rows: Sequence[dict[str, Any]], path: Path) -> Path:
+    """One subplot per figure against N (log2 axis)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(12, 6.5), layout="constrained")
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(2, 4).ravel()
+    ns = [r["agents"] for r in rows]
+    for ax, (main, second, title) in zip(axes, PLOTTED):
+        for key, style in ((main, "o-"), (second, "s--")):
+            if key is None:
+                continue
+            ys = [math.nan if r.get(key) is None else float(r[key]) for r in rows]
+            ax.plot(ns, ys, style, label=key)
+        ax.set_title(title, fontsize=9)
+        ax.set_xlabel("robot processes N", fontsize=8)
+        if len(set(ns)) > 1 and min(ns) > 0:
+            ax.set_xscale("log", base=2)
+        ax.set_xticks(ns, [str(n) for n in ns])
+        ax.tick_params(labelsize=7)
+        if second is not None:
+            ax.legend(fontsize=7)
+        ax.grid(alpha=0.3)
+    fig.savefig(path, dpi=100)
+    return path

@@ -1,0 +1,50 @@
+"""Plot smoke tests: each file is written and non-empty (nothing more is claimed)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from agent.core.config import PlannerConfig
+from agent.core.scenario import ObstacleSpec, RobotSpec, Scenario
+from orchestrator.analysis.metrics import Commands, Trajectory
+from orchestrator.analysis.plots import animate, plot_report_bars, plot_trajectories
+from orchestrator.analysis.rundir import RunData
+
+
+def run_data(tmp_path) -> RunData:
+    scenario = Scenario(
+        name="plot", description="", time_limit_s=20.0, goal_tolerance_m=0.25,
+        planner_config=PlannerConfig(),
+        robots=(RobotSpec(0, (0.0, 0.0, 0.0), (10.0, 0.0)),
+                RobotSpec(1, (10.0, 0.2, np.pi), (0.0, 0.2))),
+        obstacles=(ObstacleSpec(-1, (5.0, 4.0), 1.0, (0.0, -0.1)),),
+    )
+    t = np.arange(0, 101) * 0.1
+    x0 = t
+    x1 = 10.0 - t
+    pose = np.zeros((t.size, 2, 3))
+    pose[:, 0, 0], pose[:, 1, 0], pose[:, 1, 1], pose[:, 1, 2] = x0, x1, 0.2, np.pi
+    traj = Trajectory(t, np.array([0, 1]), pose, np.zeros((t.size, 2, 2)))
+    return RunData(tmp_path, scenario, traj, Commands.empty(), [])
+
+
+def test_trajectory_png(tmp_path):
+    path = plot_trajectories(run_data(tmp_path), tmp_path / "trajectory.png")
+    assert path.stat().st_size > 0
+
+
+def test_gif(tmp_path):
+    path = animate(run_data(tmp_path), tmp_path / "trajectory.gif", max_frames=12)
+    assert path.stat().st_size > 0
+
+
+def test_report_bars(tmp_path):
+    stats = {("setup_a", "eifp"): {"plan_ms_mean": (5.0, 1.0), "oscillations_per_robot":
+                                   (2.0, 0.5)},
+             ("setup_a", "orca"): {"plan_ms_mean": (1.0, 0.1)},
+             ("setup_b", "eifp"): {"plan_ms_mean": (7.0, 0.0),
+                                   "oscillations_per_robot": (float("nan"), float("nan"))}}
+    written = plot_report_bars(stats, [("plan_ms_mean", "ms"), ("oscillations_per_robot",
+                                                               "osc")], tmp_path / "r")
+    assert len(written) == 3
+    assert all(p.stat().st_size > 0 for p in written)

@@ -1,0 +1,137 @@
+"""`orchestrator compose`: the docker-compose demo's scenario step and the orchestrator's
+watch-and-report step, the latter against real world and robot processes on loopback (the
+same processes the containers run, without Docker)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import uuid
+from pathlib import Path
+
+import pytest
+
+from orchestrator.cli import main
+from orchestrator.experiments.compose import SCENARIO_FILE, set_aside
+from orchestrator.experiments.distributed import (
+    free_tcp_endpoint,
+    robot_command,
+    spawn_logged,
+    stop_processes,
+    world_command,
+)
+from world.scenario_file import load_scenario
+
+TWO_LANES = """\
+name: two_lanes
+description: two robots on parallel lanes (tests/orchestrator/test_compose.py)
+time_limit: 40
+goal_tolerance: 0.25
+defaults: {radius: 0.3, v_max: 1.0, omega_max: 1.5}
+robots:
+  - {id: 0, start: [0.0, 0.0, 0.0], goal: [3.0, 0.0]}
+  - {id: 1, start: [0.0, 3.0, 0.0], goal: [3.0, 3.0]}
+obstacles: []
+"""
+
+
+def test_scenario_step_writes_the_worlds_file(tmp_path: Path) -> None:
+    rc = main(["compose", "scenario", "--setup", "setup_d", "--robots", "4", "--run", "r1",
+               "--runs-dir", str(tmp_path)])
+    assert rc == 0
+    scenario = load_scenario(tmp_path / "r1" / SCENARIO_FILE)
+    assert scenario.name == "setup_d"
+    assert [r.id for r in scenario.robots] == [0, 1, 2, 3]
+
+
+def test_scenario_step_sets_an_earlier_run_aside(tmp_path: Path) -> None:
+    args = ["compose", "scenario", "--setup", "setup_a", "--run", "r1", "--runs-dir",
+            str(tmp_path)]
+    assert main(args) == 0
+    (tmp_path / "r1" / "trajectory.csv").write_text("t,robot,x,y,theta,v,omega\n")
+    assert main(args) == 0
+    assert (tmp_path / "r1.1" / "trajectory.csv").is_file()
+    assert not (tmp_path / "r1" / "trajectory.csv").exists()
+    assert (tmp_path / "r1" / SCENARIO_FILE).is_file()
+
+
+def test_set_aside_leaves_missing_and_empty_directories(tmp_path: Path) -> None:
+    assert set_aside(tmp_path / "absent") is None
+    (tmp_path / "empty").mkdir()
+    assert set_aside(tmp_path / "empty") is None
+    assert (tmp_path / "empty").is_dir()
+    (tmp_path / "full").mkdir()
+    (tmp_path / "full" / "x").write_text("x")
+    (tmp_path / "full.1").mkdir()
+    assert set_aside(tmp_path / "full") == tmp_path / "full.2"
+
+
+def test_robot_count_must_match_the_robot_services(tmp_path: Path,
+                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    rc = main(["compose", "scenario", "--setup", "setup_g", "--robots", "4", "--run", "r1",
+               "--runs-dir", str(tmp_path)])
+    assert rc == 2
+    assert "has 16 robots but the compose file runs 4 robot services" in capsys.readouterr().err
+    assert not (tmp_path / "r1").exists()
+
+
+def test_bad_run_id_is_bad_input(tmp_path: Path) -> None:
+    assert main(["compose", "scenario", "--setup", "setup_a", "--run", "a/b", "--runs-dir",
+                 str(tmp_path)]) == 2
+
+
+@pytest.mark.system
+@pytest.mark.timeout(120)
+def test_await_without_a_world_gives_up_at_the_deadline(tmp_path: Path) -> None:
+    cmd = [sys.executable, "-m", "orchestrator", "compose", "await", "--setup", "setup_a",
+           "--run", "nobody", "--runs-dir", str(tmp_path), "--connect", free_tcp_endpoint(),
+           "--startup-timeout-s", "2"]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=60, check=False)
+    assert proc.returncode == 3, proc.stderr
+    assert "cannot connect" in proc.stderr
+    assert not (tmp_path / "nobody" / "metrics.json").exists()
+
+
+@pytest.mark.system
+@pytest.mark.timeout(240)
+def test_await_follows_a_real_run_and_writes_the_report(tmp_path: Path) -> None:
+    """The orchestrator's container role, started before the world as Compose may do."""
+    setup = tmp_path / "two_lanes.yaml"
+    setup.write_text(TWO_LANES)
+    runs = tmp_path / "runs"
+    run_id = f"test-compose-{uuid.uuid4().hex[:8]}"
+    endpoint = free_tcp_endpoint()
+    common = ["--setup", str(setup), "--robots", "2", "--run", run_id, "--runs-dir", str(runs)]
+    assert main(["compose", "scenario", *common]) == 0
+    run_dir = runs / run_id
+    procs: list[subprocess.Popen] = []
+    try:
+        orchestrator = spawn_logged(
+            [sys.executable, "-m", "orchestrator", "compose", "await", *common, "--connect",
+             endpoint, "--startup-timeout-s", "60"], tmp_path / "orchestrator.log")
+        procs.append(orchestrator)
+        procs.append(spawn_logged(world_command(run_id, run_dir / SCENARIO_FILE, run_dir,
+                                                endpoint, wait_robots_s=60.0),
+                                  tmp_path / "world.log"))
+        for rid in (0, 1):
+            procs.append(spawn_logged(robot_command(run_id, rid, endpoint,
+                                                    startup_timeout_s=60.0),
+                                      tmp_path / f"robot_{rid}.log"))
+        try:
+            status = orchestrator.wait(timeout=180)
+        except subprocess.TimeoutExpired:
+            pytest.fail("the orchestrator did not exit within 180 s:\n"
+                        + (tmp_path / "orchestrator.log").read_text()[-3000:])
+    finally:
+        stop_processes(procs, 10.0, 5.0)
+    log = (tmp_path / "orchestrator.log").read_text()
+    assert status == 0, log[-3000:]
+    assert "every robot is alive" in log and "world left" in log
+    for name in ("metrics.json", "report.txt", "run.json", "trajectory.png"):
+        assert (run_dir / name).stat().st_size > 0, name
+    metrics = json.loads((run_dir / "metrics.json").read_text())
+    assert metrics["success"] is True and metrics["arrived"] == 2 and metrics["contacts"] == 0
+    run = json.loads((run_dir / "run.json").read_text())
+    assert run["mode"] == "docker-compose" and run["run_id"] == run_id
+    assert "end reason all_arrived" in (run_dir / "report.txt").read_text()

@@ -1,0 +1,108 @@
+"""Tests of the distributed launcher's pure parts (the process tests are in tests/system)."""
+
+from __future__ import annotations
+
+import json
+import socket
+import sys
+from pathlib import Path
+
+import pytest
+
+from orchestrator.experiments.distributed import (
+    _EventTail,
+    _last_trajectory_time,
+    _progress,
+    fleet_command,
+    free_tcp_endpoint,
+    robot_command,
+    run_distributed,
+    world_command,
+)
+from protocol import ProtocolError
+from world.scenario_file import ScenarioError
+
+
+def test_free_tcp_endpoint_is_bindable() -> None:
+    endpoint = free_tcp_endpoint()
+    assert endpoint.startswith("tcp/127.0.0.1:")
+    port = int(endpoint.rsplit(":", 1)[1])
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.bind(("127.0.0.1", port))
+
+
+def test_commands(tmp_path: Path) -> None:
+    world = world_command("r1", tmp_path / "s.yaml", tmp_path / "out", "tcp/127.0.0.1:9",
+                          time_scale=2.0, extra_args=["--cmd-timeout-s", "0.3"])
+    assert world[:3] == [sys.executable, "-m", "world"]
+    assert world[world.index("--time-scale") + 1] == "2.0"
+    assert world[world.index("--listen") + 1] == "tcp/127.0.0.1:9"
+    assert world[-2:] == ["--cmd-timeout-s", "0.3"]
+    robot = robot_command("r1", 3, "tcp/127.0.0.1:9")
+    assert robot[:3] == [sys.executable, "-m", "agent"]
+    assert robot[robot.index("--id") + 1] == "3"
+
+
+def test_fleet_command_passes_ids_and_per_robot_endpoints(tmp_path: Path) -> None:
+    from agent.fleet import build_parser
+
+    cmd = fleet_command("r1", [0, 1, 2], "tcp/127.0.0.1:9", tmp_path,
+                        robot_endpoints={2: "tcp/127.0.0.2:9"})
+    assert cmd[:3] == [sys.executable, "-m", "agent.fleet"]
+    args = build_parser().parse_args(cmd[3:])
+    assert args.ids == [0, 1, 2] and args.connect == "tcp/127.0.0.1:9"
+    assert args.connect_id == [(2, "tcp/127.0.0.2:9")] and args.log_dir == tmp_path.resolve()
+    assert args.cpu_tokens == 0 and args.max_starting >= 1  # the fleet's defaults
+    tokens = fleet_command("r1", [0], "tcp/127.0.0.1:9", tmp_path, cpu_tokens=2)
+    assert build_parser().parse_args(tokens[3:]).cpu_tokens == 2
+    for bad in (["--ids", "1,1"], ["--ids", "-1"], ["--ids", "0", "--connect-id", "x"]):
+        with pytest.raises(SystemExit):
+            build_parser().parse_args(["--run", "r", "--connect", "c", "--log-dir", "d", *bad])
+
+
+def test_run_distributed_rejects_an_unknown_launcher(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="robot_launcher"):
+        run_distributed(tmp_path / "s.yaml", tmp_path, "r1", robot_launcher="thread")
+
+
+def test_event_tail_reads_only_complete_lines(tmp_path: Path) -> None:
+    path = tmp_path / "events.jsonl"
+    tail = _EventTail(path)
+    assert tail.poll() == []  # no file yet
+    path.write_text('{"kind": "start", "t": 0.0}\n{"kind": "arr')
+    assert [e["kind"] for e in tail.poll()] == ["start"]
+    with open(path, "a") as f:
+        f.write('ived", "t": 1.5, "robot": 2}\n')
+    assert tail.poll() == [{"kind": "arrived", "t": 1.5, "robot": 2}]
+    assert len(tail.events) == 2 and tail.poll() == []
+
+
+def test_last_trajectory_time(tmp_path: Path) -> None:
+    path = tmp_path / "trajectory.csv"
+    assert _last_trajectory_time(path) == 0.0
+    path.write_text("t,robot,x,y,theta,v,omega\n")
+    assert _last_trajectory_time(path) == 0.0
+    path.write_text("t,robot,x,y,theta,v,omega\n1.2000,0,0,0,0,0,0\n1.2200,0,0,0,0,0,0\n1.24")
+    assert _last_trajectory_time(path) == pytest.approx(1.22)
+
+
+def test_progress_summarises_events(tmp_path: Path) -> None:
+    events = [json.loads(line) for line in (
+        '{"kind": "start", "t": 0.0}',
+        '{"kind": "arrived", "t": 3.0, "robot": 1}',
+        '{"kind": "robot_lost", "t": 3.5, "robot": 0}',
+        '{"kind": "contact", "t": 4.0, "a": 0, "b": 2}',
+        '{"kind": "robot_lost", "t": 4.2, "robot": 2}',
+        '{"kind": "robot_rejoined", "t": 4.4, "robot": 2}',
+    )]
+    p = _progress(events, tmp_path, 0.0, 3, [])
+    assert p.started and p.arrived == {1} and p.lost == {0} and p.contacts == 1
+    assert p.sim_t_s == pytest.approx(4.4) and p.n_robots == 3 and p.robots_running == 0
+
+
+def test_bad_inputs_fail_before_anything_is_spawned(tmp_path: Path) -> None:
+    with pytest.raises(ProtocolError):
+        run_distributed(tmp_path / "missing.yaml", tmp_path / "out", "bad/run")
+    with pytest.raises(ScenarioError):
+        run_distributed(tmp_path / "missing.yaml", tmp_path / "out", "ok-run")
+    assert not (tmp_path / "out").exists()

@@ -1,0 +1,368 @@
+"""The lockstep runner: files, determinism, stopping rules."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from agent.core.config import PlannerConfig
+from agent.core.scenario import RobotSpec, Scenario
+from orchestrator.experiments.lockstep import LockstepProgress, run_lockstep
+from world.scenario_file import load_scenario
+from world.sim.faults import build_plan
+
+
+def two_lanes(time_limit_s: float = 30.0, planner: str = "ifp") -> Scenario:
+    """Two robots on parallel lanes 6 m apart, 5 m runs: no interaction."""
+    return Scenario(
+        name="lanes", description="", time_limit_s=time_limit_s, goal_tolerance_m=0.25,
+        planner_config=PlannerConfig(),
+        robots=(RobotSpec(0, (0.0, 0.0, 0.0), (5.0, 0.0), planner=planner),
+                RobotSpec(1, (0.0, 6.0, 0.0), (5.0, 6.0), planner=planner)),
+    )
+
+
+def test_lockstep_run_writes_the_run_directory(tmp_path):
+    seen: list[LockstepProgress] = []
+    out = run_lockstep(two_lanes(), tmp_path / "run", on_progress=seen.append)
+    run = tmp_path / "run"
+    for name in ("scenario.yaml", "trajectory.csv", "commands.csv", "events.jsonl",
+                 "metrics.json"):
+        assert (run / name).stat().st_size > 0, name
+    assert load_scenario(run / "scenario.yaml") == two_lanes()
+    assert out.reason == "all_arrived" and out.success and out.metrics.arrived == 2
+    # 5 m at <= 1.1 m/s: at least 4.5 s, and the straight lanes take well under 10 s.
+    assert 4.5 <= out.sim_time_s < 10.0
+    assert out.ticks == round(out.sim_time_s * 50)
+    rows = (run / "trajectory.csv").read_text().splitlines()
+    assert len(rows) == 1 + 2 * (out.ticks + 1)  # header, then both robots per tick from t=0
+    cmds = (run / "commands.csv").read_text().splitlines()
+    cycles = (out.ticks - 1) // 5 + 1
+    assert len(cmds) == 1 + 2 * cycles  # one command per robot per 0.1 s
+    events = [json.loads(x) for x in (run / "events.jsonl").read_text().splitlines()]
+    kinds = [e["kind"] for e in events]
+    assert kinds[0] == "start" and kinds[-1] == "end" and kinds.count("arrived") == 2
+    assert events[0]["world_rate_hz"] == 50.0 and events[0]["control_rate_hz"] == 10.0
+    metrics = json.loads((run / "metrics.json").read_text())
+    assert metrics["latency_ms_p50"] == 0.0 and metrics["deadline_miss_rate"] == 0.0
+    assert seen and seen[-1].arrived == frozenset({0, 1})
+
+
+def test_lockstep_is_deterministic(tmp_path):
+    run_lockstep(two_lanes(), tmp_path / "a")
+    run_lockstep(two_lanes(), tmp_path / "b")
+    traj_a = (tmp_path / "a" / "trajectory.csv").read_text()
+    assert traj_a == (tmp_path / "b" / "trajectory.csv").read_text()
+
+    def decisions(path):  # everything but the wall-time plan_ms column
+        return [line.split(",")[:6] + line.split(",")[7:]
+                for line in (path / "commands.csv").read_text().splitlines()]
+
+    assert decisions(tmp_path / "a") == decisions(tmp_path / "b")
+
+
+def test_lockstep_stops_at_the_time_limit(tmp_path):
+    out = run_lockstep(two_lanes(time_limit_s=1.0), tmp_path / "run")
+    assert out.reason == "time_limit" and not out.success
+    assert out.ticks == 50 and out.metrics.arrived == 0
+
+
+def test_control_rate_must_divide_the_world_rate(tmp_path):
+    with pytest.raises(ValueError, match="must divide"):
+        run_lockstep(two_lanes(), tmp_path / "run", world_rate_hz=50.0, control_rate_hz=15.0)
+
+
+@pytest.mark.parametrize("planner", ["eifp", "eifp-mpc"])
+def test_encounter_rules_break_the_mirror_symmetry_of_setup_a(tmp_path, planner):
+    # Setup A is mirrored across the x axis: with the paper's cost alone the two robots see
+    # mirrored costs, pick mirrored (incompatible) sides and run side by side; with the
+    # shared give-way convention one gives way and both go nearly straight.
+    from dataclasses import replace
+
+    from orchestrator.experiments.families import resolve
+
+    base = resolve("setup_a", planner=planner)
+    on = run_lockstep(base, tmp_path / "on").metrics
+    off_cfg = replace(base.planner_config, encounter_rules=False)
+    off = run_lockstep(replace(base, planner_config=off_cfg), tmp_path / "off").metrics
+    assert on.success and on.contacts == 0
+    assert on.path_ratio_mean < 1.03 and on.oscillations_per_robot <= 2
+    # Without the rules: the dance, a clearly longer path or no arrival at all.
+    assert off.arrived < 2 or off.path_ratio_mean > on.path_ratio_mean + 0.05
+
+
+# --- the fault-injected (streaming) loop ---------------------------------------------------
+
+def crossing(time_limit_s: float = 40.0) -> Scenario:
+    """Robot 1 crosses robot 0's lane ahead of it (as the distributed kill test)."""
+    return Scenario(
+        name="crossing", description="", time_limit_s=time_limit_s, goal_tolerance_m=0.25,
+        planner_config=PlannerConfig(),
+        robots=(RobotSpec(0, (-6.0, 0.0, 0.0), (5.0, 0.0), radius_m=0.3),
+                RobotSpec(1, (0.0, -3.0, 1.5707963), (0.0, 4.0), radius_m=0.3)),
+    )
+
+
+def events_of(run) -> list[dict]:
+    return [json.loads(x) for x in (run / "events.jsonl").read_text().splitlines()]
+
+
+def test_faulty_loop_without_faults_succeeds_and_is_deterministic(tmp_path):
+    plan = build_plan()
+    a = run_lockstep(two_lanes(), tmp_path / "a", faults=plan)
+    run_lockstep(two_lanes(), tmp_path / "b", faults=plan)
+    assert a.success and a.metrics.latency_ms_p50 == 0.0
+    assert ((tmp_path / "a" / "trajectory.csv").read_text()
+            == (tmp_path / "b" / "trajectory.csv").read_text())
+
+
+def test_link_latency_is_the_measured_command_latency(tmp_path):
+    # A robot receives only its pose slot (every 100 ms), as a distributed robot does: with
+    # 60 ms on the pose link it plans on the slot pose of the previous period (100 ms old),
+    # and its command takes another 60 ms: 160 ms per command.
+    out = run_lockstep(two_lanes(), tmp_path / "run", faults=build_plan(latency_ms=60))
+    assert out.success
+    assert out.metrics.latency_ms_p50 == pytest.approx(160.0)
+
+
+def test_lost_commands_give_way_to_braking_after_their_hold(tmp_path):
+    # Half of all messages lost: a command not followed within 1.5 periods brakes the robot
+    # (the end event counts it); a hold of 100 periods (longer than the 0.5 s time-out)
+    # turns that off, and the robot keeps driving on its last command instead.
+    import dataclasses
+
+    def run(hold_periods: float, name: str) -> tuple[dict, list[float]]:
+        lanes = two_lanes()
+        scenario = dataclasses.replace(lanes, planner_config=PlannerConfig(
+            command_hold_periods=hold_periods))
+        out = run_lockstep(scenario, tmp_path / name, faults=build_plan(drop=0.5, seed=1))
+        assert out.success, out.metrics
+        end = events_of(tmp_path / name)[-1]
+        rows = (tmp_path / name / "trajectory.csv").read_text().splitlines()
+        header = rows[0].split(",")
+        v = [float(r.split(",")[header.index("v")]) for r in rows[1:]
+             if r.split(",")[header.index("robot")] == "0"]
+        return end, v
+
+    short, v_short = run(1.5, "short")
+    long_, v_long = run(100.0, "long")
+    assert short["cmd_hold_expiries"] > 0 and long_["cmd_hold_expiries"] == 0
+    # braking ticks show as a speed below the previous tick's while cruising
+    dips = sum(1 for a, b in zip(v_short, v_short[1:]) if 0.3 < b < a - 0.02)
+    assert dips > 0 and dips > sum(1 for a, b in zip(v_long, v_long[1:]) if 0.3 < b < a - 0.02)
+
+
+def test_faulty_runs_are_repeatable_per_seed(tmp_path):
+    def traj(seed, name):
+        run_lockstep(crossing(), tmp_path / name,
+                     faults=build_plan(latency_ms=50, jitter_ms=40, drop=0.2, dup=0.1,
+                                       reorder=0.1, seed=seed))
+        return (tmp_path / name / "trajectory.csv").read_text()
+
+    assert traj(3, "a") == traj(3, "b")
+    assert traj(3, "a") != traj(4, "c")
+
+
+def test_latency_compensation_makes_a_measurable_difference(tmp_path):
+    # 200 ms ± 60 ms on both links of setup D (four robots crossing at the centre).
+    from orchestrator.experiments.families import resolve
+
+    scenario = resolve("setup_d", agents=None, seed=0, start_jitter_m=0.0, planner=None)
+    results = {}
+    for on in (True, False):
+        out = run_lockstep(scenario, tmp_path / str(on), faults=build_plan(
+            latency_ms=200, jitter_ms=60, seed=1, compensate_latency=on))
+        end = events_of(tmp_path / str(on))[-1]
+        results[on] = (end["ego_error_m_mean"], out.metrics.min_gap_m)
+    (err_on, gap_on), (err_off, gap_off) = results[True], results[False]
+    # Own-position error at planning time: 1.1 m/s x ~0.2 s ~ 0.1-0.2 m without compensation.
+    assert err_off > 0.08 and err_on < 0.3 * err_off, results
+    # With compensation the four robots still keep clear of each other at this level (with
+    # the encounter rules both variants happen to stay clear, so the gap is no comparison).
+    assert gap_on > 0.0 and out.metrics.robots == 4, results
+    print(f"ego error {err_on:.3f} vs {err_off:.3f} m, min gap {gap_on:.3f} vs {gap_off:.3f} m")
+
+
+def stop23_cycle(cfg):
+    """`cfg` with eIFP-MPC's stop-24 and stop-25 cycle rules off (the paper's threat test,
+    via-point margin, escape, no cap on lambda* and no primary fallback).
+
+    The two ablations below were measured on that cycle. With the stop-24 rules on
+    (via-points 0.3 m out of the discs) setup D keeps clear at these latencies without the
+    feature under test too (150 ms, link seed 2: +0.07 m with the half-planes' latency term
+    off; 200 ms, link seeds 8 and 7: +0.14 m without the braking guard, and none of the
+    three cases touched), so they would no longer show what the feature does."""
+    from dataclasses import replace
+
+    return replace(cfg, threats_within_inflated=False, threat_release_margin_m=0.0,
+                   via_margin_m=0.05, escape_hysteresis_m=0.0, head_on_hold_s=0.0,
+                   via_time_max_s=None, primary_fallback=False)
+
+
+def test_latency_aware_half_planes_keep_setup_d_clear_at_150_ms(tmp_path, monkeypatch):
+    # 150 ms +- 45 ms on both links of setup D, link seed 2: with the half-planes' clearance
+    # at its fault-free value the robots touch (measured min gap -0.09 m; 5 of seeds 0-9
+    # touch), with 2 x pose age x relative speed on top they keep clear (+0.27 m; 0 of 10).
+    # Figures of stop 18 (slack weight 1e3); with 1e4 it was link seed 8 (-0.15 / +0.30 m,
+    # 8 of 10 touching), which now keeps clear either way (+0.07 / +0.32 m): a run at this
+    # level is chaotic. The braking guard is off here to isolate the half-planes.
+    from dataclasses import replace
+
+    import agent.planning.planners
+    from orchestrator.experiments.families import resolve
+
+    scenario = resolve("setup_d", agents=None, seed=2, start_jitter_m=0.0, planner=None)
+    cfg = stop23_cycle(scenario.planner_config)
+    scenario = replace(scenario, planner_config=replace(
+        cfg, mpc=replace(cfg.mpc, braking_guard=False)))
+    faults = build_plan(latency_ms=150, jitter_ms=45, seed=2)
+    gaps = {}
+    for factor in (0.0, agent.planning.planners.LATENCY_CLEARANCE_FACTOR):
+        monkeypatch.setattr(agent.planning.planners, "LATENCY_CLEARANCE_FACTOR", factor)
+        out = run_lockstep(scenario, tmp_path / str(factor), faults=faults)
+        gaps[factor] = (out.metrics.contacts, out.metrics.min_gap_m)
+    (touch_off, gap_off), (touch_on, gap_on) = gaps.values()
+    assert touch_off > 0 and gap_off < 0.0, gaps
+    assert touch_on == 0 and gap_on > 0.1, gaps
+
+
+def test_braking_guard_keeps_setup_g_clear_at_100_ms_with_loss(tmp_path):
+    # 100 ms +- 30 ms on both links of setup G with 10 % loss, link seed 3. On the machine
+    # of stop 12 the run without the guard touched (-0.21 m: a robot squeezed between a
+    # stopped neighbour and an approaching one accelerated into the stopped one) and the
+    # guarded one kept clear (+0.12 m). A run at this level is chaotic: on the machine of
+    # stop 13 (another CPU, a fresh install of numpy 2.4.6 / scipy 1.17.1 / osqp 1.1.3) the
+    # same code's unguarded run kept clear too (+0.07 m), so only the guarded run is
+    # asserted here (+0.10 m with the unseen speed-up term; +0.0496 m with the command hold
+    # and the braking term of stop 15, so the bar is "clear", not the guard's 5 cm margin,
+    # which latency may eat into). The cap itself is tested step by step in
+    # tests/agent/test_safety.py.
+
+    from orchestrator.experiments.families import resolve
+
+    scenario = resolve("setup_g", agents=None, seed=3, start_jitter_m=0.0, planner=None)
+    faults = build_plan(latency_ms=100, jitter_ms=30, drop=0.1, seed=3)
+    cfg = scenario.planner_config
+    assert cfg.mpc.braking_guard  # on by default
+    out = run_lockstep(scenario, tmp_path / "run", faults=faults)
+    assert out.metrics.contacts == 0 and out.metrics.min_gap_m > 0.0, out.metrics.min_gap_m
+    assert out.metrics.success
+
+
+def test_braking_guard_makes_the_difference_in_setup_d_at_200_and_250_ms(tmp_path):
+    # Setup D (four robots), latency 200 +- 60 ms and 250 +- 75 ms per link, no loss. With
+    # the guard off, link seed 2 at 200 ms touched (-0.32 m) on the machine of stop 14, and
+    # seeds 2 and 7 at 250 ms (-0.10, -0.05 m; 3 of the 20 runs at 200 and 250 ms); with it
+    # on, all 20 kept clear, these three by +0.36, +0.11 and +0.29 m. Since commands carry
+    # a hold (the world brakes a robot whose next command is late instead of applying the
+    # last one until its time-out) fewer unguarded runs touch: of the 20, only seed 2 at
+    # 200 ms (-0.04 m; guarded +0.18 m; the other two +0.38 / +0.34 and +0.41 / +0.51 m).
+    # With the slack weight of stop 18 (1e3 instead of 1e4) those three keep clear
+    # unguarded too; of link seeds 0-9 at 200 and 250 ms, seed 7 at 200 ms (-0.09 m) and
+    # seed 1 at 250 ms (-0.15 m) touch unguarded, and all 20 keep clear guarded (these two
+    # by +0.25 and +0.27 m). With the 0.75 s estimation window of stop 20, of link seeds 0-9
+    # at 200 and 250 ms five touch unguarded (200 ms: seeds 2, 6; 250 ms: seeds 0, 5, 6;
+    # down to -0.52 m) and all 20 keep clear guarded (at least +0.084 m). With the
+    # lines-and-arcs reference of stop 22, of the same 20 one touches unguarded (200 ms,
+    # seed 8: -0.25 m; the closest other +0.071 m, seed 7 at 200 ms; `orchestrator stress`
+    # on setup D with `mpc: {braking_guard: false}`, `--sweep latency_ms=200,250 --seeds
+    # 10`). A run at this level is chaotic (another CPU or numerics build moves it), so the
+    # test asks for what the guard is for over three cases: the unguarded runs touch in at
+    # least one, the guarded ones in none.
+    from dataclasses import replace
+
+    from orchestrator.experiments.families import resolve
+
+    results = {}
+    for latency_ms, seed in ((200, 8), (200, 7), (250, 0)):
+        scenario = resolve("setup_d", agents=None, seed=seed, start_jitter_m=0.0, planner=None)
+        cfg = stop23_cycle(scenario.planner_config)
+        assert cfg.mpc.braking_guard  # on by default
+        faults = build_plan(latency_ms=latency_ms, jitter_ms=0.3 * latency_ms, seed=seed)
+        for guard in (False, True):
+            s = replace(scenario, planner_config=replace(
+                cfg, mpc=replace(cfg.mpc, braking_guard=guard)))
+            out = run_lockstep(s, tmp_path / f"{latency_ms}-{seed}-{guard}", faults=faults)
+            results[latency_ms, seed, guard] = (out.metrics.contacts, out.metrics.min_gap_m)
+    off = [v for (_, _, guard), v in results.items() if not guard]
+    on = [v for (_, _, guard), v in results.items() if guard]
+    assert any(contacts > 0 for contacts, _ in off), results
+    assert all(contacts == 0 and gap > 0.0 for contacts, gap in on), results
+
+
+def test_killed_robot_is_avoided_where_it_stopped(tmp_path):
+    # Killed at 3 s, when it is about on robot 0's lane: it brakes and stays an obstacle.
+    out = run_lockstep(crossing(), tmp_path / "run", faults=build_plan(kill=["1@3"]))
+    events = events_of(tmp_path / "run")
+    lost = [e for e in events if e["kind"] == "robot_lost"]
+    assert [(e["robot"], e["t"]) for e in lost] == [(1, pytest.approx(3.0, abs=0.03))]
+    assert out.reason == "time_limit" and out.metrics.contacts == 0
+    assert [e["robot"] for e in events if e["kind"] == "arrived"] == [0]
+    assert events[-1]["lost"] == [1]
+    rows = [r.split(",") for r in (tmp_path / "run" / "trajectory.csv").read_text().split()[1:]]
+    y1 = [(float(r[0]), float(r[3])) for r in rows if r[1] == "1"]
+    after = [y for t, y in y1 if t > 5.0]  # braked to a stop within 2 s of the kill
+    assert max(after) - min(after) < 1e-9 and abs(after[0]) < 1.0, after[0]
+
+
+def test_stopped_robot_is_lost_after_the_lease_braked_and_rejoins(tmp_path):
+    out = run_lockstep(crossing(), tmp_path / "run", faults=build_plan(stop=["1@2:3"]))
+    events = events_of(tmp_path / "run")
+    kinds = {e["kind"]: e for e in reversed(events)}  # first of each kind
+    assert kinds["cmd_timeout"]["robot"] == 1
+    assert 2.4 < kinds["cmd_timeout"]["t"] < 2.7  # the world's 0.5 s command time-out
+    assert kinds["robot_lost"]["t"] == pytest.approx(3.0, abs=0.03)  # after the 1 s lease
+    assert kinds["robot_rejoined"]["t"] == pytest.approx(5.0, abs=0.03)
+    assert out.success, out.metrics
+
+
+def test_restarted_robot_rejoins_and_finishes(tmp_path):
+    out = run_lockstep(crossing(), tmp_path / "run", faults=build_plan(restart=["1@2"]))
+    events = events_of(tmp_path / "run")
+    assert [e["kind"] for e in events if e["kind"].startswith("robot_")] == [
+        "robot_lost", "robot_rejoined"]
+    assert out.success
+    seqs = [int(r.split(",")[2]) for r in
+            (tmp_path / "run" / "commands.csv").read_text().split()[1:] if r.split(",")[1] == "1"]
+    assert seqs.count(0) == 2  # the new controller numbers from 0 again
+
+
+def test_slow_robot_and_its_own_rate(tmp_path):
+    plan = build_plan(slow=["0:80"], rates=["1:5:0.1"])
+    out = run_lockstep(two_lanes(), tmp_path / "run", faults=plan)
+    assert out.success
+    rows = [r.split(",") for r in (tmp_path / "run" / "commands.csv").read_text().split()[1:]]
+    lat0 = [(float(r[0]) - float(r[3])) for r in rows if r[1] == "0"]
+    t1 = [float(r[0]) for r in rows if r[1] == "1"]
+    assert min(lat0) == pytest.approx(0.08, abs=0.021)  # applied one tick after the delay
+    assert t1[0] == pytest.approx(0.1) and all(
+        b - a == pytest.approx(0.2) for a, b in zip(t1, t1[1:]))
+
+def test_dense_circle_with_a_small_neighbour_cap_has_no_contact(tmp_path):
+    """The neighbour cap bounds each robot's work; at 4 of 7 it still keeps everyone apart.
+
+    Eight robots swap antipodes through one point: near the centre every robot has all
+    seven others within its sensing radius but plans against its 4 nearest only (the MPC
+    also takes at most `MpcConfig.max_constraints` = 4). Measured here: a cap of 2 makes
+    contact in this scene, 3, 4, 6 and the default 10 do not (README, "Scale").
+    """
+    import dataclasses
+
+    import numpy as np
+
+    from orchestrator.analysis.rundir import read_run_dir
+    from orchestrator.experiments.families import circle
+
+    scenario = circle(8)
+    cap = 4
+    scenario = dataclasses.replace(scenario, planner_config=dataclasses.replace(
+        scenario.planner_config, max_neighbors=cap))
+    out = run_lockstep(scenario, tmp_path / "run")
+    assert out.metrics.contacts == 0 and out.metrics.success
+    assert out.metrics.min_gap_m is not None and out.metrics.min_gap_m > 0.0
+    # The cap was binding: at some tick a robot had more than `cap` others in range.
+    xy = read_run_dir(tmp_path / "run").trajectory.pose[:, :, :2]
+    dist = np.linalg.norm(xy[:, :, None, :] - xy[:, None, :, :], axis=-1)
+    in_range = (dist <= scenario.planner_config.sensing_radius_m).sum(axis=2) - 1
+    assert in_range.max() > cap

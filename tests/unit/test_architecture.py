@@ -1,0 +1,165 @@
+"""The layers import one way only, and no module imports in a circle.
+
+Layers, lowest first (a module may import its own layer and the layers below it):
+
+0. core: types, configs, scenario dataclasses (`agent.core`)
+1. planning: threats, via-points, encounters, reference paths, MPC, ORCA, controller
+   (`agent.planning`)
+2. simulation: dynamics, link faults, fault plans, schedule, the lockstep loop (`world.sim`)
+3. wire: keys, messages, codec (`protocol`), the scenario file format (`world.scenario_file`)
+4. runtime: the robot and world processes and their plumbing (`agent.node`, `agent.fleet`,
+   `agent.process`, `agent.flags`, `world.node`, `world.recorder`)
+5. experiments and analysis (`orchestrator.experiments`, `orchestrator.analysis`)
+6. CLI (`orchestrator.cli`)
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+PACKAGES = ("agent", "world", "orchestrator")
+LAYERS: tuple[tuple[str, ...], ...] = (
+    ("agent.core",),
+    ("agent.planning",),
+    ("world.sim",),
+    ("protocol", "world.scenario_file"),
+    ("agent.node", "agent.fleet", "agent.process", "agent.flags", "agent.__main__",
+     "world.node", "world.recorder", "world.__main__"),
+    ("orchestrator.experiments", "orchestrator.analysis"),
+    ("orchestrator.cli", "orchestrator.__main__"),
+)
+LAYER_NAMES = ("core", "planning", "simulation", "wire", "runtime", "experiments", "cli")
+PURE_FORBIDDEN = ("zenoh", "yaml", "matplotlib", "psutil", "subprocess", "socket")
+"""Layers 0-2 do no I/O; the wire layer may read YAML but never touches zenoh."""
+
+
+def module_name(path: Path) -> str:
+    rel = path.relative_to(ROOT).with_suffix("")
+    parts = rel.parts[:-1] if rel.name == "__init__" else rel.parts
+    return ".".join(parts)
+
+
+def project_modules() -> dict[str, Path]:
+    mods = {"protocol": ROOT / "protocol.py"}
+    for pkg in PACKAGES:
+        for path in (ROOT / pkg).rglob("*.py"):
+            mods[module_name(path)] = path
+    return mods
+
+
+MODULES = project_modules()
+
+
+def layer_of(module: str) -> int | None:
+    for i, prefixes in enumerate(LAYERS):
+        if any(module == p or module.startswith(p + ".") for p in prefixes):
+            return i
+    return None
+
+
+def imports_of(path: Path, module: str) -> set[str]:
+    """Every module `path` imports, anywhere in the file (function-local imports too)."""
+    tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+    package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+    found: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            found.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                up = package.split(".")[: len(package.split(".")) - node.level + 1]
+                base = ".".join([*up, base] if base else up)
+            for alias in node.names:
+                full = f"{base}.{alias.name}"
+                found.add(full if full in MODULES else base)
+    return found
+
+
+def project_imports(module: str) -> set[str]:
+    """The project modules `module` imports (a package import counts as its __init__)."""
+    out = set()
+    for name in imports_of(MODULES[module], module):
+        while name and name not in MODULES:
+            name = name.rpartition(".")[0]
+        if name and name != module:
+            out.add(name)
+    return out
+
+
+GRAPH = {m: project_imports(m) for m in MODULES}
+
+
+def test_every_module_has_a_layer() -> None:
+    package_inits = {"agent", "world", "orchestrator"}
+    missing = sorted(m for m in MODULES if layer_of(m) is None and m not in package_inits)
+    assert not missing, f"modules outside every layer: {missing}"
+
+
+@pytest.mark.parametrize("module", sorted(MODULES))
+def test_no_upward_import(module: str) -> None:
+    mine = layer_of(module)
+    if mine is None:
+        return
+    upward = sorted(
+        f"{dep} ({LAYER_NAMES[layer_of(dep)]})" for dep in GRAPH[module]
+        if layer_of(dep) is not None and layer_of(dep) > mine)
+    assert not upward, f"{module} ({LAYER_NAMES[mine]}) imports upward: {upward}"
+
+
+@pytest.mark.parametrize("module", sorted(m for m in MODULES if (layer_of(m) or 0) <= 3))
+def test_lower_layers_do_no_io(module: str) -> None:
+    mine = layer_of(module)
+    forbidden = ("zenoh",) if mine == 3 else PURE_FORBIDDEN
+    external = {name.split(".")[0] for name in imports_of(MODULES[module], module)}
+    bad = sorted(external & set(forbidden))
+    assert not bad, f"{module} ({LAYER_NAMES[mine or 0]}) imports {bad}"
+
+
+def test_no_import_cycles() -> None:
+    # Tarjan's strongly connected components over the module graph.
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    cycles: list[list[str]] = []
+    counter = [0]
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = counter[0]
+        counter[0] += 1
+        stack.append(v)
+        on_stack.add(v)
+        for w in GRAPH[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                cycles.append(sorted(comp))
+
+    for v in sorted(GRAPH):
+        if v not in index:
+            visit(v)
+    assert not cycles, f"import cycles: {cycles}"
+
+
+def test_the_checker_sees_an_upward_import(tmp_path: Path) -> None:
+    """The walk finds function-local imports, so an upward one could not hide in a function."""
+    src = tmp_path / "probe.py"
+    src.write_text("def f():\n    from orchestrator.cli import main\n    return main\n")
+    assert "orchestrator.cli.main" in imports_of(src, "agent.core.probe") or \
+        "orchestrator.cli" in imports_of(src, "agent.core.probe")

@@ -1,0 +1,1 @@
+"""Simulation: world dynamics, injected link faults and the one lockstep loop (pure)."""
