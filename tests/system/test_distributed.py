@@ -25,6 +25,7 @@ import numpy as np
 import psutil
 import pytest
 
+from agent.process import ExitCode
 from orchestrator.experiments.distributed import (
     free_tcp_endpoint,
     robot_command,
@@ -254,7 +255,7 @@ def test_killed_robot_is_detected_and_avoided(tmp_path: Path, launch) -> None:
     wait_for_event(run.out_dir, lambda e: e["kind"] == "arrived" and e["robot"] == 0, RUN_S,
                    run.world)
     run.world.send_signal(signal.SIGTERM)
-    assert wait_exit(run.world) == 1  # not every robot arrived
+    assert wait_exit(run.world) == ExitCode.ROBOT_LOST  # robot 1 was lost; the run stopped
     assert wait_exit(run.robots[0]) == 0
     events = read_events(run.out_dir)
     assert not [e for e in events if e["kind"] == "contact"], events
@@ -426,7 +427,7 @@ def test_robots_stop_and_fail_when_the_world_is_killed(tmp_path: Path, launch) -
     assert codes == [3, 3]
     assert exit_s < 3.0, f"robots took {exit_s:.2f} s to leave (README states < 3 s)"
     for reason, code, _ in robot_exit_lines(run.out_dir).values():
-        assert code == 3 and reason.startswith("world lost")
+        assert code == ExitCode.WORLD_LOST and reason.startswith("world lost")
     print(f"robots exited {exit_s:.2f} s after the world was SIGKILLed")
 
 
@@ -482,11 +483,11 @@ def test_robot_without_world_gives_up_at_its_startup_deadline(tmp_path: Path) ->
     log = tmp_path / "robot_0.log"
     robot = spawn_logged(robot_command(run_id, 0, endpoint, startup_timeout_s=2.0), log)
     try:
-        assert wait_exit(robot, STARTUP_S) == 2
+        assert wait_exit(robot, STARTUP_S) == ExitCode.TRANSPORT
     finally:
         stop_processes([robot], 0.0, 5.0)
     reason, code, _ = robot_exit_lines(tmp_path)[0]
-    assert code == 2 and reason.startswith("cannot connect")
+    assert code == ExitCode.TRANSPORT and reason.startswith("cannot connect")
 
 
 def test_robot_exits_cleanly_on_sigterm(tmp_path: Path) -> None:

@@ -88,7 +88,7 @@ def test_await_without_a_world_gives_up_at_the_deadline(tmp_path: Path) -> None:
            "--run", "nobody", "--runs-dir", str(tmp_path), "--connect", free_tcp_endpoint(),
            "--startup-timeout-s", "2"]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=60, check=False)
-    assert proc.returncode == 3, proc.stderr
+    assert proc.returncode == 6, proc.stderr  # ExitCode.TRANSPORT: no world to connect to
     assert "cannot connect" in proc.stderr
     assert not (tmp_path / "nobody" / "metrics.json").exists()
 

@@ -121,7 +121,7 @@ def test_sampler_reads_a_robot_process() -> None:
         [sys.executable, "-m", "agent", "--run", "t", "--id", "0", "--connect",
          "tcp/127.0.0.1:9", "--startup-timeout-s", "20"],
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-        cwd=Path(__file__).resolve().parents[2])
+        cwd=Path(__file__).resolve().parents[4])
     sampler = ResourceSampler(memory_every=1)
     try:
         deadline = time.monotonic() + 20.0
