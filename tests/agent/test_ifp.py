@@ -518,7 +518,7 @@ def test_paper_config_declares_threats_by_eq6_alone():
         assert plan.status == PlanStatus.OK
         assert plan.waypoints_m.shape == (2, 2)  # [P, goal]: no via-point
         assert plan.via_point_m is None
-    # the old behaviour (the project's default) keeps the direct-leg check (static obstacles seen at rest)
+    # the old behaviour (the project's default): the direct-leg check declares a threat
     old = plan_ifp(obs, paper_config(direct_leg_check=True))
     assert old.threats == () and old.via_point_m is not None
 
@@ -538,5 +538,6 @@ def test_goal_tcpa_filter_is_off_in_the_paper_config():
     # a threat whose TCPA (about 5.5 s) is past the time to the goal (1.8 s at 1.1 m/s)
     o = others([(6.0, 0.2)], vel=[(0.0, 0.0)])
     obs = observe(o, v=1.1, goal=(2.0, 0.0))
-    assert plan_ifp(obs, PlannerConfig()).threats and plan_ifp(obs, PlannerConfig()).via_point_m is None
+    default = plan_ifp(obs, PlannerConfig())
+    assert default.threats and default.via_point_m is None
     assert plan_ifp(obs, paper_config()).via_point_m is not None
