@@ -279,6 +279,18 @@ class PlannerConfig:
             that has one is resolved first; without it the cycle gives up (NO_FEASIBLE,
             straight to the goal) and the next cycle swerves again. The cap alone: F / G
             1.45 / 2.44 (G's robots flipped between the goal and a via-point).
+        direct_leg_check: when Eq. (5) finds no threat, the direct leg robot -> goal still
+            goes through IFP's leg check (`agent.ifp`, step 4: closest approach on the leg
+            at top speed against the inflated radius L, within T_max), so a robot standing
+            still (v_r = 0) sees a static obstacle on its way. Not in the paper, where a
+            threat is declared by Eq. (5) alone: the leg check flags others whose TCPA is
+            past T_max (it measures the gap at the horizon's end), and then drops them again
+            as the two swerve, which made the paper profile weave (`paper_config`). The
+            legs after a via-point are checked either way (the IFP iteration).
+        goal_tcpa_filter: threats of Eq. (5) whose TCPA is more than
+            `agent.ifp.GOAL_TCPA_MARGIN_S` past the robot's time to its goal at top speed are
+            not resolved (an overshoot near the goal would otherwise send the robot round it).
+            Not in the paper.
         estimation_window_s: history length used to estimate others' velocity and linearity.
             0.75 s (was 0.5): measured, it cut the reversals in the dense crossings
             (lockstep, 5 cm jitter, seeds 0-9: F 4.28 -> 3.09, G 8.30 -> 6.75 per robot;
@@ -332,6 +344,8 @@ class PlannerConfig:
     via_time_max_s: float | None = 8.0
     primary_fallback: bool = True
     stand_on_emergency_s: float = 2.0
+    direct_leg_check: bool = True
+    goal_tcpa_filter: bool = True
     estimation_window_s: float = 0.75
     command_hold_periods: float = 1.5
     lookahead_s: float = 0.6
@@ -347,3 +361,93 @@ class PlannerConfig:
         if self.d_thresh_m is not None:
             return self.d_thresh_m
         return 5.0 * robot_radius_m + self.d_safety_m
+
+
+PAPER_MPC_OVERRIDES: dict[str, object] = {
+    "q_terminal": 1.0,
+    "r_dv": 0.0,
+    "r_domega": 0.0,
+    "braking_guard": False,
+}
+"""`MpcConfig` fields that `paper_config` changes: the paper's J (Eq. 21) has one state
+weight Q for every step (no terminal multiplier) and an input weight R, no input-rate
+terms; there is no braking guard. The inputs' rate bounds stay: they are the robot's
+actuation limits (`RobotLimits`), which the world enforces too."""
+
+PAPER_OVERRIDES: dict[str, object] = {
+    # eIFP's additions (not in the paper): encounter rules, side memory, right-hand rule.
+    "encounter_rules": False,
+    "side_hysteresis": 0.0,
+    "right_hand_margin": 0.0,
+    "threat_commitment": False,
+    "primary_hysteresis": False,
+    # IFP cycle: threats by Eq. (5) alone, with D_thresh = 5 r + d_safety.
+    "direct_leg_check": False,
+    "goal_tcpa_filter": False,
+    "d_thresh_m": None,
+    # eIFP-MPC's cycle rules (agent.ifp.CycleRules): all off, the paper's cycle.
+    "threats_within_inflated": False,
+    "threat_release_margin_m": 0.0,
+    "via_margin_m": 0.05,  # agent.ifp.VIA_MARGIN_M, as ifp and eifp (an open choice)
+    "escape_hysteresis_m": 0.0,
+    "head_on_hold_s": 0.0,
+    "via_time_max_s": None,
+    "primary_fallback": False,
+    # The paper's cubic spline through the waypoints, natural ends (Eq. 19).
+    "reference_lines_arcs": False,
+    "spline_clamp_heading": False,
+    "spline_first_leg_segments": 1,
+    # The paper limits neither the sensing range nor the neighbour count.
+    "sensing_radius_m": 1.0e3,
+    "max_neighbors": 1000,
+}
+"""`PlannerConfig` fields that `paper_config` sets (every addition of ours off)."""
+
+
+def paper_config(base: PlannerConfig | None = None, **overrides: object) -> PlannerConfig:
+    """The paper's method as written (Eqs. 6-22): every addition of this project off.
+
+    IFP, eIFP and eIFP-MPC then run the threat test of Eq. (6) with D_thresh, the TCPA
+    ranking (7), the inflated radius (8), the tangents (9)-(11), the velocity cone
+    (12)-(14), the cost (15)-(17) with plain argmin (18) (exact ties to S1, RIGHT), the
+    natural cubic spline (19) and the MPC (20)-(22) with the neighbours' predictions as
+    soft constraints. What the paper leaves open keeps the readings documented in the
+    modules (and in /work/notes/paper-profile.md).
+
+    Args:
+        base: the configuration to start from (weights, d_safety, T_max, ...); None: the
+            defaults.
+        overrides: further fields, applied last (``mpc`` replaces the paper's MpcConfig).
+
+    Returns:
+        A frozen `PlannerConfig`.
+    """
+    base = base if base is not None else PlannerConfig()
+    fields_ = dict(PAPER_OVERRIDES)
+    fields_["mpc"] = dataclasses.replace(base.mpc, **PAPER_MPC_OVERRIDES)
+    fields_.update(overrides)
+    return dataclasses.replace(base, **fields_)
+
+
+def is_paper_config(config: PlannerConfig) -> bool:
+    """Whether `config` has every field `paper_config` sets at the paper's value."""
+    for name, value in PAPER_OVERRIDES.items():
+        if getattr(config, name) != value:
+            return False
+    return all(getattr(config.mpc, name) == value for name, value in PAPER_MPC_OVERRIDES.items())
+
+
+def paper_file_defaults() -> dict[str, object]:
+    """`PAPER_OVERRIDES` as scenario-file `defaults` keys (unit suffixes stripped, as
+    `world.scenario` reads them), ``mpc`` nested: paste into a scenario's `defaults`."""
+    suffixes = ("_mps2", "_radps2", "_radps", "_mps", "_m", "_s")
+
+    def key(name: str) -> str:
+        for suffix in suffixes:
+            if name.endswith(suffix):
+                return name[: -len(suffix)]
+        return name
+
+    out: dict[str, object] = {key(k): v for k, v in PAPER_OVERRIDES.items()}
+    out["mpc"] = {key(k): v for k, v in PAPER_MPC_OVERRIDES.items()}
+    return out

@@ -21,7 +21,9 @@ Choices the paper leaves open (documented here, tested in tests/agent/test_ifp.p
 
 - Step 3 uses the measured velocity v_r as in Eq. (3). A robot that stands still (v_r = 0)
   sees no static obstacle as a threat under Eq. (5), so when Eq. (5) finds nothing the
-  direct leg P -> goal still goes through the leg check of step 4.
+  direct leg P -> goal still goes through the leg check of step 4
+  (`PlannerConfig.direct_leg_check`; not in the paper, off in `config.paper_config`: then
+  a cycle whose Eq. (5) finds nothing plans [P, goal]).
 - The leg check counts other j as a threat when the closest approach on the leg is below
   its inflated radius L_j (not D_thresh, which is a detection radius): the plan must clear
   the inflated discs. Grazing within `LEG_GRAZE_TOL_M` is not a threat, so a leg that is
@@ -37,7 +39,8 @@ Choices the paper leaves open (documented here, tested in tests/agent/test_ifp.p
 - A candidate is only built from a leg start outside the disc by more than
   `ON_DISC_REL_TOL` of L.
 - Step 3 drops threats whose TCPA is more than `GOAL_TCPA_MARGIN_S` past the time the
-  robot needs to reach its goal at top speed: near the goal the measured velocity of an
+  robot needs to reach its goal at top speed (`PlannerConfig.goal_tcpa_filter`; not in the
+  paper, off in `config.paper_config`): near the goal the measured velocity of an
   overshoot points at whoever stands beyond it, and resolving that sends the robot round
   its goal. Such others still count on the legs of step 4.
 - `ViaPlan.via_point_m` is the first via-point after P (where the robot heads now), with
@@ -359,8 +362,10 @@ def plan_via_points(
     # Closest approaches after the robot can be at its goal are not its business: near the
     # goal, an overshoot would otherwise point the measured velocity at someone beyond it
     # and send the robot round the goal. The leg to the goal is still checked below.
-    to_goal_s = math.hypot(goal[0] - p[0], goal[1] - p[1]) / float(observation.limits.v_max_mps)
-    index = index[tcpa[index] <= to_goal_s + GOAL_TCPA_MARGIN_S]
+    if config.goal_tcpa_filter:
+        to_goal_s = (math.hypot(goal[0] - p[0], goal[1] - p[1])
+                     / float(observation.limits.v_max_mps))
+        index = index[tcpa[index] <= to_goal_s + GOAL_TCPA_MARGIN_S]
     ignored = np.zeros(len(others), dtype=bool)
     if ignored_ids and len(others):
         ignored = np.fromiter((i in ignored_ids for i in others.ids.tolist()), dtype=bool,
@@ -429,6 +434,10 @@ def plan_via_points(
         wps.insert(1, split[0])
         excluded[0:1] = [k, -1]
         chosen.insert(1, (k, split[1]))
+    elif not config.direct_leg_check:
+        # The paper declares threats by Eq. (5) alone: none, so the plan is [P, goal].
+        return ViaPlan(status=PlanStatus.OK, waypoints_m=np.stack((p, goal)), threats=threats,
+                       threats_s=threats_s)
 
     # Iteration: re-check every leg from `first` on; split the first resolvable one.
     velocity = as_complex(others.velocity_mps)

@@ -96,3 +96,29 @@ def test_positive_rule_is_the_sign_of_the_value(name: str, value: float) -> None
 def test_non_numbers_are_left_to_the_type_checks_of_the_loaders() -> None:
     for value in (None, True, "x", (1.0, 2.0)):
         assert field_range_error("t_max_s", value) is None
+
+
+def test_paper_config_turns_every_addition_off():
+    from agent.config import PAPER_MPC_OVERRIDES, PAPER_OVERRIDES, is_paper_config, paper_config
+
+    cfg = paper_config()
+    assert is_paper_config(cfg)
+    assert not is_paper_config(PlannerConfig())
+    for name, value in PAPER_OVERRIDES.items():
+        assert getattr(cfg, name) == value, name
+    for name, value in PAPER_MPC_OVERRIDES.items():
+        assert getattr(cfg.mpc, name) == value, name
+    assert cfg.dcpa_threshold_m(0.5) == 5 * 0.5 + cfg.d_safety_m  # D_thresh of Eq. (6)
+    # overrides apply last; the profile is still frozen and hashable
+    assert paper_config(t_max_s=5.0).t_max_s == 5.0
+    hash(cfg)
+
+
+def test_paper_file_defaults_load_as_the_paper_config():
+    from agent.config import is_paper_config, paper_file_defaults
+    from world.scenario import scenario_from_dict
+
+    data = {"name": "x", "time_limit": 10.0, "goal_tolerance": 0.25,
+            "defaults": paper_file_defaults(),
+            "robots": [{"id": 0, "start": [0.0, 0.0, 0.0], "goal": [5.0, 0.0]}]}
+    assert is_paper_config(scenario_from_dict(data).planner_config)

@@ -491,3 +491,53 @@ def test_via_time_max_and_fallback_come_from_the_config():
     assert math.isinf(PAPER_RULES.via_time_max_s) and PAPER_RULES.primary_fallback is False
     with pytest.raises(ValueError, match="via_time_max_s"):
         PlannerConfig(via_time_max_s=0.0)
+
+
+def _setup_a_at_8s():
+    """Setup A (two robots crossing at right angles, mirrored), 8.1 s in: the other's TCPA
+    is about 8.7 s, past T_max = 8 s, so Eq. (6) declares no threat, but the gap at the
+    horizon's end (8 s) is below L = 1.3 m."""
+    o = others([(-6.83, -6.79)], vel=[(0.78, 0.78)], radius=0.5)
+    return Observation(robot_id=0, ego=EgoState(-6.80, 6.84, -math.pi / 4, 1.1),
+                       goal_m=np.array([12.73, -12.73]), radius_m=0.5,
+                       limits=RobotLimits(v_max_mps=1.1), others=o)
+
+
+def test_paper_config_declares_threats_by_eq6_alone():
+    """The weaving of the paper profile on setup A (notes/paper-profile.md): IFP's check of
+    the direct leg declared the other a threat while Eq. (6) did not (its TCPA is past
+    T_max), and dropped it again a few cycles later as both swerved. In the paper profile a
+    cycle without an Eq. (6) threat plans straight to the goal."""
+    from agent.config import paper_config
+    from agent.eifp import plan_eifp
+
+    obs = _setup_a_at_8s()
+    paper = paper_config()
+    for plan in (plan_ifp(obs, paper), plan_eifp(obs, paper)):
+        assert plan.threats == ()
+        assert plan.status == PlanStatus.OK
+        assert plan.waypoints_m.shape == (2, 2)  # [P, goal]: no via-point
+        assert plan.via_point_m is None
+    # the old behaviour (the project's default): the direct-leg check declares a threat
+    old = plan_ifp(obs, paper_config(direct_leg_check=True))
+    assert old.threats == () and old.via_point_m is not None
+
+
+def test_paper_config_still_resolves_an_eq6_threat():
+    from agent.config import paper_config
+
+    o = others([(5.0, 0.3)], vel=[(-1.0, 0.0)])
+    plan = plan_ifp(observe(o, v=1.1), paper_config())
+    assert [t.other_id for t in plan.threats] == [1]
+    assert plan.via_point_m is not None
+
+
+def test_goal_tcpa_filter_is_off_in_the_paper_config():
+    from agent.config import paper_config
+
+    # a threat whose TCPA (about 5.5 s) is past the time to the goal (1.8 s at 1.1 m/s)
+    o = others([(6.0, 0.2)], vel=[(0.0, 0.0)])
+    obs = observe(o, v=1.1, goal=(2.0, 0.0))
+    default = plan_ifp(obs, PlannerConfig())
+    assert default.threats and default.via_point_m is None
+    assert plan_ifp(obs, paper_config()).via_point_m is not None
