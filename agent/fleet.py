@@ -23,14 +23,14 @@ Start-up is throttled: at most ``--max-starting`` (`MAX_STARTING`) children are 
 their fork and their liveliness token at once; each reports ready through a pipe and the
 parent forks the next. 128 robots forked in one burst all connect, query and warm up at
 the same moment, and on a loaded 2-core machine that starved the router's Zenoh threads
-past the 1 s transport lease: the world dropped most of them and they left (README, "Scale").
+past the 1 s transport lease: the world dropped most of them and they left (docs/scale.md).
 
 CPU tokens (``--cpu-tokens N``, off by default): the children share a semaphore of N; a
 robot holds one while it senses and plans (`agent.node.RobotNode.sense_and_plan`), so at
 most N compute at once, each to the end of its cycle, instead of 100 runnable robots
 time-sliced against each other (and against the world) when they want more CPU than the
 host has. Measured with N = 2 on 2 cores it kept every robot's lease but raised the
-deadline misses (the queue's wait adds to every late cycle), so it is off (README, "Scale").
+deadline misses (the queue's wait adds to every late cycle), so it is off (docs/scale.md).
 """
 
 from __future__ import annotations
@@ -49,7 +49,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from types import FrameType
 
-from agent.process import die_with_parent
+from agent.process import PARENT_PID_ENV, die_with_launcher, die_with_parent
 
 log = logging.getLogger("fleet")
 
@@ -94,7 +94,7 @@ def build_parser() -> argparse.ArgumentParser:
                              f"declared its liveliness token (default {MAX_STARTING})")
     parser.add_argument("--cpu-tokens", type=int, default=0,
                         help="robots computing at once (e.g. the number of CPUs; default 0: "
-                             "no tokens, every robot competes for the CPU; see README, Scale)")
+                             "no tokens, every robot competes for the CPU; see docs/scale.md)")
     parser.add_argument("--nice", type=int, default=0,
                         help="robot processes add this to their niceness (>= 0; e.g. 5 keeps "
                              "a world on the same machine ahead of them)")
@@ -139,6 +139,7 @@ def _child(argv: list[str], log_path: Path, parent_pid: int, nice: int = 0,
 
     try:
         die_with_parent(parent_pid)
+        os.environ[PARENT_PID_ENV] = str(parent_pid)  # the robot's own check sees the fleet
         if nice > 0:
             os.nice(nice)
         fd = os.open(log_path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
@@ -284,6 +285,7 @@ def run_fleet(args: argparse.Namespace) -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``python -m agent.fleet``."""
+    die_with_launcher()
     logging.basicConfig(level=logging.INFO, stream=sys.stderr,
                         format="%(asctime)s fleet %(levelname)s %(message)s")
     return run_fleet(build_parser().parse_args(argv))

@@ -42,8 +42,9 @@ malformed messages; ``stale``: poses the controller dropped as old or out of ord
 ``link_dropped``: poses the injected link lost; ``suspended``: times it found itself
 resumed after a stop). The launcher collects these lines into ``robots.json``.
 
-Exit status: 0 (end of run, or a signal), 2 (setup: cannot connect or get the
-configuration before the startup deadline), 3 (the world is gone).
+Exit status (`agent.process.ExitCode`): OK (end of run, or a signal), TRANSPORT (cannot
+connect before the startup deadline), BAD_INPUT (no valid configuration), WORLD_LOST (the
+world is gone).
 
 Planning slots are staggered over the world's ticks (`plan_phase_s`: robot k plans on the
 ticks k mod 5 of each 0.1 s period), so only a fifth of the robots plan on any one pose.
@@ -54,7 +55,7 @@ bytes. A robot whose plan slots are not on one pose slot (``--control-phase-s`` 
 ticks, ``--control-rate-hz`` 20 ...) subscribes to every slot (``poses/*``).
 Between slots the loop sleeps until just before the slot's pose is due, then waits on the
 pose subscriber's event (woken by the pose itself: no polling while the world runs late).
-An idle robot costs little CPU (see README, "Scale").
+An idle robot costs little CPU (see docs/scale.md).
 """
 
 from __future__ import annotations

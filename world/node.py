@@ -35,8 +35,9 @@ Events (``events.jsonl``, sim time ``t``; ``wall`` is Unix time where detection 
 matters): world_ready, robot_joined, robot_lost, robot_rejoined, robot_left, unknown_robot,
 start, arrived, contact, cmd_timeout, rejected, startup_timeout, end.
 
-Exit status: 0 if every robot arrived with no contact, 1 otherwise, 2 for a setup error
-(bad arguments, bad scenario, transport could not be opened).
+Exit status (`agent.process.ExitCode.of_run`): OK every robot arrived with no contact,
+CONTACT, ROBOT_LOST, INTERRUPTED or INCOMPLETE otherwise; BAD_INPUT for bad arguments or a
+bad scenario, TRANSPORT when the session could not be opened.
 """
 
 from __future__ import annotations

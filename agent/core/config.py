@@ -412,7 +412,7 @@ def paper_config(base: PlannerConfig | None = None, **overrides: object) -> Plan
     (12)-(14), the cost (15)-(17) with plain argmin (18) (exact ties to S1, RIGHT), the
     natural cubic spline (19) and the MPC (20)-(22) with the neighbours' predictions as
     soft constraints. What the paper leaves open keeps the readings documented in the
-    modules (and in /work/notes/paper-profile.md).
+    modules and in docs/method.md.
 
     Args:
         base: the configuration to start from (weights, d_safety, T_max, ...); None: the
@@ -429,6 +429,24 @@ def paper_config(base: PlannerConfig | None = None, **overrides: object) -> Plan
     return dataclasses.replace(base, **fields_)
 
 
+PROFILES: tuple[str, ...] = ("default", "paper")
+"""Named planner configurations: ``default`` (this project's eIFP-MPC) and ``paper`` (the
+paper's method as written, `paper_config`)."""
+
+
+def profile_config(profile: str, base: PlannerConfig | None = None) -> PlannerConfig:
+    """The `PlannerConfig` of a named profile (`PROFILES`), built on `base`.
+
+    Raises:
+        ValueError: an unknown profile name.
+    """
+    if profile == "paper":
+        return paper_config(base)
+    if profile == "default":
+        return base if base is not None else PlannerConfig()
+    raise ValueError(f"unknown profile {profile!r}; expected one of {', '.join(PROFILES)}")
+
+
 def is_paper_config(config: PlannerConfig) -> bool:
     """Whether `config` has every field `paper_config` sets at the paper's value."""
     for name, value in PAPER_OVERRIDES.items():
@@ -439,7 +457,7 @@ def is_paper_config(config: PlannerConfig) -> bool:
 
 def paper_file_defaults() -> dict[str, object]:
     """`PAPER_OVERRIDES` as scenario-file `defaults` keys (unit suffixes stripped, as
-    `world.scenario` reads them), ``mpc`` nested: paste into a scenario's `defaults`."""
+    `world.scenario_file` reads them), ``mpc`` nested: paste into a scenario's `defaults`."""
     suffixes = ("_mps2", "_radps2", "_radps", "_mps", "_m", "_s")
 
     def key(name: str) -> str:

@@ -72,7 +72,7 @@ speed jumps. Measured (distributed, setup G at 100 +- 30 ms with 10 % loss, stop
 machine): read at every age, 3 of 10 runs touched, one of them a follower into a braking
 leader; the blind bound, 3 of 10 on the same machine. So the gate is not shown to be
 needed, but it keeps the speed terms of every run with a delayed link those of the code
-whose safety envelope was measured (README, "The safety envelope"). Poses are fresh (age 0)
+whose safety envelope was measured (docs/faults.md). Poses are fresh (age 0)
 in an undisturbed lockstep run and a few ms old in a healthy distributed one.
 
 The same age switches the guard's turn allowances on. From poses older than this the

@@ -11,7 +11,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from agent.core.config import PLANNER_NAMES
+from agent.core.config import PLANNER_NAMES, PROFILES
 from agent.core.scenario import Scenario
 from agent.process import ExitCode
 from orchestrator.analysis.console import ProgressLine, run_summary
@@ -34,6 +34,9 @@ RUN_ENDINGS = frozenset({ExitCode.OK, ExitCode.CONTACT, ExitCode.INCOMPLETE, Exi
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("run", help="run one scenario")
+    p.add_argument("--profile", choices=PROFILES, default=None,
+                   help="planner configuration: default or paper (the paper\'s method as "
+                        "written); default: the scenario\'s own")
     p.add_argument("setup", help="setup_a..setup_g (or a..g), circle, crossing, crossing4, "
                                  "random, or a scenario .yaml file")
     p.add_argument("--agents", type=int, help="robot count (setup_f, setup_g, families)")
@@ -65,7 +68,8 @@ def run(args: argparse.Namespace) -> int:
                                             and args.time_scale > 0):
         raise BadInput(f"--time-scale: must be > 0, got {args.time_scale}")
     scenario = resolve(args.setup, agents=args.agents, seed=args.seed,
-                       start_jitter_m=args.start_jitter_m, planner=args.planner)
+                       start_jitter_m=args.start_jitter_m, planner=args.planner,
+                       profile=args.profile)
     faults = fault_plan(args, scenario)
     planner = planner_label(scenario)
     out_dir = Path(args.out) if args.out else default_out_dir(scenario, planner, args.seed)
@@ -75,7 +79,8 @@ def run(args: argparse.Namespace) -> int:
     label = f"{scenario.name} {planner} {args.mode}"
     write_json(out_dir / "run.json", {
         "setup": args.setup, "scenario": scenario.name, "planner": planner,
-        "seed": args.seed, "mode": args.mode, "agents": len(scenario.robots),
+        "seed": args.seed, "mode": args.mode, "profile": args.profile,
+        "agents": len(scenario.robots),
         "start_jitter_m": args.start_jitter_m, "time_scale": args.time_scale,
         "faults": faults.to_json() if faults is not None else None,
         "started": dt.datetime.now().isoformat(timespec="seconds"),

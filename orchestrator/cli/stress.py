@@ -8,7 +8,7 @@ import sys
 import time
 from pathlib import Path
 
-from agent.core.config import PLANNER_NAMES
+from agent.core.config import PLANNER_NAMES, PROFILES
 from agent.flags import link_faults
 from agent.process import ExitCode
 from orchestrator.analysis.rundir import safe_name
@@ -23,6 +23,9 @@ from orchestrator.cli.common import (
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("stress", help="fault levels x planners x seeds: table and envelope")
+    p.add_argument("--profile", choices=PROFILES, default=None,
+                   help="planner configuration: default or paper (the paper\'s method as "
+                        "written); default: the scenario\'s own")
     p.add_argument("setup", help="a setup, family or scenario file (as for run)")
     p.add_argument("--sweep", action="append", metavar="KEY=V1,V2,...",
                    help="latency_ms, jitter_ms, drop, dup or reorder; repeat for a grid")
@@ -61,7 +64,8 @@ def run(args: argparse.Namespace) -> int:
         raise BadInput(str(exc)) from None
     for planner in planners:  # fail before starting
         scenario = resolve(args.setup, agents=args.agents, seed=0,
-                           start_jitter_m=args.start_jitter_m, planner=planner)
+                           start_jitter_m=args.start_jitter_m, planner=planner,
+                           profile=args.profile)
     robot_faults = fault_plan(args, scenario, links=False)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -75,7 +79,8 @@ def run(args: argparse.Namespace) -> int:
             setup=args.setup, planner=planner, seed=seed, level=tuple(level.items()),
             links=links, mode=args.mode, out_dir=str(out / name), agents=args.agents,
             start_jitter_m=args.start_jitter_m, time_scale=args.time_scale or 1.0,
-            compensate_latency=not args.no_latency_compensation, robot_faults=robot_faults))
+            compensate_latency=not args.no_latency_compensation, robot_faults=robot_faults,
+            profile=args.profile))
     print(f"stress: {len(jobs)} runs ({args.mode}), {args.jobs} at a time, into {out}",
           file=sys.stderr)
     t0 = time.monotonic()

@@ -11,7 +11,7 @@ import sys
 import time
 from pathlib import Path
 
-from agent.core.config import PLANNER_NAMES
+from agent.core.config import PLANNER_NAMES, PROFILES
 from agent.process import ExitCode
 from orchestrator.analysis.rundir import safe_name
 from orchestrator.cli.common import (
@@ -26,6 +26,9 @@ SWEEP_RUN_TIMEOUT_S = 4 * 3600.0
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("sweep", help="many runs: setups x planners x seeds")
+    p.add_argument("--profile", choices=PROFILES, default=None,
+                   help="planner configuration: default or paper (the paper\'s method as "
+                        "written); default: the scenario\'s own")
     p.add_argument("--setups", required=True, help="comma-separated names, or 'all' (A-G)")
     p.add_argument("--planners", required=True, help="comma-separated names, or 'all'")
     p.add_argument("--seeds", type=int, default=1, help="seeds 0..N-1 (default 1)")
@@ -53,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
         raise BadInput(f"--jobs: must be >= 1, got {args.jobs}")
     for setup, planner in itertools.product(setups, planners):  # fail before starting
         resolve(setup, agents=args.agents, seed=0, start_jitter_m=args.start_jitter_m,
-                planner=planner)
+                planner=planner, profile=args.profile)
     out = Path(args.out)
     (out / "logs").mkdir(parents=True, exist_ok=True)
     jobs = []
@@ -66,6 +69,8 @@ def run(args: argparse.Namespace) -> int:
             cmd += ["--agents", str(args.agents)]
         if args.time_scale is not None:
             cmd += ["--time-scale", repr(args.time_scale)]
+        if args.profile is not None:
+            cmd += ["--profile", args.profile]
         jobs.append((setup, planner, seed, name, cmd))
     print(f"sweep: {len(jobs)} runs, {args.jobs} at a time, into {out}", file=sys.stderr)
 

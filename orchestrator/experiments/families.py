@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from agent.core.config import PLANNER_NAMES, PlannerConfig, RobotLimits
+from agent.core.config import PLANNER_NAMES, PlannerConfig, RobotLimits, profile_config
 from agent.core.scenario import RobotSpec, Scenario
 from world.scenario_file import ScenarioError, load_scenario, validate_scenario
 
@@ -421,7 +421,8 @@ def known_names() -> tuple[str, ...]:
 
 
 def resolve(name_or_path: str, agents: int | None = None, seed: int = 0,
-            start_jitter_m: float = 0.0, planner: str | None = None) -> Scenario:
+            start_jitter_m: float = 0.0, planner: str | None = None,
+            profile: str | None = None) -> Scenario:
     """The scenario the CLI runs.
 
     Args:
@@ -433,6 +434,9 @@ def resolve(name_or_path: str, agents: int | None = None, seed: int = 0,
         seed: seeds the random family and the start jitter (independent streams).
         start_jitter_m: move starts by up to this much (see `jitter_starts`).
         planner: if given, every robot uses it.
+        profile: if given, the planner configuration of that profile
+            (`agent.core.config.PROFILES`; ``paper``: the paper's method as written, built
+            on the scenario's own weights and sizes).
 
     Raises:
         ScenarioError: unknown name, bad size, invalid file or parameters.
@@ -464,4 +468,10 @@ def resolve(name_or_path: str, agents: int | None = None, seed: int = 0,
                             f"{', '.join(known_names())} or a .yaml file")
     if planner is not None:
         scenario = with_planner(scenario, planner)
+    if profile is not None:
+        try:
+            config = profile_config(profile, scenario.planner_config)
+        except ValueError as exc:
+            raise ScenarioError(f"--profile: {exc}") from None
+        scenario = dataclasses.replace(scenario, planner_config=config)
     return jitter_starts(scenario, start_jitter_m, jitter_rng)

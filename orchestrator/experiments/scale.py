@@ -69,10 +69,10 @@ MEMORY_EVERY = 10
 """Read PSS on every this many samples (reading smaps_rollup costs ~1 ms per process)."""
 FAMILIES = ("circles", "circle", "crossing", "random")
 DEFAULT_FAMILY = "circles"
-"""Tiled 8-robot circles: the same local density and run length for every N (see README)."""
+"""Tiled 8-robot circles: the same local density and run length for every N (see docs/scale.md)."""
 MIB = float(1 << 20)
 ROBOT_NICE = 0
-"""Default niceness added to the robots (see README, "Scale": a nicer robot's Zenoh threads
+"""Default niceness added to the robots (see docs/scale.md: a nicer robot's Zenoh threads
 starve too, and a missed 1 s lease loses the robot)."""
 
 CPU_PARTS = ("sense", "plan", "send", "loop", "threads")

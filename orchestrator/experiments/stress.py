@@ -110,6 +110,7 @@ class StressJob:
     time_scale: float = 1.0
     compensate_latency: bool = True
     robot_faults: FaultPlan | None = None  # its timing and process faults (links: `links`)
+    profile: str | None = None  # planner profile (`agent.core.config.PROFILES`)
 
 
 def run_job(job: StressJob) -> dict[str, Any]:
@@ -124,7 +125,8 @@ def run_job(job: StressJob) -> dict[str, Any]:
                            **dict(job.level), "error": None}
     try:
         scenario = resolve(job.setup, agents=job.agents, seed=job.seed,
-                           start_jitter_m=job.start_jitter_m, planner=job.planner)
+                           start_jitter_m=job.start_jitter_m, planner=job.planner,
+                           profile=job.profile)
         plan = replace(job.robot_faults or FaultPlan(), links=job.links, seed=job.seed,
                        compensate_latency=job.compensate_latency)
         out = Path(job.out_dir)

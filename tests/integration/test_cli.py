@@ -288,3 +288,16 @@ def test_stress_without_a_sweep_runs_the_base_faults_as_given(tmp_path):
 def test_stress_rejects_bad_options(tmp_path, capsys, argv, message):
     assert main(["stress", "setup_a", "--out", str(tmp_path / "s"), *argv]) == 2
     assert message in capsys.readouterr().err
+
+
+def test_run_with_the_paper_profile_records_it(tmp_path):
+    from agent.core.config import is_paper_config
+    from world.scenario_file import load_scenario
+
+    out = tmp_path / "paper"
+    rc = main(["run", "setup_a", "--mode", "lockstep", "--profile", "paper", "--quiet",
+               "--start-jitter-m", "0.05", "--out", str(out)])
+    assert rc in (ExitCode.OK, ExitCode.CONTACT, ExitCode.INCOMPLETE)
+    assert json.loads((out / "run.json").read_text())["profile"] == "paper"
+    assert is_paper_config(load_scenario(out / "scenario.yaml").planner_config)
+    assert (out / "metrics.json").is_file()

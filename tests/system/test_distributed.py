@@ -424,7 +424,7 @@ def test_robots_stop_and_fail_when_the_world_is_killed(tmp_path: Path, launch) -
     t0 = time.monotonic()
     codes = [wait_exit(run.robots[rid], 10.0) for rid in (0, 1)]
     exit_s = time.monotonic() - t0
-    assert codes == [3, 3]
+    assert codes == [ExitCode.WORLD_LOST, ExitCode.WORLD_LOST]
     assert exit_s < 3.0, f"robots took {exit_s:.2f} s to leave (README states < 3 s)"
     for reason, code, _ in robot_exit_lines(run.out_dir).values():
         assert code == ExitCode.WORLD_LOST and reason.startswith("world lost")

@@ -21,6 +21,7 @@ import numpy as np
 import psutil
 import pytest
 
+from agent.process import ExitCode
 from orchestrator.experiments.distributed import free_tcp_endpoint, run_distributed
 from protocol import CommandMsg, PosesMsg, ProtocolError, RunKeys
 from tests.system.test_distributed import (
@@ -131,7 +132,7 @@ def test_killed_robot_is_avoided_by_the_launchers_schedule(tmp_path: Path) -> No
     out = tmp_path / "run"
     code = run_distributed(scenario, out, unique_run_id("skill"), time_scale=1.0,
                            startup_timeout_s=STARTUP_S, faults=build_plan(kill=["1@3"]))
-    assert code == 1  # robot 1 never arrives
+    assert code == ExitCode.ROBOT_LOST  # robot 1 was killed and never arrives
     events = read_events(out)
     end = by_kind(events, "end")[0]
     assert end["contacts"] == 0 and end["lost"] == [1] and end["arrived"] == [0]
@@ -244,13 +245,13 @@ def test_orchestrator_reports_a_killed_world_as_failed_not_hung(tmp_path: Path) 
         if cli.poll() is None:
             cli.kill()
             cli.wait()
-    assert cli.returncode == 3, stderr.decode()
+    assert cli.returncode == ExitCode.WORLD_LOST, stderr.decode()
     # "the world exited with status 137" (or, killed before any row was written, "the
     # distributed run left no trajectory (world exit status 137)").
     assert re.search(rb"world exit(ed with)? status 137", stderr), stderr
     robots = json.loads((out / "robots.json").read_text())
     for p in robots["processes"]:
-        assert p["code"] == 3 and p["reason"].startswith("world lost"), p
+        assert p["code"] == ExitCode.WORLD_LOST and p["reason"].startswith("world lost"), p
     assert took_s < 10.0
     print(f"orchestrator exited {took_s:.2f} s after the world was SIGKILLed")
 
@@ -268,7 +269,7 @@ def test_robots_stop_and_fail_when_the_world_hangs(tmp_path: Path, launch) -> No
         exit_s = time.monotonic() - t0
     finally:
         run.world.send_signal(signal.SIGCONT)
-    assert codes == [3, 3]
+    assert codes == [ExitCode.WORLD_LOST, ExitCode.WORLD_LOST]
     assert exit_s < 5.0, f"robots took {exit_s:.2f} s to leave (README states < 5 s)"
     print(f"robots exited {exit_s:.2f} s after the world was SIGSTOPped")
 

@@ -346,3 +346,50 @@ def test_validate_catches_bad_generated_scenarios():
                                                   planner="nope"),))
     with pytest.raises(ScenarioError, match=r"robots\[0\]\.planner: unknown planner"):
         validate_scenario(s2, "gen")
+
+
+# --- profiles ----------------------------------------------------------------------------
+
+_PROFILE_DOC = """
+name: profiled
+time_limit: 60
+{profile}
+defaults:
+  {extra}
+robots:
+  - {{id: 0, start: [0, 0, 0], goal: [10, 0]}}
+"""
+
+
+def _load_profile_doc(tmp_path, profile: str, extra: str = "radius: 0.5"):
+    from world.scenario_file import load_scenario
+
+    path = tmp_path / "profiled.yaml"
+    path.write_text(_PROFILE_DOC.format(profile=profile, extra=extra))
+    return load_scenario(path)
+
+
+def test_profile_paper_loads_the_paper_config(tmp_path):
+    from agent.core.config import PlannerConfig, is_paper_config
+
+    paper = _load_profile_doc(tmp_path, "profile: paper").planner_config
+    default = _load_profile_doc(tmp_path, "").planner_config
+    assert is_paper_config(paper)
+    assert not is_paper_config(default) and default == PlannerConfig()
+
+
+def test_defaults_override_the_profile(tmp_path):
+    from agent.core.config import is_paper_config
+
+    config = _load_profile_doc(tmp_path, "profile: paper",
+                               "encounter_rules: true\n  mpc: {horizon_steps: 12}").planner_config
+    assert config.encounter_rules is True and not is_paper_config(config)
+    assert config.mpc.horizon_steps == 12
+    assert config.mpc.q_terminal == 1.0  # the paper's MPC weights stay under the override
+
+
+def test_unknown_profile_names_file_and_field(tmp_path):
+    from world.scenario_file import ScenarioError
+
+    with pytest.raises(ScenarioError, match=r"profiled.yaml: profile: expected one of"):
+        _load_profile_doc(tmp_path, "profile: fancy")

@@ -99,7 +99,12 @@ def test_non_numbers_are_left_to_the_type_checks_of_the_loaders() -> None:
 
 
 def test_paper_config_turns_every_addition_off():
-    from agent.config import PAPER_MPC_OVERRIDES, PAPER_OVERRIDES, is_paper_config, paper_config
+    from agent.core.config import (
+        PAPER_MPC_OVERRIDES,
+        PAPER_OVERRIDES,
+        is_paper_config,
+        paper_config,
+    )
 
     cfg = paper_config()
     assert is_paper_config(cfg)
@@ -115,8 +120,8 @@ def test_paper_config_turns_every_addition_off():
 
 
 def test_paper_file_defaults_load_as_the_paper_config():
-    from agent.config import is_paper_config, paper_file_defaults
-    from world.scenario import scenario_from_dict
+    from agent.core.config import is_paper_config, paper_file_defaults
+    from world.scenario_file import scenario_from_dict
 
     data = {"name": "x", "time_limit": 10.0, "goal_tolerance": 0.25,
             "defaults": paper_file_defaults(),

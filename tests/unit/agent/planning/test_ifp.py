@@ -508,8 +508,8 @@ def test_paper_config_declares_threats_by_eq6_alone():
     the direct leg declared the other a threat while Eq. (6) did not (its TCPA is past
     T_max), and dropped it again a few cycles later as both swerved. In the paper profile a
     cycle without an Eq. (6) threat plans straight to the goal."""
-    from agent.config import paper_config
-    from agent.eifp import plan_eifp
+    from agent.core.config import paper_config
+    from agent.planning.eifp import plan_eifp
 
     obs = _setup_a_at_8s()
     paper = paper_config()
@@ -524,7 +524,7 @@ def test_paper_config_declares_threats_by_eq6_alone():
 
 
 def test_paper_config_still_resolves_an_eq6_threat():
-    from agent.config import paper_config
+    from agent.core.config import paper_config
 
     o = others([(5.0, 0.3)], vel=[(-1.0, 0.0)])
     plan = plan_ifp(observe(o, v=1.1), paper_config())
@@ -533,7 +533,7 @@ def test_paper_config_still_resolves_an_eq6_threat():
 
 
 def test_goal_tcpa_filter_is_off_in_the_paper_config():
-    from agent.config import paper_config
+    from agent.core.config import paper_config
 
     # a threat whose TCPA (about 5.5 s) is past the time to the goal (1.8 s at 1.1 m/s)
     o = others([(6.0, 0.2)], vel=[(0.0, 0.0)])
