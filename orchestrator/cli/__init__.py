@@ -16,7 +16,17 @@ from types import ModuleType
 from typing import Any
 
 from agent.process import ExitCode
-from orchestrator.cli import bench, catalog, compose, report, run, scale, stress, sweep
+from orchestrator.cli import (
+    bench,
+    catalog,
+    compose,
+    paper,
+    report,
+    run,
+    scale,
+    stress,
+    sweep,
+)
 from orchestrator.cli.common import BadInput
 from world.scenario_file import ScenarioError
 
@@ -26,6 +36,7 @@ COMMANDS: dict[str, ModuleType] = {
     "sweep": sweep,
     "stress": stress,
     "report": report,
+    "paper": paper,
     "bench": bench,
     "scale": scale,
     "compose": compose,

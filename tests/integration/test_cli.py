@@ -301,3 +301,15 @@ def test_run_with_the_paper_profile_records_it(tmp_path):
     assert json.loads((out / "run.json").read_text())["profile"] == "paper"
     assert is_paper_config(load_scenario(out / "scenario.yaml").planner_config)
     assert (out / "metrics.json").is_file()
+
+
+def test_paper_command_writes_table_i_beside_ours(tmp_path, capsys):
+    out = tmp_path / "paper"
+    assert main(["paper", "--setups", "setup_a", "--seeds", "1", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "plan ms paper" in printed and "expected shape" in printed
+    for name in ("table.txt", "table.csv", "paper.json", "paper_all.png"):
+        assert (out / name).stat().st_size > 0, name
+    shape = json.loads((out / "paper.json").read_text())["shape"]
+    assert [s["setup"] for s in shape] == ["setup_a"]
+    assert set(shape[0]["oscillations"]) == {"ifp", "eifp", "eifp-mpc"}
