@@ -7,11 +7,26 @@ import sys
 import time
 from typing import Any, TextIO
 
+from rich.console import Console
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    Progress,
+    TaskID,
+    TextColumn,
+    TimeElapsedColumn,
+)
+
 from orchestrator.analysis.report import format_table
 
 
 class ProgressLine:
-    """One live status line on stderr: rewritten in place on a terminal, else every 5 s."""
+    """The live progress of a run on stderr.
+
+    On a terminal: a `rich` progress bar of the robots that arrived, with sim time, contacts,
+    lost robots and wall time, redrawn in place. Elsewhere (a log file, CI): one plain line
+    every 5 s, so logs stay readable.
+    """
 
     def __init__(self, label: str, stream: TextIO | None = None, *, quiet: bool = False) -> None:
         self.label = label
@@ -19,39 +34,50 @@ class ProgressLine:
         self.quiet = quiet
         self.tty = self.stream.isatty()
         self._last_wall = -math.inf
-        self._width = 0
+        self._bar: Progress | None = None
+        self._task: TaskID | None = None
 
     def __call__(self, progress: Any) -> None:
         """Accepts `LockstepProgress` or `DistributedProgress` (same field names)."""
         if self.quiet:
             return
-        now = time.monotonic()
-        if not self.tty and now - self._last_wall < 5.0:
-            return
-        self._last_wall = now
         arrived = getattr(progress, "arrived", ())
         n_arrived = arrived if isinstance(arrived, int) else len(arrived)
+        n_robots = getattr(progress, "n_robots", None)
         sim_t = float(getattr(progress, "sim_t_s", 0.0))
         wall = float(getattr(progress, "wall_s", 0.0))
-        text = (f"[{self.label}] t = {sim_t:7.1f} s   arrived {n_arrived}/"
-                f"{getattr(progress, 'n_robots', '?')}   contacts "
-                f"{getattr(progress, 'contacts', 0)}   wall {wall:6.1f} s")
+        status = f"t = {sim_t:7.1f} s   contacts {getattr(progress, 'contacts', 0)}"
         if not getattr(progress, "started", True):
-            text += "   (waiting for robots)"
+            status += "   (waiting for robots)"
         lost = getattr(progress, "lost", ())
         if lost:
-            text += f"   lost {sorted(lost)}"
+            status += f"   lost {sorted(lost)}"
         if self.tty:
-            self.stream.write("\r" + text.ljust(self._width))
-            self._width = len(text)
-        else:
-            self.stream.write(text + "\n")
+            self._draw(n_arrived, n_robots, status)
+            return
+        now = time.monotonic()
+        if now - self._last_wall < 5.0:
+            return
+        self._last_wall = now
+        self.stream.write(f"[{self.label}] {status}   arrived {n_arrived}/{n_robots or '?'}"
+                          f"   wall {wall:6.1f} s\n")
         self.stream.flush()
 
+    def _draw(self, n_arrived: int, n_robots: int | None, status: str) -> None:
+        if self._bar is None:
+            self._bar = Progress(
+                TextColumn(f"[bold]{self.label}[/bold]"), BarColumn(),
+                MofNCompleteColumn(), TextColumn("arrived   {task.fields[status]}"),
+                TimeElapsedColumn(), console=Console(file=self.stream), transient=False)
+            self._task = self._bar.add_task(self.label, total=n_robots, status=status)
+            self._bar.start()
+        assert self._task is not None
+        self._bar.update(self._task, completed=n_arrived, total=n_robots, status=status)
+
     def done(self) -> None:
-        if self.tty and self._width and not self.quiet:
-            self.stream.write("\n")
-            self.stream.flush()
+        if self._bar is not None:
+            self._bar.stop()
+            self._bar = None
 
 
 def run_summary(metrics: dict[str, Any], label: str) -> str:
