@@ -64,6 +64,8 @@ MAX_RADIUS_M = 1.0e3
 MAX_SPEED = 1.0e3
 """|v| [m/s] and |omega| [rad/s] larger than this are treated as garbage."""
 MAX_HOLD_S = 60.0
+MAX_TIME_S = 1.0e7
+"""Largest sim time on the wire [s] (about 116 days): stamps, ticks' times, time limits."""
 """Longest a command may ask to be held [s]."""
 MAX_REASON_CHARS = 256
 MAX_SEQ = 2**63 - 1
@@ -444,7 +446,7 @@ class PosesMsg:
     def _validate(self, known_ids: Collection[int] | None) -> None:
         set_ = object.__setattr__
         known = _known_set(known_ids)
-        set_(self, "t_s", _float(self.t_s, "poses.t", 0.0))
+        set_(self, "t_s", _float(self.t_s, "poses.t", 0.0, MAX_TIME_S))
         set_(self, "tick", _int(self.tick, "poses.tick", 0, MAX_SEQ))
         try:
             rid = np.asarray(self.robot_ids)
@@ -615,7 +617,7 @@ class CommandMsg:
         set_ = object.__setattr__
         set_(self, "robot_id", _int(self.robot_id, "cmd.robot", 0, MAX_ROBOT_ID))
         set_(self, "seq", _int(self.seq, "cmd.seq", 0, MAX_SEQ))
-        set_(self, "pose_stamp_s", _float(self.pose_stamp_s, "cmd.pose_stamp", 0.0))
+        set_(self, "pose_stamp_s", _float(self.pose_stamp_s, "cmd.pose_stamp", 0.0, MAX_TIME_S))
         set_(self, "v_mps", _float(self.v_mps, "cmd.v", -MAX_SPEED, MAX_SPEED))
         set_(self, "omega_radps", _float(self.omega_radps, "cmd.omega", -MAX_SPEED, MAX_SPEED))
         set_(self, "plan_ms", _float(self.plan_ms, "cmd.plan_ms", 0.0))
@@ -703,7 +705,7 @@ class ControlMsg:
     def __post_init__(self) -> None:
         if self.kind not in ("start", "end"):
             raise ProtocolError(f"control.kind: {self.kind!r} is not 'start' or 'end'")
-        object.__setattr__(self, "t_s", _float(self.t_s, "control.t", 0.0))
+        object.__setattr__(self, "t_s", _float(self.t_s, "control.t", 0.0, MAX_TIME_S))
         object.__setattr__(self, "reason", _str(self.reason, "control.reason"))
 
     def encode(self) -> bytes:

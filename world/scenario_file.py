@@ -83,6 +83,14 @@ from agent.core.config import (
     profile_config,
 )
 from agent.core.scenario import ObstacleSpec, RobotSpec, Scenario
+from protocol import (
+    MAX_COORD_M,
+    MAX_OBSTACLES,
+    MAX_RADIUS_M,
+    MAX_ROBOTS,
+    MAX_SPEED,
+    MAX_TIME_S,
+)
 
 
 class ScenarioError(ValueError):
@@ -388,10 +396,17 @@ def validate_scenario(scenario: Scenario, source: str = "<scenario>") -> Scenari
     """
     ctx = _Ctx(source)
     _number(ctx, "time_limit", scenario.time_limit_s, lower="positive")
+    _at_most(ctx, "time_limit", scenario.time_limit_s, MAX_TIME_S, "s")
     _number(ctx, "goal_tolerance", scenario.goal_tolerance_m, lower="positive")
     _check_config(ctx, "defaults", scenario.planner_config)
     if not scenario.robots:
         raise ctx.error("robots", "expected at least one robot, got an empty list")
+    # The wire's bounds (`protocol`): what passes here can be sent, so no run fails later.
+    if len(scenario.robots) > MAX_ROBOTS:
+        raise ctx.error("robots", f"at most {MAX_ROBOTS} robots, got {len(scenario.robots)}")
+    if len(scenario.obstacles) > MAX_OBSTACLES:
+        raise ctx.error("obstacles",
+                        f"at most {MAX_OBSTACLES} obstacles, got {len(scenario.obstacles)}")
     seen: dict[int, int] = {}
     for k, r in enumerate(scenario.robots):
         path = _join("robots", k)
@@ -404,6 +419,11 @@ def validate_scenario(scenario: Scenario, source: str = "<scenario>") -> Scenari
         _vector(ctx, _join(path, "goal"), r.goal, ("x", "y"))
         _number(ctx, _join(path, "radius"), r.radius_m, lower="positive")
         _check_config(ctx, path, r.limits)
+        for key, values in (("start", r.start[:2]), ("goal", r.goal)):
+            for v in values:
+                _at_most(ctx, _join(path, key), abs(v), MAX_COORD_M, "m (|x|, |y|)")
+        _at_most(ctx, _join(path, "radius"), r.radius_m, MAX_RADIUS_M, "m")
+        _at_most(ctx, _join(path, "v_max"), r.limits.v_max_mps, MAX_SPEED, "m/s")
         _planner_name(ctx, _join(path, "planner"), r.planner)
     for k, o in enumerate(scenario.obstacles):
         path = _join("obstacles", k)
@@ -412,6 +432,13 @@ def validate_scenario(scenario: Scenario, source: str = "<scenario>") -> Scenari
         _vector(ctx, _join(path, "center"), o.center, ("x", "y"))
         _number(ctx, _join(path, "radius"), o.radius_m, lower="positive")
         _vector(ctx, _join(path, "velocity"), o.velocity, ("vx", "vy"))
+        _at_most(ctx, _join(path, "radius"), o.radius_m, MAX_RADIUS_M, "m")
+        for v in o.velocity:
+            _at_most(ctx, _join(path, "velocity"), abs(v), MAX_SPEED, "m/s")
+        # A moving obstacle must stay on the wire's map for the whole run.
+        for c, v in zip(o.center, o.velocity):
+            _at_most(ctx, _join(path, "center"), abs(c) + abs(v) * scenario.time_limit_s,
+                     MAX_COORD_M, "m (|x|, |y| over the time limit)")
 
     start = np.array([r.start[:2] for r in scenario.robots], dtype=float)
     goal = np.array([r.goal for r in scenario.robots], dtype=float)
@@ -434,6 +461,12 @@ def validate_scenario(scenario: Scenario, source: str = "<scenario>") -> Scenari
         _raise_first_overlap(ctx, _gaps(goal, radius, ob_c, ob_r), everywhere, "goal",
                              lambda i: f"goal disc overlaps obstacles[{i}] at t=0")
     return scenario
+
+
+def _at_most(ctx: _Ctx, path: str, value: float, bound: float, unit: str) -> None:
+    """Refuse `value` above the wire's `bound` (`protocol`), naming the field."""
+    if value > bound:
+        raise ctx.error(path, f"must be at most {bound:g} {unit}, got {value!r}")
 
 
 def _gaps(a: np.ndarray, ra: np.ndarray, b: np.ndarray, rb: np.ndarray) -> np.ndarray:

@@ -98,6 +98,12 @@ def run_summary(metrics: dict[str, Any], label: str) -> str:
     ]
     rows = [[label_, metrics.get(k)] for k, label_ in keys]
     rows[1][1] = f"{metrics.get('arrived')}/{metrics.get('robots')}"
+    end = metrics.get("end") or {}
+    rows += [["end reason", end.get("reason")],
+             ["robots lost", ", ".join(map(str, end.get("lost") or [])) or "none"],
+             ["rejected messages", end.get("rejected")], ["stale messages", end.get("stale")]]
+    if metrics.get("partial"):
+        rows.append(["partial", "yes: interrupted, figures cover what was recorded"])
     top = format_table([label, ""], rows)
     per = [[r.get("id"), r.get("arrived"), r.get("time_to_goal_s"), r.get("time_ratio"),
             r.get("path_length_m"), r.get("path_ratio"), r.get("oscillations"),

@@ -230,9 +230,20 @@ def write_json(path: Path, content: Any) -> Path:
     return path
 
 
-def write_metrics(run_dir: Path, metrics: RunMetrics) -> Path:
-    """`metrics.json` of a run directory."""
-    return write_json(Path(run_dir) / "metrics.json", metrics.to_json_dict())
+END_FIELDS = ("reason", "lost", "rejected", "stale", "stale_poses", "cmd_timeouts",
+              "cmd_hold_expiries", "overruns", "rejected_by_reason")
+"""What `metrics.json` keeps of the run's ``end`` event (under ``end``)."""
+
+
+def write_metrics(run_dir: Path, metrics: RunMetrics, *, partial: bool = False) -> Path:
+    """`metrics.json` of a run directory: the metrics, how the run ended (``end``: reason,
+    lost robots, rejected and stale message counts) and ``partial`` (true when the run was
+    interrupted before its end: the figures cover only what was recorded)."""
+    end = end_event(run_dir)
+    content = metrics.to_json_dict()
+    content["end"] = {k: end[k] for k in END_FIELDS if k in end}
+    content["partial"] = bool(partial or not end)
+    return write_json(Path(run_dir) / "metrics.json", content)
 
 
 def find_run_dirs(paths: Iterable[Path]) -> list[Path]:

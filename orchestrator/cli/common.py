@@ -73,3 +73,15 @@ def fault_plan(args: argparse.Namespace, scenario: Scenario, *, links: bool = Tr
     return plan if plan.active else None
 
 
+
+
+def make_dir(path: Path, flag: str = "--out") -> Path:
+    """Create `path` (and its parents) for output; a one-line `BadInput` if it cannot be."""
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        probe = path / ".write-test"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as exc:
+        raise BadInput(f"{flag}: cannot write to {path}: {exc.strerror or exc}") from None
+    return path

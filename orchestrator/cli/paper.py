@@ -22,7 +22,7 @@ from orchestrator.analysis.report import (
     paper_table,
 )
 from orchestrator.analysis.rundir import write_json
-from orchestrator.cli.common import BadInput, split_list
+from orchestrator.cli.common import BadInput, make_dir, split_list
 from orchestrator.experiments import stress
 from orchestrator.experiments.paper import (
     DEFAULT_SEEDS,
@@ -66,10 +66,7 @@ def run(args: argparse.Namespace) -> int:
     if not (math.isfinite(args.start_jitter_m) and args.start_jitter_m >= 0):
         raise BadInput(f"--start-jitter-m: must be >= 0, got {args.start_jitter_m}")
     out = Path(args.out)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise BadInput(f"--out: cannot create {out}: {exc.strerror}") from None
+    make_dir(out)
     jobs = paper_jobs(out / "runs", setups=setups, seeds=seeds,
                       start_jitter_m=args.start_jitter_m)
     print(f"paper: {len(jobs)} lockstep runs (paper profile), {args.jobs} at a time, "

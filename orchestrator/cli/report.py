@@ -10,6 +10,7 @@ from pathlib import Path
 from agent.process import ExitCode
 from orchestrator.cli.common import (
     BadInput,
+    make_dir,
 )
 
 
@@ -47,6 +48,13 @@ def run(args: argparse.Namespace) -> int:
     if not records:
         raise BadInput(f"report: no run directories with metrics.json under "
                        f"{', '.join(map(str, paths))}")
+    partial = [r for r in records if r.metrics.get("partial")]
+    records = [r for r in records if not r.metrics.get("partial")]
+    if partial:
+        print(f"{len(partial)} partial runs (interrupted before their end; left out of the "
+              f"means): {', '.join(str(r.path) for r in partial)}")
+    if not records:
+        raise BadInput("report: every run found is partial (interrupted)")
     stats = aggregate(records, ALL_METRICS)
     print(f"{len(records)} runs")
     print(summary_table(stats))
@@ -59,11 +67,12 @@ def run(args: argparse.Namespace) -> int:
         print(paper_table(stats))
     out = Path(args.out) if args.out else (paths[0] if len(paths) == 1 and paths[0].is_dir()
                                            else Path("report"))
-    out.mkdir(parents=True, exist_ok=True)
+    make_dir(out)
     bar_stats = {k: {m: (v[0], v[1]) for m, v in s.items()} for k, s in stats.items()}
     written = plot_report_bars(bar_stats, PAPER_METRICS, out)
     write_json(out / "report.json", {
         "runs": [str(r.path) for r in records],
+        "partial_runs": [str(r.path) for r in partial],
         "groups": [{"setup": k[0], "planner": k[1],
                     **{m: {"mean": _finite(v[0]), "std": _finite(v[1]), "n": v[2]}
                        for m, v in s.items()},

@@ -23,6 +23,7 @@ from orchestrator.cli.common import (
     BadInput,
     add_fault_args,
     fault_plan,
+    make_dir,
     planner_label,
 )
 from world.scenario_file import dump_scenario
@@ -61,7 +62,7 @@ def default_out_dir(scenario: Scenario, planner: str, seed: int) -> Path:
 
 
 def run(args: argparse.Namespace) -> int:
-    from orchestrator.analysis.rundir import write_json
+    from orchestrator.analysis.rundir import read_json, write_json
     from orchestrator.experiments.families import resolve
 
     if args.time_scale is not None and not (math.isfinite(args.time_scale)
@@ -75,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
     out_dir = Path(args.out) if args.out else default_out_dir(scenario, planner, args.seed)
     if (out_dir / "trajectory.csv").exists() or (out_dir / "metrics.json").exists():
         raise BadInput(f"--out: {out_dir} already holds a run; choose another directory")
-    out_dir.mkdir(parents=True, exist_ok=True)
+    make_dir(out_dir)
     label = f"{scenario.name} {planner} {args.mode}"
     write_json(out_dir / "run.json", {
         "setup": args.setup, "scenario": scenario.name, "planner": planner,
@@ -88,38 +89,64 @@ def run(args: argparse.Namespace) -> int:
     })
     progress = ProgressLine(label, quiet=args.quiet)
     wall0 = time.monotonic()
+    interrupted = False
+    world_status: int | None = None
     try:
         if args.mode == "lockstep":
             from orchestrator.experiments.lockstep import run_lockstep
 
-            outcome = run_lockstep(scenario, out_dir, on_progress=progress, faults=faults)
-            metrics = outcome.metrics
-            world_status = None
+            metrics = run_lockstep(scenario, out_dir, on_progress=progress,
+                                   faults=faults).metrics
         else:
             metrics, world_status = _run_distributed(scenario, out_dir, args, progress, faults)
+    except KeyboardInterrupt:
+        interrupted = True
+        metrics = _partial_metrics(out_dir)
     finally:
         progress.done()
     wall_s = time.monotonic() - wall0
+    end = end_event(out_dir)
+    crashed = metrics is None or (world_status is not None and world_status not in RUN_ENDINGS)
+    content = metrics.to_json_dict() if metrics is not None else {}
+    code = (ExitCode.INTERRUPTED if interrupted else ExitCode.WORLD_LOST if crashed
+            else ExitCode.of_run(contacts=int(content.get("contacts") or 0),
+                                 all_arrived=content.get("arrived") == content.get("robots"),
+                                 robots_lost=bool(end.get("lost")),
+                                 interrupted=end.get("reason") == "signal"))
+    status = ("interrupted" if interrupted or end.get("reason") == "signal"
+              else "crashed" if crashed
+              else "timed-out" if end.get("reason") == "time_limit" else "complete")
+    write_json(out_dir / "run.json", {
+        **read_json(out_dir / "run.json"), "status": status, "exit_code": int(code),
+        "end_reason": end.get("reason"), "lost": end.get("lost", []),
+        "world_exit_status": world_status, "wall_s": round(wall_s, 2),
+        "finished": dt.datetime.now().isoformat(timespec="seconds")})
     if metrics is None:
-        print(f"error: the distributed run left no trajectory (world exit status "
-              f"{world_status}); see {out_dir}/world.log", file=sys.stderr)
+        print(f"error: the run left no trajectory (world exit status {world_status}); "
+              f"see {out_dir}/world.log", file=sys.stderr)
         print(out_dir)
-        return ExitCode.WORLD_LOST
-    content = metrics.to_json_dict()
+        return code
     write_run_plots(out_dir, gif=args.gif)
     if not args.quiet:
-        print(run_summary(content, label))
-        print(f"\nwall time {wall_s:.1f} s")
+        print(run_summary(read_json(out_dir / "metrics.json") or content, label))
+        print(f"\nstatus {status}, wall time {wall_s:.1f} s")
     print(out_dir)
-    if world_status is not None and world_status not in RUN_ENDINGS:
+    if crashed:
         print(f"error: the world exited with status {world_status}; see {out_dir}/world.log",
               file=sys.stderr)
-        return ExitCode.WORLD_LOST
-    end = end_event(out_dir)
-    return ExitCode.of_run(contacts=int(content.get("contacts") or 0),
-                           all_arrived=content.get("arrived") == content.get("robots"),
-                           robots_lost=bool(end.get("lost")),
-                           interrupted=end.get("reason") == "signal")
+    return code
+
+
+def _partial_metrics(out_dir: Path) -> Any:
+    """The metrics of what an interrupted run recorded (written, marked partial), or None."""
+    from orchestrator.analysis.rundir import RunDirError, metrics_from_run_dir, write_metrics
+
+    try:
+        metrics = metrics_from_run_dir(out_dir)
+    except (RunDirError, OSError, ValueError):
+        return None
+    write_metrics(out_dir, metrics, partial=True)
+    return metrics
 
 
 def _run_distributed(scenario: Scenario, out_dir: Path, args: argparse.Namespace,

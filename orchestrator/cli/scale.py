@@ -10,6 +10,7 @@ from pathlib import Path
 
 from agent.core.config import PLANNER_NAMES
 from agent.flags import positive, robot_counts
+from orchestrator.cli.common import make_dir
 from orchestrator.experiments.scale import (
     DEFAULT_FAMILY,
     FAMILIES,
@@ -73,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
     """Entry point of `orchestrator scale`; returns 0 (figures), 2 for bad arguments."""
     argv = ["orchestrator", *args.argv]
     out_root = Path(args.out)
-    out_root.mkdir(parents=True, exist_ok=True)
+    make_dir(out_root)
     if args.world_bench:
         from orchestrator.analysis.rundir import write_json
 

@@ -17,6 +17,7 @@ from orchestrator.cli.common import (
     BadInput,
     add_fault_args,
     fault_plan,
+    make_dir,
     split_list,
 )
 
@@ -68,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
                            profile=args.profile)
     robot_faults = fault_plan(args, scenario, links=False)
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    make_dir(out)
     keys = list(sweep)
     jobs = []
     for level, planner, seed in itertools.product(stress.levels(sweep), planners,

@@ -17,6 +17,7 @@ from orchestrator.analysis.rundir import safe_name
 from orchestrator.cli.common import (
     MODES,
     BadInput,
+    make_dir,
     split_list,
 )
 
@@ -58,7 +59,7 @@ def run(args: argparse.Namespace) -> int:
         resolve(setup, agents=args.agents, seed=0, start_jitter_m=args.start_jitter_m,
                 planner=planner, profile=args.profile)
     out = Path(args.out)
-    (out / "logs").mkdir(parents=True, exist_ok=True)
+    make_dir(out / "logs")
     jobs = []
     for setup, planner, seed in itertools.product(setups, planners, range(args.seeds)):
         name = f"{safe_name(setup)}-{planner}-{seed}"

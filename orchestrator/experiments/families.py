@@ -21,6 +21,7 @@ import numpy as np
 
 from agent.core.config import PLANNER_NAMES, PlannerConfig, RobotLimits, profile_config
 from agent.core.scenario import RobotSpec, Scenario
+from protocol import MAX_ROBOTS
 from world.scenario_file import ScenarioError, load_scenario, validate_scenario
 
 SETUPS_DIR = Path(__file__).resolve().parent.parent / "setups"
@@ -445,8 +446,8 @@ def resolve(name_or_path: str, agents: int | None = None, seed: int = 0,
     key = name_or_path.strip()
     if len(key) == 1 and f"setup_{key.lower()}" in SETUPS:
         key = f"setup_{key.lower()}"
-    if agents is not None and agents < 1:
-        raise ScenarioError(f"--agents: must be >= 1, got {agents}")
+    if agents is not None and not 1 <= agents <= MAX_ROBOTS:
+        raise ScenarioError(f"--agents: must be in [1, {MAX_ROBOTS}], got {agents}")
     if key in SETUPS:
         scenario = load_scenario(setup_path(key))
         if agents is not None and agents != len(scenario.robots):

@@ -313,3 +313,56 @@ def test_paper_command_writes_table_i_beside_ours(tmp_path, capsys):
     shape = json.loads((out / "paper.json").read_text())["shape"]
     assert [s["setup"] for s in shape] == ["setup_a"]
     assert set(shape[0]["oscillations"]) == {"ifp", "eifp", "eifp-mpc"}
+
+
+# --- how a run ends -------------------------------------------------------------------------
+
+
+def test_a_complete_run_records_its_status_and_end(tmp_path):
+    out = tmp_path / "a"
+    assert main(["run", "setup_a", "--mode", "lockstep", "--quiet", "--out", str(out)]) == 0
+    info = json.loads((out / "run.json").read_text())
+    assert info["status"] == "complete" and info["exit_code"] == 0 and info["lost"] == []
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["partial"] is False
+    assert metrics["end"]["reason"] == "all_arrived" and metrics["end"]["lost"] == []
+
+
+def test_an_interrupted_run_leaves_partial_metrics_and_report_says_so(tmp_path, monkeypatch,
+                                                                      capsys):
+    from orchestrator.experiments import lockstep
+
+    real = lockstep.run_lockstep
+
+    def interrupted(scenario, out_dir, *, on_progress=None, **kw):
+        def progress(p):
+            if p.sim_t_s >= 3.0:
+                raise KeyboardInterrupt
+        return real(scenario, out_dir, on_progress=progress, **kw)
+
+    monkeypatch.setattr(lockstep, "run_lockstep", interrupted)
+    out = tmp_path / "runs" / "cut"
+    assert main(["run", "setup_a", "--mode", "lockstep", "--quiet", "--out", str(out)]) \
+        == ExitCode.INTERRUPTED
+    assert json.loads((out / "run.json").read_text())["status"] == "interrupted"
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["partial"] is True and metrics["arrived"] == 0
+    monkeypatch.setattr(lockstep, "run_lockstep", real)
+    assert main(["run", "setup_a", "--mode", "lockstep", "--quiet",
+                 "--out", str(tmp_path / "runs" / "whole")]) == 0
+    capsys.readouterr()
+    assert main(["report", str(tmp_path / "runs"), "--out", str(tmp_path / "rep")]) == 0
+    printed = capsys.readouterr().out
+    assert "1 partial runs" in printed and "cut" in printed and "1 runs" in printed
+
+
+def test_unwritable_out_and_too_many_agents_are_one_line_errors(tmp_path, capsys):
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    assert main(["run", "setup_a", "--mode", "lockstep", "--out", str(blocker / "x")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("error: --out: cannot write to") and "\n" not in err
+    assert main(["run", "circle", "--agents", "100000", "--mode", "lockstep",
+                 "--out", str(tmp_path / "big")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "--agents: must be in [1, 4096]" in err and "\n" not in err

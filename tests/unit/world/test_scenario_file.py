@@ -393,3 +393,40 @@ def test_unknown_profile_names_file_and_field(tmp_path):
 
     with pytest.raises(ScenarioError, match=r"profiled.yaml: profile: expected one of"):
         _load_profile_doc(tmp_path, "profile: fancy")
+
+
+# --- the wire's bounds --------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("snippet, message", [
+    ("time_limit: 1.0e12", r"time_limit: must be at most 1e\+07 s"),
+    ("goal: [2.0e6, 0]", r"robots\[0\].goal: must be at most 1e\+06 m"),
+    ("start: [-1.5e6, 0, 0]", r"robots\[0\].start: must be at most 1e\+06 m"),
+    ("v_max: 5000", r"robots\[0\].v_max: must be at most 1000 m/s"),
+])
+def test_values_beyond_the_wire_bounds_are_refused(tmp_path, snippet, message):
+    from world.scenario_file import ScenarioError, load_scenario
+
+    robot = {"start": "start: [0, 0, 0]", "goal": "goal: [10, 0]", "v_max": ""}
+    top = "time_limit: 60"
+    key = snippet.split(":")[0]
+    if key == "time_limit":
+        top = snippet
+    else:
+        robot[key] = snippet
+    body = ", ".join(v for v in robot.values() if v)
+    path = tmp_path / "bounds.yaml"
+    path.write_text(f"name: bounds\n{top}\nrobots:\n  - {{id: 0, {body}}}\n")
+    with pytest.raises(ScenarioError, match=rf"bounds.yaml: {message}"):
+        load_scenario(path)
+
+
+def test_a_moving_obstacle_must_stay_on_the_map_for_the_whole_run(tmp_path):
+    from world.scenario_file import ScenarioError, load_scenario
+
+    path = tmp_path / "drift.yaml"
+    path.write_text("name: drift\ntime_limit: 1.0e6\nrobots:\n  - {id: 0, start: [0, 0, 0], "
+                    "goal: [10, 0]}\nobstacles:\n  - {center: [0, 50], radius: 1, "
+                    "velocity: [2, 0]}\n")
+    with pytest.raises(ScenarioError, match=r"drift.yaml: obstacles\[0\].center: must be at most"):
+        load_scenario(path)
