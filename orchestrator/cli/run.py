@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import datetime as dt
 import math
-import secrets
 import sys
 import time
 from pathlib import Path
@@ -25,7 +24,6 @@ from orchestrator.cli.common import (
     fault_plan,
     planner_label,
 )
-from world.scenario_file import dump_scenario
 
 RUN_ENDINGS = frozenset({ExitCode.OK, ExitCode.CONTACT, ExitCode.INCOMPLETE, ExitCode.ROBOT_LOST,
                          ExitCode.INTERRUPTED})
@@ -120,20 +118,8 @@ def run(args: argparse.Namespace) -> int:
 def _run_distributed(scenario: Scenario, out_dir: Path, args: argparse.Namespace,
                      progress: ProgressLine, faults: Any = None) -> tuple[Any, int]:
     """Run the real processes; (metrics or None, the world's exit status)."""
-    from orchestrator.analysis.rundir import RunDirError, metrics_from_run_dir, write_metrics
-    from orchestrator.experiments.distributed import run_distributed
+    from orchestrator.experiments.distributed import run_scenario_distributed
 
-    scenario_path = out_dir / "scenario.input.yaml"
-    dump_scenario(scenario, scenario_path)
-    run_id = f"{safe_name(scenario.name)[:24]}-{args.seed}-{secrets.token_hex(4)}"
-    status = run_distributed(scenario_path, out_dir, run_id, rate_hz=50.0,
-                             time_scale=args.time_scale or 1.0, on_progress=progress,
-                             faults=faults)
-    if not (out_dir / "trajectory.csv").exists():
-        return None, status
-    try:
-        metrics = metrics_from_run_dir(out_dir)
-    except RunDirError:
-        return None, status
-    write_metrics(out_dir, metrics)
-    return metrics, status
+    return run_scenario_distributed(scenario, out_dir, args.seed,
+                                    time_scale=args.time_scale or 1.0,
+                                    on_progress=progress, faults=faults)
