@@ -16,7 +16,17 @@ from types import ModuleType
 from typing import Any
 
 from agent.process import ExitCode
-from orchestrator.cli import bench, catalog, compose, report, run, scale, stress, sweep
+from orchestrator.cli import (
+    bench,
+    benchmark,
+    catalog,
+    compose,
+    report,
+    run,
+    scale,
+    stress,
+    sweep,
+)
 from orchestrator.cli.common import BadInput
 from world.scenario_file import ScenarioError
 
@@ -27,6 +37,7 @@ COMMANDS: dict[str, ModuleType] = {
     "stress": stress,
     "report": report,
     "bench": bench,
+    "benchmark": benchmark,
     "scale": scale,
     "compose": compose,
 }
