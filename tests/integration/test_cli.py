@@ -288,3 +288,42 @@ def test_stress_without_a_sweep_runs_the_base_faults_as_given(tmp_path):
 def test_stress_rejects_bad_options(tmp_path, capsys, argv, message):
     assert main(["stress", "setup_a", "--out", str(tmp_path / "s"), *argv]) == 2
     assert message in capsys.readouterr().err
+
+
+def test_benchmark_quick_one_case_writes_the_table_files(tmp_path, capsys):
+    out = tmp_path / "bq"
+    rc = main(["benchmark", "--quick", "--families", "swap_pairs", "--max-cases", "1",
+               "--jobs", "1", "--out", str(out)])
+    assert rc == 0
+    printed = capsys.readouterr().out
+    for name in ("benchmark.csv", "benchmark.json", "benchmark.md", "benchmark.png"):
+        assert (out / name).stat().st_size > 0
+    rows = list(csv.DictReader((out / "benchmark.csv").read_text().splitlines()))
+    assert [(r["case"], r["planner"]) for r in rows] == [("swap_pairs_4", "eifp-mpc"),
+                                                        ("swap_pairs_4", "orca")]
+    assert all(r["runs"] == "1" for r in rows)
+    saved = json.loads((out / "benchmark.json").read_text())
+    assert saved["suite"]["seeds"] == [0] and saved["suite"]["cases"] == ["swap_pairs_4"]
+    assert [r["seed"] for r in saved["runs"]] == [0, 0]
+    for run in saved["runs"]:  # ordinary run directories, with metrics
+        metrics = json.loads((Path(run["dir"]) / "metrics.json").read_text())
+        assert metrics["robots"] == 4 and run["robot_oscillations"] == \
+            [r["oscillations"] for r in metrics["per_robot"]]
+    md = (out / "benchmark.md").read_text().splitlines()
+    assert sum(line.startswith("| swap_pairs_4 |") for line in md) == 2
+    assert sum(line.startswith("swap_pairs_4") for line in printed.splitlines()) == 2
+    # The same directory again: refused, nothing overwritten.
+    assert main(["benchmark", "--quick", "--families", "swap_pairs", "--max-cases", "1",
+                 "--out", str(out)]) == ExitCode.BAD_INPUT
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    (["--planners", "rrt"], "--planners"),
+    (["--families", "nope"], "--families"),
+    (["--seeds", "lots"], "--seeds"),
+    (["--jobs", "0"], "--jobs"),
+])
+def test_benchmark_rejects_bad_options(tmp_path, capsys, argv, message):
+    assert main(["benchmark", "--quick", "--out", str(tmp_path / "b"), *argv]) == \
+        ExitCode.BAD_INPUT
+    assert message in capsys.readouterr().err
