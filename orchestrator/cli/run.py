@@ -32,8 +32,9 @@ RUN_ENDINGS = frozenset({ExitCode.OK, ExitCode.CONTACT, ExitCode.INCOMPLETE, Exi
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("run", help="run one scenario")
-    p.add_argument("setup", help="setup_a..setup_g (or a..g), circle, crossing, crossing4, "
-                                 "random, or a scenario .yaml file")
+    p.add_argument("setup", help="setup_a..setup_g (or a..g), a family (circle, crossing, "
+                                 "crossing4, random, ...: orchestrator list), or a scenario "
+                                 ".yaml file")
     p.add_argument("--agents", type=int, help="robot count (setup_f, setup_g, families)")
     p.add_argument("--planner", choices=PLANNER_NAMES,
                    help="every robot uses this planner (default: the scenario's)")

@@ -670,8 +670,9 @@ def resolve(name_or_path: str, agents: int | None = None, seed: int = 0,
     """The scenario the CLI runs.
 
     Args:
-        name_or_path: `setup_a` ... `setup_g` (also `a` ... `g`), a family (`circle`,
-            `crossing`, `crossing4`, `random`) or a scenario file path.
+        name_or_path: `setup_a` ... `setup_g` (also `a` ... `g`), a family (`FAMILIES`:
+            `circle`, `crossing`, `crossing4`, `random`, the benchmark families) or a
+            scenario file path.
         agents: robot count; setups F and G scale (groups of agents/3, cohorts of
             agents/4), families take any valid count, other setups and files only
             their own size.

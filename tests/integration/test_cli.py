@@ -327,3 +327,32 @@ def test_benchmark_rejects_bad_options(tmp_path, capsys, argv, message):
     assert main(["benchmark", "--quick", "--out", str(tmp_path / "b"), *argv]) == \
         ExitCode.BAD_INPUT
     assert message in capsys.readouterr().err
+
+
+def test_benchmark_distributed_mode_takes_the_path_of_orchestrator_run(tmp_path, monkeypatch,
+                                                                       capsys):
+    from orchestrator.experiments import distributed
+    from orchestrator.experiments.lockstep import run_lockstep
+    from world.scenario_file import load_scenario
+
+    calls = []
+
+    def fake(scenario_path, out_dir, run_id, *, rate_hz, time_scale, on_progress, faults):
+        calls.append((Path(scenario_path), run_id, time_scale))
+        run_lockstep(load_scenario(scenario_path), out_dir)
+        (Path(out_dir) / "metrics.json").unlink()  # the world does not write metrics
+        return 0
+
+    monkeypatch.setattr(distributed, "run_distributed", fake)
+    out = tmp_path / "bd"
+    rc = main(["benchmark", "--quick", "--families", "setup_a", "--planners", "orca",
+               "--mode", "distributed", "--time-scale", "3", "--out", str(out)])
+    assert rc == 0
+    ((path, run_id, scale),) = calls
+    assert path.name == "scenario.input.yaml" and run_id.startswith("setup_a-0-")
+    assert scale == 3.0
+    saved = json.loads((out / "benchmark.json").read_text())
+    assert saved["suite"]["mode"] == "distributed"
+    (run,) = saved["runs"]
+    assert run["mode"] == "distributed" and run["world_status"] == 0 and run["robots"] == 2
+    assert json.loads((Path(run["dir"]) / "run.json").read_text())["mode"] == "distributed"
