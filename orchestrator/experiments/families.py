@@ -7,7 +7,8 @@ setup files in `orchestrator/setups/`).
 Scale (the paper's grid units read as metres): robot radius 0.5 m, v_max 1.1 m/s,
 d_safety 0.3 m; straight start-goal distance 36 m for setups A-E, 76 m for F and G;
 lanes of one cohort 3 m apart (starts >= 2.5 m apart); time limit 4x the ideal time
-(longest straight line / v_max), rounded up to 10 s.
+(longest straight line / v_max), rounded up to 10 s; the benchmark families (circle_mixed,
+crossing_<angle>, swap_pairs, swap_grid, random_<density>, obstacles_circle) 3x + 30 s.
 """
 
 from __future__ import annotations
