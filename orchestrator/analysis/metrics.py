@@ -49,7 +49,8 @@ end of the trajectory if it never arrives):
   such consecutive pairs ("cycles").
 
 Aggregate means (`path_ratio_mean`, `time_ratio_mean`, ...) are over the robots that
-arrived; `oscillations_per_robot` and `side_flips_per_robot` over all robots. Values that
+arrived; `oscillations_per_robot` and `side_flips_per_robot` over all robots;
+`oscillations_max` is the largest count of one robot (0 without robots). Values that
 do not exist (no robot arrived, no commands) are None in JSON.
 """
 
@@ -256,6 +257,7 @@ class RunMetrics:
     makespan_s: float | None
     oscillations_per_robot: float
     oscillations_total: int
+    oscillations_max: int
     reversal_causes_per_robot: dict[str, float]
     side_flips_per_robot: float | None
     plan_ms_mean: float | None
@@ -621,6 +623,7 @@ def compute_metrics(traj: Trajectory, commands: Commands, spec: RunSpec, *,
                     if arrived and len(arrived) == n else None),
         oscillations_per_robot=float(np.mean([r.oscillations for r in per_robot])) if n else 0.0,
         oscillations_total=sum(r.oscillations for r in per_robot),
+        oscillations_max=max((r.oscillations for r in per_robot), default=0),
         reversal_causes_per_robot={
             c: (float(np.mean([r.reversal_causes[c] for r in per_robot])) if n else 0.0)
             for c in REVERSAL_CAUSES

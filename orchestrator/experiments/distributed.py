@@ -42,7 +42,9 @@ from pathlib import Path
 from types import FrameType
 from typing import IO
 
+from agent.core.scenario import Scenario
 from agent.process import PARENT_PID_ENV
+from orchestrator.analysis.metrics import RunMetrics
 from protocol import validate_run_id
 from world.scenario_file import load_scenario
 from world.sim.faults import FaultPlan, ProcessFault
@@ -464,6 +466,48 @@ def run_distributed(
             if in_main:
                 signal.signal(signal.SIGINT, previous_int or signal.SIG_DFL)
                 signal.signal(signal.SIGTERM, previous_term or signal.SIG_DFL)
+
+
+def run_scenario_distributed(scenario: Scenario, out_dir: Path, seed: int, *,
+                             time_scale: float = 1.0,
+                             on_progress: Callable[[DistributedProgress], None] | None = None,
+                             faults: FaultPlan | None = None
+                             ) -> tuple[RunMetrics | None, int]:
+    """One resolved scenario as real processes, with its metrics: `orchestrator run`'s path.
+
+    Writes `scenario.input.yaml` into out_dir, runs `run_distributed` (50 Hz world, a run
+    id from the scenario name, the seed and a random token) and, when the world left a
+    trajectory, computes and writes `metrics.json`.
+
+    Returns:
+        (the metrics, or None when the run left no readable trajectory; the world's exit
+        status).
+    """
+    import secrets
+
+    from orchestrator.analysis.rundir import (
+        RunDirError,
+        metrics_from_run_dir,
+        safe_name,
+        write_metrics,
+    )
+    from world.scenario_file import dump_scenario
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    scenario_path = out_dir / "scenario.input.yaml"
+    dump_scenario(scenario, scenario_path)
+    run_id = f"{safe_name(scenario.name)[:24]}-{seed}-{secrets.token_hex(4)}"
+    status = run_distributed(scenario_path, out_dir, run_id, rate_hz=50.0,
+                             time_scale=time_scale, on_progress=on_progress, faults=faults)
+    if not (out_dir / "trajectory.csv").exists():
+        return None, status
+    try:
+        metrics = metrics_from_run_dir(out_dir)
+    except RunDirError:
+        return None, status
+    write_metrics(out_dir, metrics)
+    return metrics, status
 
 
 def _progress(events: list[dict], out_dir: Path, t0: float, n_robots: int,

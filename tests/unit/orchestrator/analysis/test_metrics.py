@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -220,6 +221,23 @@ def test_straight_path_has_ratio_one_and_known_time():
     assert r.oscillations == 0 and m.contacts == 0 and m.min_gap_m is None
 
 
+def test_mixed_speeds_ideal_time_and_time_ratio_use_each_robots_own_v_max():
+    # Two robots 10 m from their goals at v_max 0.5 and 2.0 m/s; both move at 1 m/s.
+    t = np.arange(0, 121) * DT
+    xy = np.stack([np.stack([t, np.zeros_like(t)], axis=1),
+                   np.stack([t, np.full_like(t, 5.0)], axis=1)], axis=1)
+    sp = spec([(0, 0), (0, 5)], [(10, 0), (10, 5)])
+    sp = dataclasses.replace(sp, v_max_mps=np.array([0.5, 2.0]))
+    m = metrics(trajectory(t, xy), sp)
+    slow, fast = m.per_robot
+    assert slow.ideal_time_s == 20.0 and fast.ideal_time_s == 5.0
+    assert slow.time_ratio == pytest.approx(9.8 / 20.0)
+    assert fast.time_ratio == pytest.approx(9.8 / 5.0)
+    assert m.time_ratio_mean == pytest.approx((9.8 / 20.0 + 9.8 / 5.0) / 2.0)
+    assert slow.straight_m == fast.straight_m == 10.0
+    assert slow.path_ratio == pytest.approx(1.0) and fast.path_ratio == pytest.approx(1.0)
+
+
 def test_detour_path_ratio():
     # Start (0, 0) -> (5, 5) -> (10, 0): sqrt(2) detour, arrival exactly at the goal.
     t = np.arange(3.0)
@@ -297,6 +315,7 @@ def test_oscillations_counted_per_robot_until_arrival():
     m = metrics(trajectory(t, xy, h), spec([(0, 0), (0, 5)], [(10, 0), (10, 5)]))
     assert [r.oscillations for r in m.per_robot] == [2, 0]
     assert m.oscillations_per_robot == 1.0 and m.oscillations_total == 2
+    assert m.oscillations_max == 2  # the worst robot (the benchmark table's max)
     # No commands: both of robot 0's reversals have no plan to explain them. The trajectory
     # applies no speed, so they are slow.
     assert m.per_robot[0].reversal_causes["slow"] == 2
