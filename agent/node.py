@@ -82,6 +82,7 @@ from agent.process import (
     StopFlag,
     close_session,
     die_with_launcher,
+    monotonic_clock_id,
     open_session,
     stop_on_signals,
 )
@@ -92,6 +93,7 @@ from protocol import (
     ProtocolError,
     RunConfigMsg,
     RunKeys,
+    WallStamps,
     plan_pose_slot,
     pose_slot_count,
     session_settings,
@@ -387,6 +389,8 @@ class RobotNode:
         self.cpu_start: tuple[float, float] | None = None
         self.last_rx_wall: float | None = None
         self.newest: PosesMsg | None = None
+        self.newest_rx_ns = 0
+        self.clock_id = monotonic_clock_id()
         self.world_alive = False
         self.world_seen = False
         self.world_gone_wall: float | None = None
@@ -399,7 +403,7 @@ class RobotNode:
         self.clock_tick = -1
         self.clock_stamp_s = 0.0
         self.clock_wall = 0.0
-        self.pose_link: FaultyLink[PosesMsg] = FaultyLink(
+        self.pose_link: FaultyLink[tuple[PosesMsg, int]] = FaultyLink(
             options.link, link_rng(options.fault_seed, LINK_POSES, self.robot_id))
 
         # Only the pose slot this robot plans on (a K-th of the stream, K = world ticks per
@@ -520,13 +524,13 @@ class RobotNode:
             if newest.tick > self.clock_tick:
                 self.clock_tick, self.clock_stamp_s, self.clock_wall = (
                     newest.tick, newest.t_s, arrived)
-            self.pose_link.send(self.sim_now(), newest)
+            self.pose_link.send(self.sim_now(), (newest, round(arrived * 1e9)))
         fresh = False
-        for msg in self.pose_link.receive(self.sim_now()):
+        for msg, rx_ns in self.pose_link.receive(self.sim_now()):
             if not self.controller.observe(msg.to_snapshot()):
                 self.counts["stale"] += 1
                 continue
-            self.newest = msg
+            self.newest, self.newest_rx_ns = msg, rx_ns
             fresh = True
         self.counts["link_dropped"] = self.pose_link.counts.dropped
         return fresh
@@ -542,6 +546,7 @@ class RobotNode:
             return
         now_s = self.sim_now()
         cpu0 = time.thread_time()
+        plan_start_ns = time.monotonic_ns()
         try:
             if now_s - msg.t_s > STALE_PLAN_S:
                 self.counts["stale_plans"] += 1
@@ -553,6 +558,7 @@ class RobotNode:
             if self.counts["plan_errors"] <= 3:
                 log.exception("robot %d: planner raised; braking", self.robot_id)
             result = self.controller.brake()
+        plan_end_ns = time.monotonic_ns()
         cpu1 = time.thread_time()
         self.cpu_s["plan"] += cpu1 - cpu0
         if self.options.plan_delay_ms > 0.0:  # a CPU-starved robot: the command leaves late
@@ -563,6 +569,10 @@ class RobotNode:
             omega_radps=result.omega_radps, plan_ms=max(0.0, result.times.total_ms),
             status=result.status, side=int(result.side), resolved_id=result.resolved_id,
             hold_s=self.controller.command_hold_s,
+            wall=WallStamps(clock_id=self.clock_id, pose_clock_id=msg.clock_id,
+                            pose_pub_ns=msg.pub_ns, pose_rx_ns=self.newest_rx_ns,
+                            plan_start_ns=plan_start_ns, plan_end_ns=plan_end_ns,
+                            pub_ns=time.monotonic_ns()),
         ).encode())
         self.cpu_s["send"] += time.thread_time() - cpu1
         self.seq += 1

@@ -16,8 +16,9 @@ from matplotlib.collections import PatchCollection
 from matplotlib.figure import Figure
 from matplotlib.patches import Circle
 
-from orchestrator.analysis.metrics import RunSpec, contact_episodes
-from orchestrator.analysis.rundir import RunData, read_run_dir
+from orchestrator.analysis.metrics import WALL_STAGES, RunSpec, contact_episodes
+from orchestrator.analysis.rundir import RunData, read_run_dir, read_timing
+from world.recorder import TIMING_COLUMNS
 
 DISC_INTERVAL_S = 10.0
 """Robot discs are drawn every this many seconds along the paths."""
@@ -249,10 +250,51 @@ def write_run_plots(out_dir: Path, *, gif: bool) -> None:
     try:
         data = read_run_dir(out_dir)
         plot_trajectories(data, out_dir / "trajectory.png")
+        stamps = read_timing(out_dir)
+        if stamps.shape[0]:
+            plot_wall_latency(stamps, out_dir / "latency.png")
         if gif:
             animate(data, out_dir / "trajectory.gif")
     except Exception as exc:  # noqa: BLE001 - the run itself is done; keep its result
         print(f"warning: plotting failed: {type(exc).__name__}: {exc}", file=sys.stderr)
+
+
+def plot_wall_latency(stamps: np.ndarray, path: Path) -> Path | None:
+    """latency.png: a histogram per wall-clock stage (`metrics.WALL_STAGES`), p50 and p99
+    marked; None (nothing written) if no stage could be measured.
+
+    Args:
+        stamps: (K, 9) timing.csv stamps (`world.recorder.TIMING_COLUMNS`).
+        path: the PNG to write.
+    """
+    stamps = np.asarray(stamps, dtype=np.int64).reshape(-1, len(TIMING_COLUMNS))
+    col = {name: stamps[:, k] for k, name in enumerate(TIMING_COLUMNS)}
+    same = (col["robot_clock"] == col["world_clock"]) & (col["robot_clock"] != 0)
+    panels = []
+    for stage, start, end, crosses in WALL_STAGES:
+        ok = (col[start] > 0) & (col[end] > 0) & (same if crosses else True)
+        ms = (col[end][ok] - col[start][ok]) / 1e6
+        if ms.size:
+            panels.append((stage, ms))
+    if not panels:
+        return None
+    cols = 2
+    rows = (len(panels) + cols - 1) // cols
+    fig = _figure(5.0 * cols, 2.4 * rows)
+    axes = fig.subplots(rows, cols, squeeze=False).ravel()
+    for ax, (stage, ms) in zip(axes, panels):
+        ax.hist(ms, bins=min(60, max(10, ms.size // 20)), color="tab:blue", alpha=0.8)
+        for q, style in ((50, "-"), (99, "--")):
+            v = float(np.percentile(ms, q))
+            ax.axvline(v, color="black", ls=style, lw=0.8, label=f"p{q} {v:.2f} ms")
+        ax.set_title(stage, fontsize=9)
+        ax.set_xlabel("wall ms")
+        ax.legend(fontsize=7)
+    for ax in axes[len(panels):]:
+        ax.set_visible(False)
+    path = Path(path)
+    fig.savefig(path, dpi=100)
+    return path
 
 
 def plot_benchmark(rows: Sequence[Mapping], path: Path, *, title: str = "") -> Path:

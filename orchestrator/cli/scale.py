@@ -95,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
         rows.append(row)
         print(f"scale: N={n}: success {row['success']}, miss rate "
               f"{_fmt(row['deadline_miss_rate'], 4)}, latency p99 "
-              f"{_fmt(row['latency_ms_p99'], 1)} ms, alive {_fmt(row['alive_s'], 1)} s, "
+              f"{_fmt(row['sim_latency_ms_p99'], 1)} ms, alive {_fmt(row['alive_s'], 1)} s, "
               f"PSS total {_fmt(row['mem_total_mib'], 0)} MiB, wall {row['wall_s']:.0f} s",
               file=sys.stderr, flush=True)
         write_outputs(rows, out_root, argv)  # after every N: a long sweep keeps its rows

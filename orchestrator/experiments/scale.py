@@ -80,7 +80,7 @@ CPU_PARTS = ("sense", "plan", "send", "loop", "threads")
 
 COLUMNS = (
     "agents", "family", "planner", "success", "arrived", "contacts", "min_gap_m",
-    "plan_ms_p50", "plan_ms_p99", "latency_ms_p50", "latency_ms_p99", "deadline_miss_rate",
+    "plan_ms_p50", "plan_ms_p99", "sim_latency_ms_p50", "sim_latency_ms_p99", "deadline_miss_rate",
     "cpu_share_robots", "cpu_share_world", "cpu_pct_per_robot", "mem_robot_mib",
     "mem_world_mib", "mem_fleet_mib", "mem_total_mib", "mem_kind", "threads_per_robot",
     "alive_s", "sim_time_s", "wall_s", "world_overruns", "robots_lost", "world_status",
@@ -90,7 +90,7 @@ COLUMNS = (
 )
 PLOTTED = (
     ("plan_ms_p50", "plan_ms_p99", "planning time [ms]"),
-    ("latency_ms_p50", "latency_ms_p99", "pose->command latency [ms]"),
+    ("sim_latency_ms_p50", "sim_latency_ms_p99", "pose->command latency [ms]"),
     ("deadline_miss_rate", None, "deadline-miss rate"),
     ("cpu_share_robots", "cpu_share_world", "CPU share of the machine"),
     ("mem_robot_mib", None, "PSS per robot process [MiB]"),
@@ -294,8 +294,8 @@ def scale_row(metrics: dict[str, Any], events: Sequence[dict], sampler: Resource
         "min_gap_m": metrics.get("min_gap_m"),
         "plan_ms_p50": metrics.get("plan_ms_p50"),
         "plan_ms_p99": metrics.get("plan_ms_p99"),
-        "latency_ms_p50": metrics.get("latency_ms_p50"),
-        "latency_ms_p99": metrics.get("latency_ms_p99"),
+        "sim_latency_ms_p50": metrics.get("sim_latency_ms_p50"),
+        "sim_latency_ms_p99": metrics.get("sim_latency_ms_p99"),
         "deadline_miss_rate": metrics.get("deadline_miss_rate"),
         "cpu_share_robots": cpu_robots,
         "cpu_share_world": cpu_world,
@@ -504,7 +504,7 @@ def format_rows(rows: Sequence[dict[str, Any]]) -> str:
             str(r["agents"]), _fmt(r["success"]), f"{_fmt(r['arrived'])}/{r['agents']}",
             _fmt(r["contacts"]),
             f"{_fmt(r['plan_ms_p50'])}/{_fmt(r['plan_ms_p99'])}",
-            f"{_fmt(r['latency_ms_p50'], 1)}/{_fmt(r['latency_ms_p99'], 1)}",
+            f"{_fmt(r['sim_latency_ms_p50'], 1)}/{_fmt(r['sim_latency_ms_p99'], 1)}",
             _fmt(100.0 * miss if miss is not None else None),
             f"{_fmt(100 * cpu_r if cpu_r is not None else None, 1)}/"
             f"{_fmt(100 * cpu_w if cpu_w is not None else None, 1)}",

@@ -16,7 +16,7 @@ from orchestrator.cli import main
 
 METRIC_KEYS = ("robots", "arrived", "success", "contacts", "min_gap_m", "path_ratio_mean",
                "time_ratio_mean", "oscillations_per_robot", "side_flips_per_robot",
-               "plan_ms_p50", "plan_ms_p99", "latency_ms_p50", "latency_ms_p99",
+               "plan_ms_p50", "plan_ms_p99", "sim_latency_ms_p50", "sim_latency_ms_p99",
                "deadline_miss_rate", "per_robot")
 BAD = """\
 name: bad
@@ -204,7 +204,7 @@ def test_run_with_fault_flags_in_lockstep_records_the_plan(tmp_path, capsys):
     assert faults["timing"]["0"]["plan_delay_ms"] == 20.0
     start = json.loads((out / "events.jsonl").read_text().splitlines()[0])
     assert start["faults"]["links"]["jitter_ms"] == 15.0
-    assert json.loads((out / "metrics.json").read_text())["latency_ms_p50"] >= 100.0
+    assert json.loads((out / "metrics.json").read_text())["sim_latency_ms_p50"] >= 100.0
 
 
 @pytest.mark.parametrize("flags, message", [

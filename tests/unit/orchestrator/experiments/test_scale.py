@@ -33,7 +33,7 @@ from orchestrator.experiments.scale import (
 def fake_row(n: int, **extra: object) -> dict:
     sampler = ResourceSampler()
     row = scale_row({"success": True, "arrived": n, "contacts": 0, "plan_ms_p50": 1.0,
-                     "plan_ms_p99": 5.0, "latency_ms_p50": 0.0, "latency_ms_p99": 20.0,
+                     "plan_ms_p99": 5.0, "sim_latency_ms_p50": 0.0, "sim_latency_ms_p99": 20.0,
                      "deadline_miss_rate": 0.01, "sim_time_s": 10.0}, [], sampler,
                     n=n, family="circles", planner="eifp-mpc", spawn_wall=0.0, spawn_mono=0.0,
                     wall_s=12.0, time_scale=1.0, world_status=0)
