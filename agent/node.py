@@ -157,6 +157,8 @@ class AgentOptions:
         control_phase_s: offset of the planning slots [sim s].
         plan_delay_ms: added planning delay [sim ms] before each command is published.
         compensate_latency: forward-predict by the poses' age before planning.
+        plan: False: command a stop every cycle without planning (``--no-plan``: measures
+            the process's own cost per cycle, `orchestrator bench --process`).
     """
 
     run_id: str
@@ -170,6 +172,7 @@ class AgentOptions:
     control_phase_s: float = 0.0
     plan_delay_ms: float = 0.0
     compensate_latency: bool = True
+    plan: bool = True
 
 
 def _robot_id(text: str) -> int:
@@ -199,6 +202,9 @@ def parse_args(argv: list[str] | None = None) -> AgentOptions:
                         help="added planning delay [sim ms] (a CPU-starved robot)")
     faults.add_argument("--no-latency-compensation", action="store_true",
                         help="plan on the poses as stamped (no forward prediction by age)")
+    parser.add_argument("--no-plan", action="store_true",
+                        help="sense and command a stop every cycle without planning (to "
+                             "measure the process's own cost)")
     args = parser.parse_args(argv)
     return AgentOptions(run_id=args.run, robot_id=args.id, connect=args.connect,
                         control_rate_hz=args.control_rate_hz,
@@ -207,7 +213,8 @@ def parse_args(argv: list[str] | None = None) -> AgentOptions:
                         link=argtypes.link_faults(args),
                         fault_seed=args.fault_seed, control_phase_s=args.control_phase_s,
                         plan_delay_ms=args.plan_delay_ms,
-                        compensate_latency=not args.no_latency_compensation)
+                        compensate_latency=not args.no_latency_compensation,
+                        plan=not args.no_plan)
 
 
 class _Exit(Exception):
@@ -548,7 +555,9 @@ class RobotNode:
         cpu0 = time.thread_time()
         plan_start_ns = time.monotonic_ns()
         try:
-            if now_s - msg.t_s > STALE_PLAN_S:
+            if not self.options.plan:
+                result = self.controller.brake()
+            elif now_s - msg.t_s > STALE_PLAN_S:
                 self.counts["stale_plans"] += 1
                 result = self.controller.brake()
             else:

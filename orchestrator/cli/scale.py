@@ -62,6 +62,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--out", type=Path, required=True, help="output directory")
     parser.add_argument("--json", action="store_true",
                         help="also print {\"rows\": [...]} as the last line")
+    parser.add_argument("--no-plan", action="store_true",
+                        help="robots sense and command a stop every cycle without planning: "
+                             "the CPU columns are then the process's own cost per cycle")
+    parser.add_argument("--seconds", type=positive, default=None,
+                        help="end every run after this much sim time (default: the "
+                             "scenario's time limit)")
     parser.add_argument("--world-bench", action="store_true",
                         help="instead of runs: time the world's per-tick work in-process for "
                              "each N (no processes, no transport)")

@@ -273,9 +273,10 @@ def collect_robot_exits(out_dir: Path) -> dict:
 def fleet_command(run_id: str, robot_ids: Sequence[int], endpoint: str, log_dir: Path, *,
                   startup_timeout_s: float = 30.0,
                   robot_endpoints: Mapping[int, str] | None = None,
-                  nice: int = 0, cpu_tokens: int | None = None) -> list[str]:
+                  nice: int = 0, cpu_tokens: int | None = None,
+                  robot_args: Sequence[str] = ()) -> list[str]:
     """Command line of one `agent.fleet` process that forks every robot process
-    (`cpu_tokens` None: the fleet's default, none)."""
+    (`cpu_tokens` None: the fleet's default, none; `robot_args` go to every robot)."""
     overrides = [arg for rid, ep in sorted((robot_endpoints or {}).items())
                  for arg in ("--connect-id", f"{int(rid)}={ep}")]
     return [
@@ -285,6 +286,7 @@ def fleet_command(run_id: str, robot_ids: Sequence[int], endpoint: str, log_dir:
         "--startup-timeout-s", repr(float(startup_timeout_s)), "--nice", str(int(nice)),
         *(() if cpu_tokens is None else ("--cpu-tokens", str(int(cpu_tokens)))),
         *overrides,
+        *(f"--robot-arg={arg}" for arg in robot_args),
     ]
 
 
@@ -343,6 +345,7 @@ def run_distributed(
     robot_launcher: str = "spawn",
     robot_nice: int = 0,
     cpu_tokens: int | None = None,
+    robot_args: Sequence[str] = (),
 ) -> int:
     """Run one scenario as real processes; return the world's exit status.
 
@@ -366,10 +369,11 @@ def run_distributed(
             process (faster start-up, less memory; its own log is ``fleet.log``).
         robot_nice: with ``"fork"``, robots run this much nicer than the world (>= 0).
         cpu_tokens: with ``"fork"``, robots computing at once (None or 0: no tokens).
+        robot_args: further ``python -m agent`` arguments for every robot (``--no-plan``).
 
     Returns:
-        The world's exit status: 0 if every robot arrived with no contact, 1 if not,
-        2 for a setup error; a world killed by signal N gives 128 + N.
+        The world's exit status (`agent.process.ExitCode`); a world killed by signal N
+        gives 128 + N.
     """
     validate_run_id(run_id)
     if robot_launcher == "fork" and faults is not None:
@@ -409,7 +413,8 @@ def run_distributed(
             address = (robot_endpoints or {}).get(rid, endpoint)
             proc = spawn_logged(robot_command(run_id, rid, address,
                                               startup_timeout_s=startup_timeout_s,
-                                              extra_args=robot_fault_args(faults, rid)),
+                                              extra_args=[*robot_fault_args(faults, rid),
+                                                          *robot_args]),
                                 out_dir / name)
             robots.append(proc)
             return proc
@@ -420,7 +425,7 @@ def run_distributed(
                 fleet_command(run_id, robot_ids, endpoint, out_dir,
                               startup_timeout_s=startup_timeout_s,
                               robot_endpoints=robot_endpoints, nice=robot_nice,
-                              cpu_tokens=cpu_tokens),
+                              cpu_tokens=cpu_tokens, robot_args=robot_args),
                 out_dir / "fleet.log"))
         else:
             current = {rid: spawn_robot(rid) for rid in robot_ids}
