@@ -15,14 +15,16 @@ Lifecycle:
    queries and commands (all read from handler channels, never in callbacks), applies the
    newest command per robot (zero-order hold, `WorldSim.set_command`), steps the world,
    publishes one `PosesMsg` (DROP, express) on the tick's pose slot
-   (``poses/<tick mod K>``, `protocol.pose_slot_count`) and records the tick.
+   (``poses/<tick mod K>``, `protocol.pose_slot_count`) and records the tick. The robots'
+   plan internals (``debug/<id>``, `PlanDebugMsg`, through a ring) are validated and
+   recorded into ``run.mcap`` (`RunRecorder.record_plan`).
 4. The run ends when every robot has arrived (``all_arrived``), at the scenario's time limit
    (``time_limit``) or on SIGTERM/SIGINT (``signal``): publish an ``end`` `ControlMsg`, write
    the ``end`` event, give robots a moment (``--linger-s``) to leave, close everything.
 
-Faults: a malformed command is rejected (`ProtocolError`), counted and logged as a
-``rejected`` event (the first `MAX_REJECT_EVENTS`); the ``end`` event always has the exact
-total (``rejected``) and tallies per key (``rejected_by_key``) and per reason
+Faults: a malformed command or plan-debug message is rejected (`ProtocolError`), counted
+and logged as a ``rejected`` event (the first `MAX_REJECT_EVENTS`); the ``end`` event always
+has the exact total (``rejected``) and tallies per key (``rejected_by_key``) and per reason
 (``rejected_by_reason``: the field or kind of error, e.g. ``cmd.v``). Valid commands pass
 through their robot's command link (`world.sim.link.FaultyLink`, ``--latency-ms`` ...: injected
 delay, loss, duplication, reordering, in sim time); a command whose ``seq`` does not
@@ -67,6 +69,7 @@ from agent.process import (
 from protocol import (
     CommandMsg,
     ControlMsg,
+    PlanDebugMsg,
     PosesMsg,
     ProtocolError,
     RunConfigMsg,
@@ -218,7 +221,7 @@ class WorldNode:
         self.last_seq: dict[int, int] = {}
         self.ended = False
         self.counts = {"commands": 0, "rejected": 0, "stale": 0, "queries": 0,
-                       "bad_queries": 0, "overruns": 0}
+                       "bad_queries": 0, "overruns": 0, "plans": 0}
         self.rejected_by_key: dict[str, int] = {}
         self.rejected_by_reason: dict[str, int] = {}
         self.cmd_links: dict[int, FaultyLink[CommandMsg]] = {
@@ -230,6 +233,10 @@ class WorldNode:
         self.queryable = session.declare_queryable(self.keys.config_all)
         self.cmd_sub = session.declare_subscriber(
             self.keys.cmd_all, zenoh.handlers.RingChannel(max(1024, 32 * n)))
+        # Plans' internals for run.mcap: a ring too (a flood drops the oldest, never blocks).
+        self.known_ids = self.robot_ids | {o.id for o in scenario.obstacles}
+        self.debug_sub = session.declare_subscriber(
+            self.keys.debug_all, zenoh.handlers.RingChannel(max(256, 8 * n)))
         self.alive_sub = session.liveliness().declare_subscriber(
             self.keys.alive_robot_all, history=True)
         # One publisher per pose slot: tick t goes out on poses/<t mod K>, so a robot that
@@ -311,7 +318,7 @@ class WorldNode:
         if self.counts["rejected"] <= MAX_REJECT_EVENTS:
             self._event("rejected", key=key[:200], reason=reason[:200])
         if self.counts["rejected"] in (1, 10, 100) or self.counts["rejected"] % 1000 == 0:
-            log.warning("rejected command #%d on %.200s: %.200s", self.counts["rejected"], key,
+            log.warning("rejected message #%d on %.200s: %.200s", self.counts["rejected"], key,
                         reason)
 
     def apply_commands(self) -> None:
@@ -334,6 +341,21 @@ class WorldNode:
         for rid, link in self.cmd_links.items():
             for msg in link.receive(self.sim.t_s):
                 self._hold(rid, msg)
+
+    def record_plans(self) -> None:
+        """Validate each robot's plan internals and record them (run.mcap only)."""
+        while (sample := self.debug_sub.try_recv()) is not None:
+            key = str(sample.key_expr)
+            try:
+                rid = self.keys.robot_id_of_debug(key)
+                msg = PlanDebugMsg.decode(sample.payload.to_bytes(), known_ids=self.known_ids,
+                                          expected_robot_id=rid)
+            except ProtocolError as exc:
+                self._reject(str(exc), key)
+                continue
+            self.counts["plans"] += 1
+            self.recorder.record_plan(msg.t_s, rid, msg.debug, v_mps=msg.v_mps,
+                                      omega_radps=msg.omega_radps, status=msg.status)
 
     def _hold(self, rid: int, msg: CommandMsg) -> None:
         """Apply one released command unless its ``seq`` is not newer."""
@@ -377,6 +399,7 @@ class WorldNode:
         self.poll_liveliness()
         self.serve_queries()
         self.apply_commands()
+        self.record_plans()
         events = self.sim.step(self.dt_s)
         self.publish_poses()
         self.recorder.record_tick(self.sim.t_s, self.sim.robot_ids, self.sim.pose,
