@@ -4,8 +4,10 @@ Topics (frame ``world``, z up, SI units; every log time is the sim time in ns):
 
 - ``/world/scene``           foxglove.SceneUpdate, every `SCENE_EVERY_TICKS` world ticks: one
                              entity ``robot/<id>`` per robot (disc in the robot's colour,
-                             heading arrow, goal as a faint flat disc, trail, id label) and one
-                             entity ``obstacles`` (grey cylinders at their current positions).
+                             heading arrow, goal as a faint flat disc, id label) and one
+                             entity ``obstacles`` (grey cylinders at their current positions);
+                             every `TRAIL_EVERY_S` also one entity ``trail/<id>`` per robot
+                             (the last `TRAIL_POINTS` positions; it stays until replaced).
 - ``/robot/<id>/command``    JSON ``eifp.Command``: each applied command (t, robot, seq, v,
                              omega, status, side, resolved).
 - ``/robot/<id>/plan``       foxglove.SceneUpdate: entity ``robot/<id>/plan``: reference path,
@@ -194,7 +196,9 @@ def scene_update(t_s: float, robot_ids: Sequence[int], xy_m: np.ndarray, heading
         robot_ids: (n,) ids; xy_m (n, 2), heading_rad (n,), radius_m (n,), goal_m (n, 2),
             colours (n, 3) RGB.
         obstacles: (m, 3) x, y, radius at `t_s`.
-        trails: per robot a (k, 2) polyline, oldest first, or None.
+        trails: per robot a (k, 2) polyline, oldest first (entities ``trail/<id>``), or None
+            for none in this message (Foxglove keeps the last ones: an entity stays until
+            replaced, and trails are the costliest part of a scene to build).
     """
     stamp = _stamp(to_ns(t_s))
     xy = np.asarray(xy_m, dtype=float).reshape(-1, 2).tolist()
@@ -206,11 +210,12 @@ def scene_update(t_s: float, robot_ids: Sequence[int], xy_m: np.ndarray, heading
         (x, y), th, r, (gx, gy) = xy[k], heading[k], radius[k], goal[k]
         solid, faint = _colour(colours[k], 0.9), _colour(colours[k], 0.35)
         arrow_len = max(2.0 * r, 0.3)
-        lines = None
         if trails is not None and len(trails[k]) >= 2:
-            lines = [LinePrimitive(type=LinePrimitiveLineType.LineStrip, pose=_pose(0, 0, 0),
-                                   thickness=0.04, points=_points(trails[k], TRAIL_Z_M),
-                                   color=faint)]
+            entities.append(SceneEntity(
+                timestamp=stamp, frame_id=WORLD_FRAME, id=f"trail/{rid}",
+                lines=[LinePrimitive(type=LinePrimitiveLineType.LineStrip, pose=_pose(0, 0, 0),
+                                     thickness=0.04, points=_points(trails[k], TRAIL_Z_M),
+                                     color=faint)]))
         texts = [TextPrimitive(pose=_pose(x, y, DISC_HEIGHT_M + 0.2), billboard=True,
                                font_size=14.0, scale_invariant=True, color=_TEXT_COLOUR,
                                text=str(rid))] if labels else None
@@ -222,7 +227,7 @@ def scene_update(t_s: float, robot_ids: Sequence[int], xy_m: np.ndarray, heading
                                    shaft_length=0.7 * arrow_len, shaft_diameter=0.05,
                                    head_length=0.3 * arrow_len, head_diameter=0.12,
                                    color=solid)],
-            lines=lines, texts=texts,
+            texts=texts,
         ))
     entities.append(SceneEntity(
         timestamp=stamp, frame_id=WORLD_FRAME, id="obstacles",
@@ -267,21 +272,26 @@ def plan_scene_update(t_s: float, robot_id: int, debug: PlanDebug,
     )])
 
 
-def _rounded(a: np.ndarray) -> list:
-    return np.round(np.asarray(a, dtype=float), 6).tolist()
+def _xy_json(points: np.ndarray) -> str:
+    """(k, 2) finite points as a JSON list of [x, y], to 0.1 mm (about 3x faster than
+    `json.dumps` of the floats, and shorter)."""
+    return "[" + ",".join(f"[{x:.4f},{y:.4f}]" for x, y in points.tolist()) + "]"
 
 
 def plan_json(t_s: float, robot_id: int, debug: PlanDebug, v_mps: float, omega_radps: float,
-              status: str) -> dict[str, Any]:
-    """The raw numbers of one plan (schema `PLAN_SCHEMA`)."""
-    return {
-        "t": round(float(t_s), 6), "robot": int(robot_id), "ego": _rounded(debug.ego),
-        "threats": list(debug.threat_ids), "via_points": _rounded(debug.via_points_m),
-        "reference_path": _rounded(debug.reference_m),
-        "mpc_prediction": _rounded(debug.predicted_m),
-        "v": round(float(v_mps), 6), "omega": round(float(omega_radps), 6),
-        "status": str(status),
-    }
+              status: str) -> bytes:
+    """The raw numbers of one plan as JSON (schema `PLAN_SCHEMA`): lengths to 0.1 mm,
+    angles, speeds and times to 1e-6."""
+    x, y, th = debug.ego.tolist()
+    return (
+        f'{{"t":{float(t_s):.6f},"robot":{int(robot_id)},'
+        f'"ego":[{x:.4f},{y:.4f},{th:.6f}],"threats":{json.dumps(list(debug.threat_ids))},'
+        f'"via_points":{_xy_json(debug.via_points_m)},'
+        f'"reference_path":{_xy_json(debug.reference_m)},'
+        f'"mpc_prediction":{_xy_json(debug.predicted_m)},'
+        f'"v":{float(v_mps):.6f},"omega":{float(omega_radps):.6f},'
+        f'"status":{json.dumps(str(status))}}}'
+    ).encode()
 
 
 # ---------------------------------------------------------------------------------------------
@@ -333,7 +343,9 @@ class RunViz:
         self._next_trail_s = -math.inf
         self._ticks = 0
         self._last_t_s = 0.0
-        self._xy: dict[int, tuple[float, float]] = {}
+        self._xy_ids: list[int] = []
+        self._xy_now = np.zeros((0, 2))
+        self._xy: dict[int, tuple[float, float]] | None = None
         self._scene = [SceneUpdateChannel(SCENE_TOPIC, context=c) for c in contexts]
         self._robot: dict[int, tuple[list[Any], list[Channel], list[Channel]]] = {}
         self.counts = {"scenes": 0, "commands": 0, "plans": 0}
@@ -364,13 +376,8 @@ class RunViz:
         ids = np.asarray(robot_ids).reshape(-1).tolist()
         xy = np.asarray(pose, dtype=float)[:, :2]
         self._last_t_s = float(t_s)
-        self._xy = dict(zip(ids, map(tuple, xy.tolist())))
-        if t_s >= self._next_trail_s - 1e-9:
-            self._next_trail_s = float(t_s) + TRAIL_EVERY_S
-            for rid, p in self._xy.items():
-                k = self._index.get(rid)
-                if k is not None:
-                    self._trails[k].append(p)
+        self._xy_ids, self._xy_now = ids, xy
+        self._xy = None
         n = self._ticks if tick is None else int(tick)
         self._ticks += 1
         if n % self.scene_every:
@@ -381,11 +388,16 @@ class RunViz:
         rows = [self._index.get(rid, -1) for rid in ids]
         known = [i for i, k in enumerate(rows) if k >= 0]
         rows = [rows[i] for i in known]
+        trails = None
+        if t_s >= self._next_trail_s - 1e-9:  # trails at their own, lower rate
+            self._next_trail_s = float(t_s) + TRAIL_EVERY_S
+            for i, k in zip(known, rows):
+                self._trails[k].append(tuple(xy[i].tolist()))
+            trails = [np.asarray(self._trails[k]) for k in rows]
         msg = scene_update(
             t_s, [ids[i] for i in known], xy[known], np.asarray(pose, dtype=float)[known, 2],
             self._radius[rows], self._goal[rows], self._colours[rows], self.obstacles_at(t_s),
-            [np.asarray(list(self._trails[k]) + [tuple(xy[i])]) for i, k in zip(known, rows)],
-            labels=self._labels)
+            trails, labels=self._labels)
         log_time = to_ns(t_s)
         for c in live:
             c.log(msg, log_time=log_time)
@@ -426,14 +438,15 @@ class RunViz:
                 c.log(msg, log_time=log_time)
         live = _with_sinks(raw)
         if live:
-            payload = json.dumps(plan_json(t_s, rid, debug, v_mps, omega_radps,
-                                           status)).encode()
+            payload = plan_json(t_s, rid, debug, v_mps, omega_radps, status)
             for c in live:
                 c.log(payload, log_time=log_time)
         self.counts["plans"] += 1
 
     def _threat_xy(self, other_id: int) -> tuple[float, float] | None:
         if other_id >= 0:
+            if self._xy is None:  # built once per tick, when a plan needs it
+                self._xy = dict(zip(self._xy_ids, map(tuple, self._xy_now.tolist())))
             return self._xy.get(other_id)
         try:
             j = self._obstacle_ids.index(other_id)
