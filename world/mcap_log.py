@@ -471,14 +471,25 @@ class LiveView:
     Args:
         host: address to bind (127.0.0.1 by default: serving other hosts is an opt-in).
         port: TCP port; 0 picks a free one (read it back from `port`).
+        robot_ids: the run's robots: their channels (and the scene's) are made before the
+            server accepts a client. The SDK gives a `RunViz` made later the same channels
+            (same topic and schema on one context), and a client that connects at the very
+            instant a channel is made can be refused its subscription ("unknown channel",
+            seen once in a test), so making them first closes that window.
     """
 
     def __init__(self, host: str = "127.0.0.1", port: int = 8765, *,
-                 name: str = "eifp-swarm") -> None:
+                 name: str = "eifp-swarm", robot_ids: Sequence[int] = ()) -> None:
         from foxglove.websocket import Capability
 
         self.host = host
         self.context = Context()
+        ctx = self.context
+        self._channels: list[Any] = [SceneUpdateChannel(SCENE_TOPIC, context=ctx)]
+        for rid in robot_ids:
+            self._channels += [SceneUpdateChannel(plan_topic(rid), context=ctx),
+                               _json_channel(plan_raw_topic(rid), PLAN_SCHEMA, ctx),
+                               _json_channel(command_topic(rid), COMMAND_SCHEMA, ctx)]
         self.server = foxglove.start_server(
             name=name, host=host, port=port, context=self.context,
             capabilities=[Capability.Time], message_backlog_size=LIVE_BACKLOG)

@@ -100,7 +100,7 @@ def run(args: argparse.Namespace) -> int:
         "started": dt.datetime.now().isoformat(timespec="seconds"),
         "argv": list(args.argv),
     })
-    live = _start_live(args)
+    live = _start_live(args, scenario)
     progress = ProgressLine(label, quiet=args.quiet)
     wall0 = time.monotonic()
     try:
@@ -144,7 +144,7 @@ def run(args: argparse.Namespace) -> int:
                            interrupted=end.get("reason") == "signal")
 
 
-def _start_live(args: argparse.Namespace) -> Any:
+def _start_live(args: argparse.Namespace, scenario: Scenario) -> Any:
     """The live Foxglove server of ``--live`` (printing its address), or None."""
     if not args.live:
         return None
@@ -153,7 +153,7 @@ def _start_live(args: argparse.Namespace) -> Any:
     from orchestrator.experiments.live import start_live_view
 
     try:
-        return start_live_view(args.live_host, args.live_port)
+        return start_live_view(args.live_host, args.live_port, scenario)
     except Exception as exc:  # foxglove raises its own error types (port in use, bad host)
         raise BadInput(f"--live: cannot serve on {args.live_host}:{args.live_port}: "
                        f"{exc}") from exc

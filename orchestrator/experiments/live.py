@@ -153,9 +153,9 @@ class LiveBridge:
         return busy
 
 
-def start_live_view(host: str, port: int) -> LiveView:
-    """Start the live server and print where to connect (stdout)."""
-    live = LiveView(host, port)
+def start_live_view(host: str, port: int, scenario: Scenario) -> LiveView:
+    """Start the live server for `scenario`'s run and print where to connect (stdout)."""
+    live = LiveView(host, port, robot_ids=[r.id for r in scenario.robots])
     print(f"live view: ws://{host}:{live.port} (Foxglove: Open connection -> Foxglove "
           f"WebSocket; layout docs/foxglove-layout.json)", flush=True)
     url = live.app_url()
