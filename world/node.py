@@ -35,7 +35,8 @@ and set offline (it brakes and stays as an obstacle); a returning token logs
 
 Events (``events.jsonl``, sim time ``t``; ``wall`` is Unix time where detection latency
 matters): world_ready, robot_joined, robot_lost, robot_rejoined, robot_left, unknown_robot,
-start, arrived, contact, cmd_timeout, rejected, startup_timeout, end.
+start, arrived, contact, cmd_timeout, rejected, startup_timeout, end (with ``tick_ms``: the
+loop's tick wall times, p50 / p99 / mean / max, and the ``overruns`` counter).
 
 Exit status (`agent.process.ExitCode.of_run`): OK every robot arrived with no contact,
 CONTACT, ROBOT_LOST, INTERRUPTED or INCOMPLETE otherwise; BAD_INPUT for bad arguments or a
@@ -222,6 +223,8 @@ class WorldNode:
         self.ended = False
         self.counts = {"commands": 0, "rejected": 0, "stale": 0, "queries": 0,
                        "bad_queries": 0, "overruns": 0, "plans": 0}
+        self.tick_s: list[float] = []
+        """Wall time of every tick of the loop (`tick`: drain, step, publish, record)."""
         self.rejected_by_key: dict[str, int] = {}
         self.rejected_by_reason: dict[str, int] = {}
         self.cmd_links: dict[int, FaultyLink[CommandMsg]] = {
@@ -431,7 +434,9 @@ class WorldNode:
             next_wall += period_wall
             if self.stop:
                 return "signal"
+            t0 = time.perf_counter()
             self.tick()
+            self.tick_s.append(time.perf_counter() - t0)
             if self.sim.all_arrived():
                 return "all_arrived"
             if self.sim.t_s >= self.scenario.time_limit_s - 1e-9:
@@ -453,6 +458,7 @@ class WorldNode:
             rejected_by_key=self.rejected_by_key, rejected_by_reason=self.rejected_by_reason,
             cmd_link={k: sum(getattr(link.counts, k) for link in self.cmd_links.values())
                       for k in ("dropped", "duplicated", "reordered")},
+            tick_ms=_tick_summary(self.tick_s),
         )
         log.info("end: %s at t=%.2f s, %d/%d arrived, %d contacts, %d rejected, %d stale",
                  reason, self.sim.t_s, len(arrived), len(self.robot_ids),
@@ -483,6 +489,17 @@ class WorldNode:
                     time_scale=self.options.time_scale, wall=time.time())
         log.info("start")
         return self.finish(self.run_loop())
+
+
+def _tick_summary(tick_s: list[float]) -> dict[str, float] | None:
+    """Median, 99th percentile, mean and largest tick wall time [ms], or None."""
+    if not tick_s:
+        return None
+    ordered = sorted(tick_s)
+    n = len(ordered)
+    return {"p50": round(ordered[n // 2] * 1e3, 4),
+            "p99": round(ordered[min(n - 1, math.ceil(0.99 * n) - 1)] * 1e3, 4),
+            "mean": round(sum(ordered) / n * 1e3, 4), "max": round(ordered[-1] * 1e3, 4)}
 
 
 def _tally(counts: dict[str, int], name: str) -> None:
