@@ -79,9 +79,9 @@ ESCAPE_STANDING_MPS = 0.05
 The escape point lies a few cm outside the disc, straight away from its centre; when the
 goal lies back past the disc, the cubic spline through [P, escape point, goal] leaves by a
 few cm and turns back through the disc, and an MPC linearised about standing still (at
-v = 0 a turn does not move the position to first order) found standing best: two robots
-inside each other's inflated discs, each goal behind the other, stood for 80 s (setup E at
-100 +- 30 ms with 10 % loss, lockstep link seed 2). The short plan makes the reference turn
+v = 0 a turn does not move the position to first order) finds standing best, so two robots
+inside each other's inflated discs, each goal behind the other, would stand. The short
+plan makes the reference turn
 to the escape direction and leave; the next cycle, outside, plans round the disc. A moving
 robot keeps the goal in its escape plan (the reference then continues where it goes)."""
 
