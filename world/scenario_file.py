@@ -17,21 +17,14 @@ File format (YAML, SI units: metres, seconds, radians)::
       planner: eifp-mpc          # default planner: eifp-mpc | eifp | ifp | orca
       v_max: 1.1                 # RobotLimits, by field name without its unit suffix:
       omega_max: 1.5             #   v_max, v_min, omega_max, accel_max, alpha_max
-      d_safety: 0.3              # PlannerConfig, by field name without its unit suffix:
-      t_max: 8.0                 #   d_safety, d_thresh, t_max, sensing_radius,
-      #                              max_neighbors, max_depth, w_length, w_distance,
-      #                              w_angle, ghost_horizon, ghost_clearance,
-      #                              side_hysteresis, estimation_window, lookahead,
-      #                              heading_gain, orca_time_horizon,
-      #                              threats_within_inflated, threat_release_margin,
-      #                              via_margin,
-      #                              escape_hysteresis, head_on_hold, via_time_max,
-      #                              primary_fallback
-      mpc:                       # MpcConfig, same rule: horizon_steps, dt, q_position,
-        horizon_steps: 20        #   q_heading, q_terminal, r_v, r_omega, r_dv, r_domega,
-        dt: 0.1                  #   max_constraints, slack_weight, max_iter, eps_abs, eps_rel,
-      #                              settle_chunk_iter, settle_v_tol, settle_omega_tol,
-      #                              braking_guard, braking_margin
+      safety:                    # PlannerConfig's sub-configs, each a mapping of its
+        d_safety: 0.3            #   fields without their unit suffix (agent.core.config):
+      threats:                   #   safety: d_safety, braking_margin
+        t_max: 8.0               #   threats: t_max, sensing_radius, max_neighbors
+      cost:                      #   cost: w_length, w_distance, w_angle, side_hysteresis
+        w_angle: 0.3             #   reference: max_depth, corner_radius
+      mpc:                       #   mpc: horizon_steps, dt, clearance_margin
+        horizon_steps: 20        #   orca: time_horizon
     robots:                      # required, at least one
       - id: 0                    # required, int in [0, 2^31 - 1], unique
         start: [-18.0, 0.0, 0.0] # required, [x, y, theta]
@@ -44,9 +37,9 @@ File format (YAML, SI units: metres, seconds, radians)::
         velocity: [0.0, 0.0]     # optional [vx, vy] in m/s, default [0, 0]
 
 The key of a dataclass field is its name with the unit suffix (`_m`, `_s`, `_mps`,
-`_mps2`, `_radps`, `_radps2`) stripped: `d_safety` -> `PlannerConfig.d_safety_m`,
-`dt` -> `MpcConfig.dt_s`, `v_max` -> `RobotLimits.v_max_mps`. Fields typed
-`float | None` (`d_thresh`, `ghost_clearance`) accept `null` (the documented default).
+`_mps2`, `_radps`, `_radps2`) stripped: `safety.d_safety` -> `SafetyConfig.d_safety_m`,
+`mpc.dt` -> `MpcConfig.dt_s`, `v_max` -> `RobotLimits.v_max_mps`. The top-level
+`profile` sets `PlannerConfig.profile`; the settings under `defaults` apply on top of it.
 
 Validation rejects, with `<file>: <field path>: <problem>` (e.g.
 `setup_x.yaml: robots[2].start: expected [x, y, theta], got [1.0, 2.0]`): YAML syntax
@@ -77,9 +70,9 @@ from agent.core.config import (
     POSITIVE_FIELDS,
     PROFILES,
     SIGNED_FIELDS,
-    MpcConfig,
-    PlannerConfig,
+    SUB_CONFIGS,
     RobotLimits,
+    file_key,
     profile_config,
 )
 from agent.core.scenario import ObstacleSpec, RobotSpec, Scenario
@@ -107,8 +100,6 @@ DEFAULT_PLANNER = "eifp-mpc"
 MAX_ROBOT_ID = 2**31 - 1
 """Robot ids travel as int32 on the wire."""
 
-_UNIT_SUFFIXES = ("_radps2", "_radps", "_mps2", "_mps", "_m", "_s")
-
 # Range rules of the config fields: agent.core.config (POSITIVE_FIELDS must be > 0, SIGNED_FIELDS
 # any sign, every other number >= 0); `v_min` may be negative (reversing) but not above v_max.
 
@@ -119,14 +110,6 @@ _TOP_REQUIRED = ("name", "time_limit", "robots")
 _ROBOT_REQUIRED = ("id", "start", "goal")
 _OBSTACLE_KEYS = ("center", "radius", "velocity")
 _OBSTACLE_REQUIRED = ("center", "radius")
-
-
-def file_key(field_name: str) -> str:
-    """The scenario-file key of a dataclass field: its name without the unit suffix."""
-    for suffix in _UNIT_SUFFIXES:
-        if field_name.endswith(suffix) and len(field_name) > len(suffix):
-            return field_name[: -len(suffix)]
-    return field_name
 
 
 @functools.cache
@@ -309,12 +292,11 @@ def scenario_from_dict(data: object, source: str = "<scenario>") -> Scenario:
                                lower="positive")
 
     limits_keys = tuple(_key_map(RobotLimits))
-    planner_keys = tuple(_key_map(PlannerConfig))
     defaults_raw = top.get("defaults", {})
     if defaults_raw is None:
         defaults_raw = {}
     defaults = _mapping(ctx, "defaults", defaults_raw,
-                        ("radius", "planner", *limits_keys, *planner_keys))
+                        ("radius", "planner", *limits_keys, *SUB_CONFIGS))
     default_radius_m = _number(ctx, "defaults.radius",
                                defaults.get("radius", DEFAULT_RADIUS_M), lower="positive")
     default_planner = _planner_name(ctx, "defaults.planner",
@@ -324,11 +306,15 @@ def scenario_from_dict(data: object, source: str = "<scenario>") -> Scenario:
     if profile not in PROFILES:
         raise ctx.error("profile", f"expected one of {', '.join(PROFILES)}, got {_got(profile)}")
     base = profile_config(profile)
-    planner_kwargs = _config_kwargs(ctx, "defaults", defaults, PlannerConfig, skip=("mpc",))
-    if defaults.get("mpc") is not None:
-        mpc = _mapping(ctx, "defaults.mpc", defaults["mpc"], tuple(_key_map(MpcConfig)))
-        planner_kwargs[_key_map(PlannerConfig)["mpc"][0]] = dataclasses.replace(
-            base.mpc, **_config_kwargs(ctx, "defaults.mpc", mpc, MpcConfig))
+    planner_kwargs: dict[str, Any] = {}
+    for group in SUB_CONFIGS:
+        if defaults.get(group) is None:
+            continue
+        path = _join("defaults", group)
+        sub = getattr(base, group)
+        data = _mapping(ctx, path, defaults[group], tuple(_key_map(type(sub))))
+        planner_kwargs[group] = dataclasses.replace(
+            sub, **_config_kwargs(ctx, path, data, type(sub)))
     planner_config = dataclasses.replace(base, **planner_kwargs)
 
     robots_raw = top["robots"]
@@ -490,6 +476,10 @@ def _check_config(ctx: _Ctx, path: str, config: object) -> None:
         value = getattr(config, name)
         if dataclasses.is_dataclass(value):
             _check_config(ctx, _join(path, key), value)
+        elif name == "profile":
+            if value not in PROFILES:
+                raise ctx.error("profile", f"expected one of {', '.join(PROFILES)}, "
+                                f"{_got(value)}")
         else:
             _field_value(ctx, _join(path, key), name, typ, value)
 
@@ -503,7 +493,9 @@ def scenario_to_dict(scenario: Scenario) -> dict[str, Any]:
     first = scenario.robots[0] if scenario.robots else RobotSpec(0, (0.0, 0.0, 0.0), (0.0, 0.0))
     defaults: dict[str, Any] = {"radius": float(first.radius_m), "planner": first.planner}
     defaults.update(_config_to_dict(first.limits))
-    defaults.update(_config_to_dict(scenario.planner_config))
+    planner = _config_to_dict(scenario.planner_config)
+    profile = planner.pop("profile")
+    defaults.update(planner)
     robots = []
     for r in scenario.robots:
         item: dict[str, Any] = {
@@ -521,6 +513,7 @@ def scenario_to_dict(scenario: Scenario) -> dict[str, Any]:
     out: dict[str, Any] = {
         "name": scenario.name,
         "description": scenario.description,
+        "profile": profile,
         "time_limit": float(scenario.time_limit_s),
         "goal_tolerance": float(scenario.goal_tolerance_m),
         "defaults": defaults,
@@ -541,7 +534,7 @@ def _config_to_dict(config: object) -> dict[str, Any]:
         value = getattr(config, name)
         if dataclasses.is_dataclass(value):
             out[key] = _config_to_dict(value)
-        elif value is None or isinstance(value, bool):
+        elif value is None or isinstance(value, bool | str):
             out[key] = value
         elif isinstance(value, int | np.integer):
             out[key] = int(value)

@@ -251,7 +251,7 @@ class Observation:
         limits: actuation limits.
         goal_tolerance_m: the robot stops when this close to its goal.
         others: the sensed others (already limited to the sensing radius / neighbour cap
-            or not: planners apply `PlannerConfig.sensing_radius_m` and `max_neighbors`).
+            or not: planners apply `ThreatConfig.sensing_radius_m` and `max_neighbors`).
         pose_age_s: how old the poses were when the robot planned, after it predicted them
             forward to now (0: fresh poses, as in an undisturbed lockstep run) [s].
     """

@@ -22,11 +22,16 @@ import numpy as np
 from agent.core.config import PlannerConfig
 from agent.core.scenario import RobotSpec
 from agent.core.types import EgoState, Observation, Others, PlanResult, PlanStatus, PoseSnapshot
-from agent.planning.estimation import NeighborTracker
+from agent.planning.estimation import ESTIMATION_WINDOW_S, NeighborTracker
 from agent.planning.planners import CONTROL_PERIOD_S, at_goal, make_planner
 
 MAX_COMPENSATED_AGE_S = 1.0
 """Poses older than this are not extrapolated further (the prediction would be fiction)."""
+COMMAND_HOLD_PERIODS = 1.5
+"""Each command tells the world to apply it for at most this many control periods
+(`protocol.CommandMsg.hold_s`): one period plus half a period of jitter between two
+commands; a command that is not followed in time (lost or late on the link) then gives way
+to braking instead of acting until the world's time-out."""
 ESTIMATION_MARGIN_M = 5.0
 """Only others within the sensing radius plus this are estimated: farther ones cannot come
 into range during the (<= 1 s) forward prediction below a closing speed of 5 m/s."""
@@ -37,7 +42,7 @@ class RobotController:
 
     Args:
         spec: the robot (id, goal, radius, limits, planner name).
-        config: planner parameters.
+        config: planner settings.
         goal_tolerance_m: the robot stops when this close to its goal.
         compensate_latency: forward-predict by the snapshot's age before planning.
         control_period_s: the robot's planning period; the planner's rate limits (and
@@ -45,7 +50,7 @@ class RobotController:
 
     Attributes:
         command_hold_s: how long the world may apply one of this robot's commands before
-            it brakes (`PlannerConfig.command_hold_periods` periods); sent with each command.
+            it brakes (`COMMAND_HOLD_PERIODS` periods); sent with each command.
     """
 
     def __init__(self, spec: RobotSpec, config: PlannerConfig, goal_tolerance_m: float,
@@ -58,9 +63,9 @@ class RobotController:
         self.goal_tolerance_m = float(goal_tolerance_m)
         self.compensate_latency = compensate_latency
         self.control_period_s = float(control_period_s)
-        self.command_hold_s = config.command_hold_periods * self.control_period_s
+        self.command_hold_s = COMMAND_HOLD_PERIODS * self.control_period_s
         self.planner = make_planner(spec.planner, config, control_period_s=self.control_period_s)
-        self.tracker = NeighborTracker(spec.id, config.estimation_window_s)
+        self.tracker = NeighborTracker(spec.id, ESTIMATION_WINDOW_S)
         self.snapshot: PoseSnapshot | None = None
         self.command = (0.0, 0.0)
         self.rejected_stale = 0
@@ -122,7 +127,7 @@ class RobotController:
     def _others(self, here_m: np.ndarray, age_s: float) -> Others:
         """The others' estimates near `here_m`, moved on by `age_s` if compensating."""
         others = self.tracker.others(
-            near_m=here_m, within_m=self.config.sensing_radius_m + ESTIMATION_MARGIN_M)
+            near_m=here_m, within_m=self.config.threats.sensing_radius_m + ESTIMATION_MARGIN_M)
         if self.compensate_latency and age_s > 0.0:
             others = _advance(others, age_s)
         return others

@@ -14,34 +14,34 @@ counts).
 Choices the paper leaves open:
 
 - Predicted path of j (for d_ij): the segment from its current position to
-  position + v_j * ghost_horizon_s; d_ij is the point-to-segment distance, floored at
+  position + v_j * `GHOST_HORIZON_S`; d_ij is the point-to-segment distance, floored at
   `MIN_PATH_DISTANCE_M` so a candidate on a path costs a lot but finitely.
 - Ghost path {s_j, g_j^ghost} (for phi_ij and discarding): s_j = `Others.track_start_m`
   (the oldest observed position of the estimation window) and g_j^ghost = position +
-  v_j * ghost_horizon_s, the straight-line projection of the observed motion. phi_ij is 0
+  v_j * `GHOST_HORIZON_S`, the straight-line projection of the observed motion. phi_ij is 0
   when |g_j - s_j| or |v_i - A| is ~0.
 - w_j = `Others.linearity`, the straightness of j's observed history (estimated
   elsewhere); w_j = 0 switches both interaction terms off for j.
-- Discarding: a candidate closer than `ghost_clearance_m` (None: the pair's inflated
-  radius L_j) to the ghost path of any other j except the threat it resolves is dropped
+- Discarding: a candidate closer than the pair's inflated radius L_j to the ghost path of
+  any other j except the threat it resolves is dropped
   (the threat's own clearance is already built into its tangent construction). If that
   drops every feasible candidate, the feasible set is used unfiltered so the robot still
   has a plan.
 - Stability: a memory {threat id -> side chosen last time} is passed in and returned.
   A candidate on the other side than the remembered one is taken only if its cost is
-  below (1 - side_hysteresis) times the kept side's. Entries live while their id is
+  below (1 - `CostConfig.side_hysteresis`) times the kept side's: a side is kept unless
+  the other is clearly cheaper, relative to the costs themselves, so the noise of the
+  velocity estimates does not flip it. Entries live while their id is
   still among the sensed neighbours.
 - Symmetry breaking: costs equal within `TIE_REL_TOL` (relative) resolve to Side.RIGHT,
   the right-hand passing rule of COLREGs rule 14: the robot turns to its right and leaves
   the threat on its left. Two robots meeting head-on both turn to their own right and
   pass each other left side to left side.
-- Near-ties against robots: exact ties are rare in practice; what breaks reciprocity is
-  two robots whose costs differ by tiny, unrelated amounts (e.g. goals a centimetre off
-  the line of approach) and so pick the same world side and dance. In closed-loop trials
-  (unicycle + pure pursuit, 2-14 robots swapping on a circle) an exact-tie-only rule left
-  two nearly head-on robots dancing for the whole run; requiring LEFT to beat RIGHT by
-  `PlannerConfig.right_hand_margin` (default 5 %) on a first choice against another robot
-  let them pass directly. Static and scenario obstacles do not reciprocate, so against them only the
+- Near-ties against robots (with the encounter rules, `Mechanisms.encounter_rules`): what
+  breaks reciprocity is two robots whose costs differ by tiny, unrelated amounts (goals a
+  centimetre off the line of approach), so that they pick the same world side. On a first
+  choice against another robot LEFT must therefore beat RIGHT by `RIGHT_HAND_MARGIN` of
+  the cost. Static and scenario obstacles do not reciprocate: against them only the
   exact-tie rule applies. The side memory and its hysteresis take over after the first
   choice.
 """
@@ -57,9 +57,25 @@ import numpy as np
 from agent.core.config import PlannerConfig
 from agent.core.types import Observation, Others, PlanStatus, Side
 from agent.planning.encounters import Role, encounter_roles, update_role_memory
-from agent.planning.ifp import PAPER_RULES, CandidateSelector, CycleRules, ViaPlan, plan_via_points
+from agent.planning.ifp import (
+    PAPER_MECHANISMS,
+    CandidateSelector,
+    Mechanisms,
+    ViaPlan,
+    plan_via_points,
+)
 from agent.planning.threats import as_complex
 from agent.planning.viapoints import SIDES, inflated_radius
+
+GHOST_HORIZON_S = 4.0
+"""How far ahead an other's predicted path and ghost goal are projected (d_ij and g_j of
+Eqs. 14 and 16) [s]: half the threat horizon T_max, the part of a constant-velocity
+forecast the side choice leans on."""
+
+RIGHT_HAND_MARGIN = 0.05
+"""On a first choice against another robot, LEFT must beat RIGHT by this fraction of the
+cost (with the encounter rules): the shared right-hand convention then decides near-ties
+the same way for both robots of a mirrored encounter."""
 
 # Floor on the distance to a predicted path in Eq. (14) [m].
 MIN_PATH_DISTANCE_M = 0.05
@@ -113,7 +129,7 @@ class GhostPaths:
 
     Args:
         others: the sensed neighbours.
-        ghost_horizon_s: how far ahead paths are projected [s].
+        ghost_horizon_s: how far ahead paths are projected [s] (`GHOST_HORIZON_S`).
         clearance_m: (K,) minimum distance of a candidate to ghost path j [m].
     """
 
@@ -232,17 +248,20 @@ def cost_selector(
     others: Others,
     side_memory: Mapping[int, Side],
     give_way_ids: frozenset[int] = frozenset(),
+    right_margin: float = 0.0,
 ) -> CandidateSelector:
     """The eIFP candidate selector for one cycle (plugs into `ifp.plan_via_points`).
 
     Args:
         observation: what the robot knows now (for its radius).
-        config: weights, ghost horizon, ghost clearance, hysteresis.
+        config: the cost weights and side hysteresis (`CostConfig`), d_safety.
         others: the neighbours the cycle plans against.
         side_memory: threat id -> side chosen last time.
         give_way_ids: others given way to (`agent.planning.encounters`): their RIGHT candidate is
             taken whenever it is feasible, whatever the cost (both robots of an encounter
             must follow the same convention for it to work).
+        right_margin: fraction by which LEFT must beat RIGHT on a first choice against
+            another robot (`RIGHT_HAND_MARGIN` with the encounter rules, else 0).
     """
     ids, is_robot = others.ids, others.is_robot
     paths: list[GhostPaths] = []  # built on first use: most cycles have no threat
@@ -260,15 +279,12 @@ def cost_selector(
         if int(ids[k]) in give_way_ids:
             return _RIGHT if feasible[_RIGHT] else 1 - _RIGHT
         if not paths:
-            if config.ghost_clearance_m is None:
-                clearance = inflated_radius(
-                    observation.radius_m, others.radius_m, config.d_safety_m
-                )
-            else:
-                clearance = np.full(len(others), float(config.ghost_clearance_m))
-            paths.append(GhostPaths(others, config.ghost_horizon_s, clearance))
+            clearance = inflated_radius(observation.radius_m, others.radius_m,
+                                        config.safety.d_safety_m)
+            paths.append(GhostPaths(others, GHOST_HORIZON_S, clearance))
+        w = config.cost
         cost, clear = paths[0].evaluate(
-            points, leg_start, leg_end, config.w_length, config.w_distance, config.w_angle, k
+            points, leg_start, leg_end, w.w_length, w.w_distance, w.w_angle, k
         )
         allowed = (feasible[0] and clear[0], feasible[1] and clear[1])
         if not (allowed[0] or allowed[1]):
@@ -277,8 +293,8 @@ def cost_selector(
             cost,
             allowed,
             side_memory.get(int(ids[k])),
-            config.side_hysteresis,
-            config.right_hand_margin if is_robot[k] else 0.0,
+            w.side_hysteresis,
+            right_margin if is_robot[k] else 0.0,
         )
 
     return select
@@ -290,13 +306,13 @@ def plan_eifp(
     side_memory: Mapping[int, Side] | None = None,
     timer: Callable[[], float] | None = None,
     primary_id: int | None = None,
-    rules: CycleRules = PAPER_RULES,
+    mech: Mechanisms = PAPER_MECHANISMS,
     escape_id: int | None = None,
-    resolved_ids: frozenset[int] = frozenset(),
 ) -> ViaPlan:
-    """One eIFP cycle as the paper has it (no encounter rules); see `plan_eifp_encounters`."""
-    return _plan_eifp(observation, config, side_memory, timer, None, primary_id, rules,
-                      escape_id, resolved_ids)[0]
+    """One eIFP cycle without the encounter rules (with `PAPER_MECHANISMS`, the paper's
+    eIFP); see `plan_eifp_encounters`."""
+    return _plan_eifp(observation, config, side_memory, timer, None, primary_id, mech,
+                      escape_id)[0]
 
 
 def plan_eifp_encounters(
@@ -306,13 +322,12 @@ def plan_eifp_encounters(
     role_memory: Mapping[int, Role],
     timer: Callable[[], float] | None = None,
     primary_id: int | None = None,
-    rules: CycleRules = PAPER_RULES,
+    mech: Mechanisms = PAPER_MECHANISMS,
     escape_id: int | None = None,
-    resolved_ids: frozenset[int] = frozenset(),
 ) -> tuple[ViaPlan, dict[int, Role]]:
     """One eIFP cycle with the encounter rules; returns (plan, role memory for next cycle)."""
     plan, roles = _plan_eifp(observation, config, side_memory, timer, role_memory, primary_id,
-                             rules, escape_id, resolved_ids)
+                             mech, escape_id)
     return plan, roles or {}
 
 
@@ -323,9 +338,8 @@ def _plan_eifp(
     timer: Callable[[], float] | None,
     role_memory: Mapping[int, Role] | None,
     primary_id: int | None,
-    rules: CycleRules = PAPER_RULES,
+    mech: Mechanisms = PAPER_MECHANISMS,
     escape_id: int | None = None,
-    resolved_ids: frozenset[int] = frozenset(),
 ) -> tuple[ViaPlan, dict[int, Role] | None]:
     """One eIFP cycle: IFP's iteration with cost-based candidate selection (Eqs. 14-16).
 
@@ -335,13 +349,11 @@ def _plan_eifp(
         side_memory: threat id -> side chosen last time (None: no memory). Use
             `update_side_memory` to carry it to the next cycle, or `EifpSelector`.
         timer: a wall clock for the stage timings only.
-        role_memory: with `config.encounter_rules`, the encounter roles of earlier cycles
-            (`agent.planning.encounters`); None: the rules are not applied (the paper's eIFP).
-        primary_id: the threat the previous cycle resolved first (kept first while it is
-            nearly as imminent as the most imminent one; `ifp.plan_via_points`).
-        rules: eIFP-MPC's changes to the cycle (`ifp.CycleRules`).
+        role_memory: with the encounter rules, the encounter roles of earlier cycles
+            (`agent.planning.encounters`); None: the rules are not applied.
+        primary_id: the threat the previous cycle resolved first (`ifp.plan_via_points`).
+        mech: the cycle's mechanisms (`ifp.Mechanisms`).
         escape_id: the other the previous cycle escaped from, if any.
-        resolved_ids: the others the previous cycle's plan resolved.
 
     Returns:
         The plan, and (with `role_memory`) the role memory for the next cycle, else None.
@@ -350,7 +362,6 @@ def _plan_eifp(
         ValueError: on non-finite inputs or configuration.
     """
     memory = side_memory or {}
-    committed = frozenset(memory) if config.threat_commitment else frozenset()
     found: dict[str, Encounters] = {}
     rule = None
     if role_memory is not None:
@@ -366,11 +377,12 @@ def _plan_eifp(
     def make_selector(others: Others) -> CandidateSelector:
         enc = found.get("encounters")
         give_way = enc.give_way_ids if enc is not None else frozenset()
-        return cost_selector(observation, config, others, memory, give_way)
+        return cost_selector(observation, config, others, memory, give_way,
+                             RIGHT_HAND_MARGIN if mech.encounter_rules else 0.0)
 
-    plan = plan_via_points(observation, config, make_selector, committed, timer,
-                           primary_id=primary_id, encounter_rule=rule, rules=rules,
-                           escape_id=escape_id, resolved_ids=resolved_ids)
+    plan = plan_via_points(observation, config, make_selector, frozenset(), timer,
+                           primary_id=primary_id, encounter_rule=rule, mech=mech,
+                           escape_id=escape_id)
     if role_memory is None:
         return plan, None
     enc = found.get("encounters")
@@ -406,7 +418,7 @@ def assess_encounters(
 
     Args:
         observation: what the robot knows now (its pose and speed).
-        config: planner parameters (`stand_on_emergency_s`).
+        config: planner settings (unused; the roles depend on geometry alone).
         others: the cycle's neighbours (after the sensing radius and cap).
         index: their Eq. (5) threats, ranked; tcpa, dcpa: (K,) Eqs. (4)-(5);
         inflated: (K,) inflated radii L (Eq. 7) -- all as `ifp.plan_via_points` computed
@@ -416,7 +428,7 @@ def assess_encounters(
     ego = observation.ego
     p = np.array([ego.x_m, ego.y_m])
     roles = encounter_roles(ego.heading_rad, ego.v_mps, p, others, tcpa, dcpa, inflated,
-                            config.stand_on_emergency_s, memory)
+                            memory)
     threat = np.zeros(len(others), dtype=bool)
     threat[index] = True
     ids = others.ids
@@ -449,19 +461,17 @@ class EifpSelector:
     Deterministic: the same sequence of observations gives the same plans.
 
     Args:
-        config: planner parameters.
-        rules: changes to the cycle (`ifp.CycleRules`): eIFP-MPC passes
-            `CycleRules.from_config(config)`, eifp the paper's.
+        config: planner settings.
+        mech: the cycle's mechanisms (`ifp.mechanisms`: eifp's or eifp-mpc's by profile).
     """
 
-    def __init__(self, config: PlannerConfig, rules: CycleRules = PAPER_RULES) -> None:
+    def __init__(self, config: PlannerConfig, mech: Mechanisms = PAPER_MECHANISMS) -> None:
         self.config = config
-        self.rules = rules
+        self.mech = mech
         self._memory: dict[int, Side] = {}
         self._roles: dict[int, Role] = {}
         self._primary: int | None = None
         self._escaping: int | None = None
-        self._resolved: frozenset[int] = frozenset()
 
     @property
     def side_memory(self) -> dict[int, Side]:
@@ -472,19 +482,17 @@ class EifpSelector:
         self, observation: Observation, timer: Callable[[], float] | None = None
     ) -> ViaPlan:
         """Plan one cycle and remember the sides chosen (see `plan_eifp`)."""
-        holds = self.config.primary_hysteresis or self.rules.head_on_hold_s > 0.0
-        primary = self._primary if holds else None
-        if self.config.encounter_rules:
+        primary = self._primary
+        if self.mech.encounter_rules:
             plan, self._roles = plan_eifp_encounters(observation, self.config, self._memory,
-                                                     self._roles, timer, primary, self.rules,
-                                                     self._escaping, self._resolved)
+                                                     self._roles, timer, primary, self.mech,
+                                                     self._escaping)
         else:
             plan = plan_eifp(observation, self.config, self._memory, timer, primary,
-                             self.rules, self._escaping, self._resolved)
+                             self.mech, self._escaping)
         self._memory = update_side_memory(self._memory, plan, observation.others.ids)
         self._primary = plan.resolved_id
         self._escaping = plan.resolved_id if plan.status == PlanStatus.ESCAPE else None
-        self._resolved = frozenset(i for i, _ in plan.resolved_sides)
         return plan
 
     def reset(self) -> None:
@@ -493,4 +501,3 @@ class EifpSelector:
         self._roles.clear()
         self._primary = None
         self._escaping = None
-        self._resolved = frozenset()

@@ -26,7 +26,7 @@ follows the same chiral convention, the one ships have used for a century (COLRE
 
 Safety net: a stand-on robot resolves the other after all, on the RIGHT tangent (which
 fits whatever the other does on its RIGHT), once the encounter is imminent: TCPA below
-`PlannerConfig.stand_on_emergency_s` with DCPA inside the inflated radius L. In eIFP-MPC the
+`STAND_ON_EMERGENCY_S` with DCPA inside the inflated radius L. In eIFP-MPC the
 tracker's half-plane constraints also keep every near neighbour out, stand-on or not.
 
 Two robots can both find the other on their left only on nearly reciprocal courses (the
@@ -57,6 +57,11 @@ SAME_COURSE_RAD = math.radians(67.5)
 
 MOVING_MPS = 0.15
 """Others slower than this are treated as obstacles."""
+
+STAND_ON_EMERGENCY_S = 2.0
+"""A stand-on robot gives way after all once TCPA is below this with DCPA inside L: about
+the time a robot at 1.1 m/s turning at 1.5 rad/s needs to move L = 1.3 m sideways, so the
+encounter is still resolved when the other does not give way."""
 
 
 class Role(enum.IntEnum):
@@ -128,8 +133,8 @@ def encounter_roles(
     tcpa_s: np.ndarray,
     dcpa_m: np.ndarray,
     inflated_m: np.ndarray,
-    emergency_s: float,
     memory: Mapping[int, Role],
+    emergency_s: float = STAND_ON_EMERGENCY_S,
 ) -> np.ndarray:
     """Roles for this cycle: remembered ones kept, new ones classified, the safety net applied.
 
@@ -138,8 +143,8 @@ def encounter_roles(
         others: the K others the cycle plans against.
         tcpa_s, dcpa_m: (K,) TCPA and DCPA at the measured velocities (Eqs. 4-5).
         inflated_m: (K,) inflated radii L of each pair (Eq. 7).
-        emergency_s: a stand-on other with TCPA below this and DCPA < L is given way to.
         memory: id -> role from earlier cycles (see `update_role_memory`).
+        emergency_s: a stand-on other with TCPA below this and DCPA < L is given way to.
 
     Returns:
         (K,) `Role` values (int).

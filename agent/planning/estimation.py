@@ -32,6 +32,13 @@ from agent.core.types import Others, PoseSnapshot
 _MIN_TRAVEL_M = 0.01
 
 
+ESTIMATION_WINDOW_S = 0.75
+"""History the velocity and linearity estimates fit over [s]. The least-squares slope
+trails a speed change by about half of it (the braking guard allows for that lag), and it
+averages out the pose noise of about 7 samples 0.1 s apart; much longer windows smooth
+over the others' own turns and lag their avoidance manoeuvres."""
+
+
 class NeighborTracker:
     """Short pose history of every other disc and the estimates built from it.
 
@@ -44,7 +51,8 @@ class NeighborTracker:
             world's rate (50 Hz in a distributed run) or once per control period (lockstep).
     """
 
-    def __init__(self, own_id: int, window_s: float = 0.5, max_samples: int = 8) -> None:
+    def __init__(self, own_id: int, window_s: float = ESTIMATION_WINDOW_S,
+                 max_samples: int = 8) -> None:
         if not window_s > 0.0:
             raise ValueError("window_s must be positive")
         if max_samples < 2:

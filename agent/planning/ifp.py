@@ -22,8 +22,8 @@ Choices the paper leaves open (documented here, tested in tests/agent/test_ifp.p
 - Step 3 uses the measured velocity v_r as in Eq. (3). A robot that stands still (v_r = 0)
   sees no static obstacle as a threat under Eq. (5), so when Eq. (5) finds nothing the
   direct leg P -> goal still goes through the leg check of step 4
-  (`PlannerConfig.direct_leg_check`; not in the paper, off in `config.paper_config`: then
-  a cycle whose Eq. (5) finds nothing plans [P, goal]).
+  (`Mechanisms.direct_leg_check`; not in the paper, off in its profile: then a cycle whose
+  Eq. (5) finds nothing plans [P, goal]).
 - The leg check counts other j as a threat when the closest approach on the leg is below
   its inflated radius L_j (not D_thresh, which is a detection radius): the plan must clear
   the inflated discs. Grazing within `LEG_GRAZE_TOL_M` is not a threat, so a leg that is
@@ -39,26 +39,21 @@ Choices the paper leaves open (documented here, tested in tests/agent/test_ifp.p
 - A candidate is only built from a leg start outside the disc by more than
   `ON_DISC_REL_TOL` of L.
 - Step 3 drops threats whose TCPA is more than `GOAL_TCPA_MARGIN_S` past the time the
-  robot needs to reach its goal at top speed (`PlannerConfig.goal_tcpa_filter`; not in the
-  paper, off in `config.paper_config`): near the goal the measured velocity of an
+  robot needs to reach its goal at top speed (`Mechanisms.goal_tcpa_filter`; not in the
+  paper, off in its profile): near the goal the measured velocity of an
   overshoot points at whoever stands beyond it, and resolving that sends the robot round
   its goal. Such others still count on the legs of step 4.
 - `ViaPlan.via_point_m` is the first via-point after P (where the robot heads now), with
   the side and the id of the threat that via-point resolves.
 
-`CycleRules` holds eIFP-MPC's changes to this cycle (not in the paper; the default
-`PAPER_RULES` is the cycle above, which `ifp` and `eifp` run): threats are only the others
-whose DCPA falls inside the pair's inflated radius L; via-points lie further out of their
-discs; an escape, once begun, goes on until the robot is a band clear of the disc; a
-head-on threat resolved first last cycle is kept first for a while (stop 24); a candidate
-reached only after `via_time_max_s` is infeasible, and in step 3 a first threat without a
-feasible candidate hands the first via-point to the next threat in rank order that has
-one, instead of giving up (stop 25). Why, and what each did to the dense crossings, is in
-`agent.core.config.PlannerConfig` and the README ("Stop 24", "Stop 25").
+`Mechanisms` holds this project's additions to this cycle (`mechanisms` picks them by
+planner and profile; `PAPER_MECHANISMS`, every one off, is the paper's cycle). Their
+reasons are documented on the class and in docs/method.md.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 from collections.abc import Callable
@@ -84,14 +79,11 @@ ESCAPE_STANDING_MPS = 0.05
 The escape point lies a few cm outside the disc, straight away from its centre; when the
 goal lies back past the disc, the cubic spline through [P, escape point, goal] leaves by a
 few cm and turns back through the disc, and an MPC linearised about standing still (at
-v = 0 a turn does not move the position to first order) found standing best: two robots
-inside each other's inflated discs, each goal behind the other, stood for 80 s (setup E at
-100 +- 30 ms with 10 % loss, lockstep link seed 2). The short plan makes the reference turn
+v = 0 a turn does not move the position to first order) finds standing best, so two robots
+inside each other's inflated discs, each goal behind the other, would stand. The short
+plan makes the reference turn
 to the escape direction and leave; the next cycle, outside, plans round the disc. A moving
 robot keeps the goal in its escape plan (the reference then continues where it goes)."""
-
-# A committed threat is released when its TCPA exceeds this multiple of T_max.
-COMMIT_RELEASE_FACTOR = 2.0
 
 # Closest approaches this close to L still clear the disc [m] (tangent legs, rounding).
 LEG_GRAZE_TOL_M = 1.0e-6
@@ -107,65 +99,111 @@ VIA_MARGIN_M = 0.05
 ON_DISC_REL_TOL = 1.0e-6
 
 HEAD_ON_MAX_DEG = 45.0
-"""`CycleRules.head_on_hold_s` holds a threat whose course lies within this angle of the
-reciprocal of the robot's heading."""
+"""A threat whose course lies within this angle of the reciprocal of the robot's heading is
+head-on (`is_head_on`)."""
 
 HEAD_ON_MIN_SPEED_MPS = 0.2
 """Below this speed (the robot's or the other's) a course has no direction: not head-on."""
 
 _HEAD_ON_COS = math.cos(math.radians(HEAD_ON_MAX_DEG))
 
+ARC_VIA_MARGIN_M = 0.3
+"""How far outside its inflated disc a via-point lies when the reference joins the legs with
+arcs (`Mechanisms.lines_arcs`): an arc of radius R turning by angle a at a via-point passes
+R (1 / cos(a / 2) - 1) inside the corner, towards the disc it turns round; 0.3 m covers a
+1 m arc up to about 75 degrees of turn."""
+
+ESCAPE_BAND_M = 0.1
+"""An escape goes on until the robot is this far outside the disc (`Mechanisms.escape_band`):
+two robots on each other's boundary otherwise alternate between escaping and planning
+round each other every cycle."""
+
+PRIMARY_HOLD_S = 3.0
+"""A head-on threat resolved first last cycle stays first while its TCPA is within this of
+the most imminent one's (`Mechanisms.commitment`): the order of two nearly simultaneous
+threats otherwise flips with small changes of TCPA, and the first via-point with it."""
+
 
 @dataclass(frozen=True)
-class CycleRules:
-    """eIFP-MPC's changes to the IFP cycle (not in the paper); the defaults are the paper's.
+class Mechanisms:
+    """This project's additions to the paper's cycle; every one off is the paper's
+    (`PAPER_MECHANISMS`). `mechanisms` gives each planner its set.
 
     Args:
-        threats_within_inflated: a threat of Eq. (5) needs DCPA <= L, the pair's inflated
-            radius (Eq. 7), instead of D_thresh (an explicit `PlannerConfig.d_thresh_m`
-            still wins).
-        threat_release_margin_m: with `threats_within_inflated`, an other that the
-            previous cycle's plan resolved stays a threat while its DCPA is within
-            L + this (a Schmitt trigger: in at L, out at L + margin) [m].
+        direct_leg_check: when Eq. (6) finds no threat, the direct leg to the goal still
+            goes through the leg check (step 4): a robot standing still (v_r = 0) sees no
+            threat by Eq. (6), even a disc on its way.
+        goal_tcpa_filter: threats whose TCPA is more than `GOAL_TCPA_MARGIN_S` past the
+            robot's time to its goal are not resolved (near the goal an overshoot's
+            measured velocity points at whoever stands beyond it).
+        encounter_rules: the reciprocal convention of `agent.planning.encounters` against
+            other robots (eIFP's selector): mirrored robots choose sides that fit together.
+        inflated_threats: a threat of Eq. (6) needs DCPA <= L (a predicted incursion of the
+            inflated disc, Eq. 8) instead of D_thresh, a detection radius 2.2 times L for
+            two 0.5 m robots: neighbours that would pass clear are left alone.
+        commitment: a head-on threat that the last plan resolved first stays first while
+            its TCPA is within `PRIMARY_HOLD_S` of the most imminent one's, so the first
+            via-point (where the robot heads now) does not flip between two nearly
+            simultaneous threats. (Keeping every resolved threat while its DCPA stays within
+            L + 0.5 m, against the robot's own swerve pushing it past L, did not earn its
+            place: more reversals on the tuning seeds of `orchestrator benchmark`.)
         via_margin_m: how far outside its inflated disc a via-point is placed [m].
-        escape_hysteresis_m: an escape goes on, from the same disc, until the robot is this
-            far outside it, and heads for a point that far out (0: escape only while inside).
-        head_on_hold_s: a head-on threat (course within `HEAD_ON_MAX_DEG` of reciprocal)
-            that the previous cycle resolved first is resolved first again while its TCPA
-            is within this of the most imminent one's (0: off) [s].
-        via_time_max_s: a via-point candidate reached later than this at top speed
-            (lambda*, Eq. 13) is infeasible (`agent.planning.viapoints.candidate_pair`) [s].
-        primary_fallback: when the first-ranked threat has no feasible via-point, the next
-            threat in rank order that has one is resolved first, instead of the cycle
-            giving up with NO_FEASIBLE (a plan straight to the goal); the MPC's
-            constraints still keep the robot off every disc.
+        escape_band_m: an escape goes on from the same disc until the robot is this far
+            outside it, towards a point that far out (0: only while inside) [m].
+        horizon_via_points: a candidate reached after more than T_max (lambda*, Eq. 13) is
+            infeasible: past the threat horizon the constant-velocity forecast that placed
+            it is not to be trusted (for an other as fast as the robot, a tangent point
+            receding nearly as fast is met kilometres down its track); and when the first
+            threat has no feasible candidate, the next one in rank order that has one gets
+            the first via-point, instead of a plan straight through the first.
+        lines_arcs: the reference follows the waypoint legs joined by arcs
+            (`agent.planning.spline.LineArcPath`) instead of the cubic spline (Eq. 19).
+        clamp_heading: the spline leaves along the robot's heading when the first
+            via-point lies within 30 degrees of it, instead of natural end conditions.
+        braking_guard: eIFP-MPC's command speed is capped so the robot can still stop its
+            own approach to every disc it faces (`agent.planning.safety`): the MPC's
+            half-planes are soft and can trade a stopped neighbour's gap away.
     """
 
-    threats_within_inflated: bool = False
-    threat_release_margin_m: float = 0.0
+    direct_leg_check: bool = False
+    goal_tcpa_filter: bool = False
+    encounter_rules: bool = False
+    inflated_threats: bool = False
+    commitment: bool = False
     via_margin_m: float = VIA_MARGIN_M
-    escape_hysteresis_m: float = 0.0
-    head_on_hold_s: float = 0.0
-    via_time_max_s: float = math.inf
-    primary_fallback: bool = False
-
-    @staticmethod
-    def from_config(config: PlannerConfig) -> CycleRules:
-        """The rules `config` sets for eIFP-MPC."""
-        return CycleRules(
-            threats_within_inflated=config.threats_within_inflated,
-            threat_release_margin_m=config.threat_release_margin_m,
-            via_margin_m=config.via_margin_m,
-            escape_hysteresis_m=config.escape_hysteresis_m,
-            head_on_hold_s=config.head_on_hold_s,
-            via_time_max_s=(math.inf if config.via_time_max_s is None
-                            else config.via_time_max_s),
-            primary_fallback=config.primary_fallback,
-        )
+    escape_band_m: float = 0.0
+    horizon_via_points: bool = False
+    lines_arcs: bool = False
+    clamp_heading: bool = False
+    braking_guard: bool = False
 
 
-PAPER_RULES = CycleRules()
-"""The paper's cycle (IFP and eIFP)."""
+PAPER_MECHANISMS = Mechanisms()
+"""The paper's cycle (the ``paper`` profile, every planner)."""
+
+IFP_MECHANISMS = Mechanisms(direct_leg_check=True, goal_tcpa_filter=True, clamp_heading=True)
+"""ifp in the default profile."""
+
+EIFP_MECHANISMS = dataclasses.replace(IFP_MECHANISMS, encounter_rules=True)
+"""eifp in the default profile: ifp's and the encounter rules. Its pure-pursuit law cuts
+the corners of a lines-and-arcs reference, so it keeps the spline and the paper's cycle."""
+
+EIFP_MPC_MECHANISMS = dataclasses.replace(
+    EIFP_MECHANISMS, inflated_threats=True, commitment=True, via_margin_m=ARC_VIA_MARGIN_M,
+    escape_band_m=ESCAPE_BAND_M, horizon_via_points=True, lines_arcs=True,
+    clamp_heading=False, braking_guard=True)
+"""eifp-mpc in the default profile: every mechanism."""
+
+
+def mechanisms(planner: str, config: PlannerConfig) -> Mechanisms:
+    """The mechanisms `planner` runs with under `config.profile`."""
+    if config.is_paper:
+        return PAPER_MECHANISMS
+    if planner == "eifp-mpc":
+        return EIFP_MPC_MECHANISMS
+    if planner == "eifp":
+        return EIFP_MECHANISMS
+    return IFP_MECHANISMS
 
 
 def is_head_on(heading_rad: float, speed_mps: float, other_velocity_mps: np.ndarray) -> bool:
@@ -271,11 +309,12 @@ def validate_inputs(observation: Observation, config: PlannerConfig) -> None:
 def plan_ifp(
     observation: Observation, config: PlannerConfig, timer: Callable[[], float] | None = None
 ) -> ViaPlan:
-    """One IFP cycle: earliest-feasible via-points, iterated up to `max_depth`.
+    """One IFP cycle: earliest-feasible via-points, iterated up to `max_depth`, with ifp's
+    mechanisms under `config.profile` (`mechanisms`).
 
     Args:
         observation: what the robot knows now.
-        config: planner parameters (d_safety, D_thresh, T_max, sensing, max_depth).
+        config: planner settings (d_safety, T_max, sensing, max_depth, profile).
 
     Returns:
         The waypoint plan; feed `waypoints_m` to `spline.build_reference`.
@@ -283,7 +322,8 @@ def plan_ifp(
     Raises:
         ValueError: on non-finite inputs or configuration.
     """
-    return plan_via_points(observation, config, lambda _others: select_earliest, timer=timer)
+    return plan_via_points(observation, config, lambda _others: select_earliest, timer=timer,
+                           mech=mechanisms("ifp", config))
 
 
 def plan_via_points(
@@ -295,9 +335,8 @@ def plan_via_points(
     ignored_ids: frozenset[int] = frozenset(),
     primary_id: int | None = None,
     encounter_rule: EncounterRule | None = None,
-    rules: CycleRules = PAPER_RULES,
+    mech: Mechanisms = PAPER_MECHANISMS,
     escape_id: int | None = None,
-    resolved_ids: frozenset[int] = frozenset(),
 ) -> ViaPlan:
     """The IFP cycle (module docstring) with a pluggable candidate selector.
 
@@ -308,26 +347,22 @@ def plan_via_points(
             radius and neighbour cap), returns the rule that picks one candidate of a
             threat; IFP's is `select_earliest`, eIFP's cost rule is in `agent.planning.eifp`.
             Called after `encounter_rule`.
-        committed_ids: others the robot is already resolving (eIFP's threat commitment):
-            they stay threats while still approaching (0 < TCPA < T_max), even when the
-            robot's own swerve has pushed their DCPA past D_thresh.
+        committed_ids: others the robot is already giving way to (eIFP's encounter rules):
+            they stay threats while still approaching (0 < TCPA < 2 T_max), even when the
+            robot's own swerve has pushed their DCPA past the threshold.
         timer: a wall clock, only to time the threat assessment (`ViaPlan.threats_s`);
             it never influences the plan.
         ignored_ids: others the robot leaves to themselves (eIFP's stand-on encounters,
             `agent.planning.encounters`): never resolved, on no leg; still escaped from if the robot
             is inside their inflated disc, and still listed in `ViaPlan.threats`.
-        primary_id: the other the previous cycle's first via-point resolved (eIFP): if it
-            is still a threat it is resolved first again unless another one's TCPA is
-            more than `config.primary_margin_s` smaller (hysteresis on the ranking).
+        primary_id: the other the previous cycle's first via-point resolved: with
+            `Mechanisms.commitment`, a head-on one is resolved first again unless another
+            one's TCPA is more than `PRIMARY_HOLD_S` smaller.
         encounter_rule: eIFP's encounter rules (`EncounterRule`): their ignored ids join
             `ignored_ids`, their committed ids `committed_ids`.
-        rules: eIFP-MPC's changes to the cycle (`CycleRules`); the paper's by default.
-            With `head_on_hold_s` > 0 a head-on `primary_id` is held that long, and
-            without `config.primary_hysteresis` only a head-on one is held.
+        mech: the mechanisms of the cycle (`Mechanisms`); the paper's by default.
         escape_id: the other the previous cycle escaped from, if it did
-            (`CycleRules.escape_hysteresis_m`).
-        resolved_ids: the others the previous cycle's plan resolved
-            (`CycleRules.threat_release_margin_m`).
+            (`Mechanisms.escape_band_m`).
 
     Raises:
         ValueError: on non-finite inputs or configuration.
@@ -336,33 +371,32 @@ def plan_via_points(
     ego = observation.ego
     p = np.array([ego.x_m, ego.y_m])
     goal = observation.goal_m
-    others = nearby_others(p, observation.others, config.sensing_radius_m, config.max_neighbors)
+    threats_cfg = config.threats
+    t_max_s = threats_cfg.t_max_s
+    others = nearby_others(p, observation.others, threats_cfg.sensing_radius_m,
+                           threats_cfg.max_neighbors)
     speed = float(observation.limits.v_max_mps)
-    radius = inflated_radius(observation.radius_m, others.radius_m, config.d_safety_m)
+    radius = inflated_radius(observation.radius_m, others.radius_m, config.safety.d_safety_m)
 
     # Eqs. (3)-(6) at the measured velocity.
     t_start = timer() if timer is not None else 0.0
     v_r = ego.v_mps * np.array([math.cos(ego.heading_rad), math.sin(ego.heading_rad)])
     d_thresh: float | np.ndarray = config.dcpa_threshold_m(observation.radius_m)
-    if rules.threats_within_inflated and config.d_thresh_m is None:
+    if mech.inflated_threats:
         d_thresh = radius
-        if resolved_ids and rules.threat_release_margin_m > 0.0 and len(others):
-            kept = np.fromiter((i in resolved_ids for i in others.ids.tolist()), dtype=bool,
-                               count=len(others))
-            d_thresh = np.where(kept, radius + rules.threat_release_margin_m, radius)
-    index, tcpa, dcpa = rank_threats(p, v_r, others, d_thresh, config.t_max_s)
+    index, tcpa, dcpa = rank_threats(p, v_r, others, d_thresh, t_max_s)
     if encounter_rule is not None and len(others):
         more_ignored, more_committed = encounter_rule(others, index, tcpa, dcpa, radius)
         ignored_ids = ignored_ids | more_ignored
         committed_ids = committed_ids | more_committed
     select = make_selector(others)
     if committed_ids and len(others):
-        index = _with_committed(index, tcpa, others, committed_ids, config.t_max_s)
+        index = _with_committed(index, tcpa, others, committed_ids, t_max_s)
     threats = threat_records(index, tcpa, dcpa, others)
     # Closest approaches after the robot can be at its goal are not its business: near the
     # goal, an overshoot would otherwise point the measured velocity at someone beyond it
     # and send the robot round the goal. The leg to the goal is still checked below.
-    if config.goal_tcpa_filter:
+    if mech.goal_tcpa_filter:
         to_goal_s = (math.hypot(goal[0] - p[0], goal[1] - p[1])
                      / float(observation.limits.v_max_mps))
         index = index[tcpa[index] <= to_goal_s + GOAL_TCPA_MARGIN_S]
@@ -371,17 +405,12 @@ def plan_via_points(
         ignored = np.fromiter((i in ignored_ids for i in others.ids.tolist()), dtype=bool,
                               count=len(others))
         index = index[~ignored[index]]
-    if primary_id is not None and index.size > 1:
+    if mech.commitment and primary_id is not None and index.size > 1:
         hit = (others.ids[index] == primary_id).nonzero()[0]
         if hit.size:
             j = int(index[hit[0]])
-            margin_s = config.primary_margin_s
-            if rules.head_on_hold_s > 0.0:
-                if not config.primary_hysteresis:
-                    margin_s = -math.inf  # the head-on hold alone
-                if is_head_on(ego.heading_rad, ego.v_mps, others.velocity_mps[j]):
-                    margin_s = max(margin_s, rules.head_on_hold_s)
-            if tcpa[j] <= tcpa[index[0]] + margin_s:
+            if (is_head_on(ego.heading_rad, ego.v_mps, others.velocity_mps[j])
+                    and tcpa[j] <= tcpa[index[0]] + PRIMARY_HOLD_S):
                 index = np.concatenate((index[hit[:1]], np.delete(index, hit[0])))
     threats_s = timer() - t_start if timer is not None else 0.0
     if len(others) == 0:
@@ -391,7 +420,7 @@ def plan_via_points(
     # Inside an inflated disc: no tangent exists, steer straight out of the deepest one.
     position = as_complex(others.position_m)
     gap = np.abs(position - complex(ego.x_m, ego.y_m)) - radius
-    band = rules.escape_hysteresis_m
+    band = mech.escape_band_m
     if escape_id is not None and band > 0.0:
         # Still escaping from the same disc until a band clear of it: a robot that left
         # by a centimetre would plan round the disc, graze it and escape again.
@@ -412,7 +441,8 @@ def plan_via_points(
         )
 
     # Waypoints as complex numbers x + iy while the list changes.
-    world = _World(others, radius, speed, select, rules.via_margin_m, rules.via_time_max_s)
+    world = _World(others, radius, speed, select, mech.via_margin_m,
+                   t_max_s if mech.horizon_via_points else math.inf)
     wps = [complex(ego.x_m, ego.y_m), complex(goal[0], goal[1])]
     excluded = [-1]  # per leg: index of the other the leg is tangent to, or -1
     chosen: list[tuple[int, Side] | None] = [None, None]  # per waypoint: (index, side)
@@ -420,7 +450,7 @@ def plan_via_points(
     if index.size:
         k = int(index[0])
         split = world.resolve(wps[0], 0.0, wps[1], k)
-        if split is None and rules.primary_fallback:
+        if split is None and mech.horizon_via_points:
             for other_k in index[1:].tolist():
                 split = world.resolve(wps[0], 0.0, wps[1], other_k)
                 if split is not None:
@@ -434,7 +464,7 @@ def plan_via_points(
         wps.insert(1, split[0])
         excluded[0:1] = [k, -1]
         chosen.insert(1, (k, split[1]))
-    elif not config.direct_leg_check:
+    elif not mech.direct_leg_check:
         # The paper declares threats by Eq. (5) alone: none, so the plan is [P, goal].
         return ViaPlan(status=PlanStatus.OK, waypoints_m=np.stack((p, goal)), threats=threats,
                        threats_s=threats_s)
@@ -443,7 +473,7 @@ def plan_via_points(
     velocity = as_complex(others.velocity_mps)
     clearance = np.where(ignored, -math.inf, radius - LEG_GRAZE_TOL_M)
     first = 0
-    while len(wps) - 2 < config.max_depth:
+    while len(wps) - 2 < config.reference.max_depth:
         arrival = [0.0, *itertools.accumulate(abs(b - a) / speed for a, b in zip(wps, wps[1:]))]
         hit, leg_tcpa = legs_threats(
             wps[first:-1],
@@ -453,7 +483,7 @@ def plan_via_points(
             position,
             velocity,
             clearance,
-            config.t_max_s,
+            t_max_s,
             excluded[first:],
         )
         split = None
@@ -486,6 +516,11 @@ def plan_via_points(
         resolved_sides=resolved,
         threats_s=threats_s,
     )
+
+
+COMMIT_RELEASE_FACTOR = 2.0
+"""A committed threat (`_with_committed`) is released when its TCPA exceeds this multiple of
+T_max."""
 
 
 def _with_committed(

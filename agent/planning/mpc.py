@@ -47,12 +47,9 @@ The slack makes the QP always feasible; the half-plane is the tangent of the cle
 disc, so n . p >= n . o + c implies |p - o| >= c exactly. One slack per step, shared by
 that step's M half-planes, so s_k is the step's largest violation and the penalty is
 exact while the step's multipliers sum to less than w_s (a robot facing a gap narrower
-than the clearances stops in front of it: tests/agent/test_mpc.py). A slack per
-(step, neighbour) had N M more
-variables and sign rows (180 variables and 300 rows against 120 and 240 at N = 20,
-M = 4); the smaller KKT system cut OSQP's time per iteration by about 15 % and its
-iterations in the 16-robot bench crowd (`orchestrator bench`: p50 40 -> 35, p99 255 ->
-200; OSQP time p99 1.4 -> 1.1 ms, measured back to back).
+than the clearances stops in front of it: tests/unit/agent/planning/test_mpc.py). A slack
+per (step, neighbour) would add N M variables and sign rows (180 variables and 300 rows
+against 120 and 240 at N = 20, M = 4) for a larger KKT system to factor every cycle.
 
 The QP is set up once; each cycle writes the changing entries of A (B_k, the v-dependent
 column of A_k, the half-plane normals) through precomputed indices into A's CSC data, and
@@ -62,7 +59,10 @@ scaling, and OSQP's own scaling is off: it would redo Ruiz at every matrix updat
 cost about four times the KKT refactorisation itself. The command period is taken equal
 to dt (the rate bounds use it).
 
-OSQP runs in chunks of `MpcConfig.settle_chunk_iter` iterations (rounded up to a multiple
+The weights and solver settings are `MpcTuning` constants (`DEFAULT_TUNING`; the paper
+profile's `PAPER_TUNING`), the horizon and the half-planes' margin `MpcConfig` settings.
+
+OSQP runs in chunks of `MpcTuning.settle_chunk_iter` iterations (rounded up to a multiple
 of the rho adaptation interval), each going on from OSQP's own iterates, so a chunked solve
 is the same ADMM run as one call; between chunks the solve stops once the first command
 (the only one applied) has settled (moved less than `settle_v_tol_mps` /
@@ -199,12 +199,71 @@ def _ruiz(P: sp.csc_matrix, A: sp.csc_matrix, iterations: int = 10):
     return d, e, c
 
 
+@dataclass(frozen=True)
+class MpcTuning:
+    """The tracker's weights and solver settings (constants, not user settings).
+
+    Args:
+        q_position: weight on squared position error per step [1/m^2]; with `r_v` it
+            makes a 0.3 m lag cost about as much as a 1 m/s speed error.
+        q_heading: weight on squared heading error per step [1/rad^2].
+        q_terminal: multiplier on the last step's state weight (a terminal cost that
+            stands in for the rest of the path beyond the horizon).
+        r_v: weight on (v - v_ref)^2.
+        r_omega: weight on (omega - omega_ref)^2.
+        r_dv: weight on squared change of v between steps (smooth commands).
+        r_domega: weight on squared change of omega between steps.
+        max_constraints: neighbours turned into half-planes (nearest predicted gap first);
+            the via-points and the braking guard handle the rest.
+        slack_weight: linear and quadratic weight on half-plane slack. The linear part
+            makes the penalty exact (no slack while it can be avoided) as long as a step's
+            half-plane multipliers sum to less than it; a larger weight dominates the
+            residual norms OSQP's rho adaptation balances and lengthens the iteration tail.
+        max_iter: OSQP iteration cap per solve, counted in whole chunks.
+        settle_chunk_iter: OSQP runs in chunks of this many iterations (rounded up to a
+            multiple of 25, the rho adaptation interval; 0: one run to `max_iter`); after
+            a chunk short of the tolerances, the solve stops once the first command (the
+            only one applied) moved by less than the settle tolerances over it. The slow
+            QPs of a crowd spend their last iterations on the far end of the horizon.
+        settle_v_tol_mps: see `settle_chunk_iter` [m/s].
+        settle_omega_tol_radps: see `settle_chunk_iter` [rad/s].
+        eps_abs: OSQP absolute tolerance.
+        eps_rel: OSQP relative tolerance.
+    """
+
+    q_position: float = 10.0
+    q_heading: float = 0.5
+    q_terminal: float = 2.0
+    r_v: float = 1.0
+    r_omega: float = 0.2
+    r_dv: float = 2.0
+    r_domega: float = 0.5
+    max_constraints: int = 4
+    slack_weight: float = 1.0e3
+    max_iter: int = 1000
+    settle_chunk_iter: int = 100
+    settle_v_tol_mps: float = 0.01
+    settle_omega_tol_radps: float = 0.01
+    eps_abs: float = 1.0e-3
+    eps_rel: float = 1.0e-3
+
+
+DEFAULT_TUNING = MpcTuning()
+"""eIFP-MPC's tracker in the default profile."""
+
+PAPER_TUNING = MpcTuning(q_terminal=1.0, r_dv=0.0, r_domega=0.0)
+"""The paper's J (Eq. 21): one state weight Q for every step (no terminal multiplier) and an
+input weight R, no input-rate terms. The inputs' rate bounds stay: they are the robot's
+actuation limits, which the world enforces too."""
+
+
 class MpcTracker:
     """LTV-MPC reference tracker with soft neighbour half-planes (see the module docstring).
 
     Args:
         limits: actuation limits (bounds and rate limits of the inputs).
-        config: horizon, weights, constraint cap and OSQP settings.
+        config: horizon and step (the half-planes' margin is the caller's).
+        tuning: weights, constraint cap and OSQP settings.
         trust_weight: weight w_t of the trust-region term w_t ||u_k - ub_k||^2
             [1/(m/s)^2, 1/(rad/s)^2] (see the module docstring).
 
@@ -212,15 +271,17 @@ class MpcTracker:
         failures: number of cycles that ended in SOLVER_FAILED since construction.
     """
 
-    def __init__(self, limits: RobotLimits, config: MpcConfig, trust_weight: float = 1.0) -> None:
+    def __init__(self, limits: RobotLimits, config: MpcConfig,
+                 tuning: MpcTuning = DEFAULT_TUNING, trust_weight: float = 1.0) -> None:
         if trust_weight < 0.0:
             raise ValueError("trust_weight must be non-negative")
-        if config.horizon_steps < 1 or config.dt_s <= 0.0 or config.max_constraints < 0:
+        if config.horizon_steps < 1 or config.dt_s <= 0.0 or tuning.max_constraints < 0:
             raise ValueError("MpcConfig: horizon_steps >= 1, dt_s > 0, max_constraints >= 0")
         self.limits = limits
         self.config = config
+        self.tuning = tuning
         self.failures = 0
-        n_steps, n_cons = config.horizon_steps, config.max_constraints
+        n_steps, n_cons = config.horizon_steps, tuning.max_constraints
         self._n_steps, self._n_cons = n_steps, n_cons
         dt = config.dt_s
         self._u_min = np.array([limits.v_min_mps, -limits.omega_max_radps])
@@ -236,10 +297,10 @@ class MpcTracker:
         i_s = nx + nu + np.arange(ns)  # i_s[k - 1] -> s_k
 
         # --- P (upper triangle), constant --------------------------------------------
-        q_diag = np.tile([config.q_position, config.q_position, config.q_heading], (n_steps, 1))
-        q_diag[-1] *= config.q_terminal
-        r_w = np.array([config.r_v, config.r_omega])
-        rd_w = np.array([config.r_dv, config.r_domega])
+        q_diag = np.tile([tuning.q_position, tuning.q_position, tuning.q_heading], (n_steps, 1))
+        q_diag[-1] *= tuning.q_terminal
+        r_w = np.array([tuning.r_v, tuning.r_omega])
+        rd_w = np.array([tuning.r_dv, tuning.r_domega])
         # D'R_dD of the difference operator: 2 r_d on the diagonal (r_d at k = N-1), -r_d off.
         u_diag = np.tile(r_w, (n_steps, 1)) + np.tile(rd_w, (n_steps, 1)) * 2.0
         u_diag[-1] -= rd_w
@@ -250,7 +311,7 @@ class MpcTracker:
             [
                 q_diag.ravel(),
                 u_diag.ravel(),
-                np.full(ns, config.slack_weight),
+                np.full(ns, tuning.slack_weight),
                 -np.tile(rd_w, n_steps - 1),
             ]
         )
@@ -315,7 +376,7 @@ class MpcTracker:
 
         # --- vectors: constant parts written once ----------------------------------------
         self._q = np.zeros(n_var)
-        self._q[nx + nu :] = config.slack_weight
+        self._q[nx + nu :] = tuning.slack_weight
         self._l = np.zeros(n_rows)
         self._u = np.zeros(n_rows)
         # Views written in place each cycle.
@@ -363,8 +424,8 @@ class MpcTracker:
         )
         # Chunks are whole multiples of the rho adaptation interval, so that a chunked
         # solve is the same ADMM run as one call (the adaptation counts from each call).
-        chunk = -(-config.settle_chunk_iter // _RHO_INTERVAL) * _RHO_INTERVAL
-        self._chunk_iter = min(chunk, config.max_iter) if chunk > 0 else config.max_iter
+        chunk = -(-tuning.settle_chunk_iter // _RHO_INTERVAL) * _RHO_INTERVAL
+        self._chunk_iter = min(chunk, tuning.max_iter) if chunk > 0 else tuning.max_iter
         i_first = np.array([iu[0, 0], iu[0, 1]])
         self._i_first, self._d_first = i_first, d_var[i_first]
         self._solver = osqp.OSQP()
@@ -379,8 +440,8 @@ class MpcTracker:
             polishing=False,
             scaling=0,
             max_iter=self._chunk_iter,
-            eps_abs=config.eps_abs,
-            eps_rel=config.eps_rel,
+            eps_abs=tuning.eps_abs,
+            eps_rel=tuning.eps_rel,
             check_termination=5,
             # Iteration-based rho adaptation (deterministic, unlike the time-based one).
             # A tolerance of 2 rather than 5 re-tunes rho sooner: it cut the iterations
@@ -563,7 +624,7 @@ class MpcTracker:
             )
             if any(flags):
                 raise osqp.OSQPException(next(f for f in flags if f))
-        # In chunks (`MpcConfig.settle_chunk_iter`): stop at the tolerances, at max_iter,
+        # In chunks (`MpcTuning.settle_chunk_iter`): stop at the tolerances, at max_iter,
         # or once the first command has settled; each chunk resumes from OSQP's iterates.
         total, first_before = 0, None
         while True:
@@ -579,7 +640,7 @@ class MpcTracker:
                 status_val, iters = int(info.status_val), int(info.iter)
                 z, y = solution.x, solution.y
             total += iters
-            if status_val == _SOLVED or total >= self.config.max_iter or z is None or y is None:
+            if status_val == _SOLVED or total >= self.tuning.max_iter or z is None or y is None:
                 return status_val, total, z, y
             if status_val not in _USABLE:
                 return status_val, total, z, y
@@ -587,8 +648,8 @@ class MpcTracker:
             if not np.isfinite(first).all():
                 return status_val, total, z, y
             if first_before is not None and (
-                abs(first[0] - first_before[0]) < self.config.settle_v_tol_mps
-                and abs(first[1] - first_before[1]) < self.config.settle_omega_tol_radps
+                abs(first[0] - first_before[0]) < self.tuning.settle_v_tol_mps
+                and abs(first[1] - first_before[1]) < self.tuning.settle_omega_tol_radps
             ):
                 return status_val, total, z, y
             first_before = first

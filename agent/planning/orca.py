@@ -41,7 +41,7 @@ import pyrvo
 
 from agent.core.config import PlannerConfig, RobotLimits
 from agent.core.types import Others
-from agent.planning.unicycle import clamp_command, heading_law
+from agent.planning.unicycle import HEADING_GAIN, clamp_command, heading_law
 
 
 @dataclass(frozen=True)
@@ -68,8 +68,8 @@ class OrcaController:
 
     Args:
         limits: actuation limits (v_max is ORCA's max speed).
-        config: planner parameters: `d_safety_m`, `sensing_radius_m`, `max_neighbors`,
-            `orca_time_horizon_s`, `heading_gain`.
+        config: planner settings: `safety.d_safety_m`, `threats.sensing_radius_m`,
+            `threats.max_neighbors`, `orca.time_horizon_s`.
         control_period_s: command period: RVO2's time step (used when discs already
             overlap) and the rate limits' dt.
     """
@@ -77,8 +77,8 @@ class OrcaController:
     def __init__(
         self, limits: RobotLimits, config: PlannerConfig, control_period_s: float = 0.1
     ) -> None:
-        if control_period_s <= 0.0 or config.orca_time_horizon_s <= 0.0:
-            raise ValueError("control_period_s and orca_time_horizon_s must be positive")
+        if control_period_s <= 0.0 or config.orca.time_horizon_s <= 0.0:
+            raise ValueError("control_period_s and orca.time_horizon_s must be positive")
         self.limits = limits
         self.config = config
         self.control_period_s = control_period_s
@@ -126,18 +126,19 @@ class OrcaController:
         if not np.all(np.isfinite(values)):
             raise ValueError("non-finite input")
         pref = self.preferred_velocity(position, goal)
-        margin = 0.5 * cfg.d_safety_m
-        horizon = cfg.orca_time_horizon_s
+        margin = 0.5 * cfg.safety.d_safety_m
+        horizon = cfg.orca.time_horizon_s
+        sensing_m, max_neighbors = cfg.threats.sensing_radius_m, cfg.threats.max_neighbors
 
         rel = others.position_m - position  # (K, 2)
         dist = np.hypot(rel[:, 0], rel[:, 1])
-        near = np.flatnonzero(dist <= cfg.sensing_radius_m)
-        near = near[np.argsort(dist[near], kind="stable")][: cfg.max_neighbors]
+        near = np.flatnonzero(dist <= sensing_m)
+        near = near[np.argsort(dist[near], kind="stable")][:max_neighbors]
 
         sim = pyrvo.RVOSimulator(
             self.control_period_s,
-            cfg.sensing_radius_m,
-            cfg.max_neighbors,
+            sensing_m,
+            max_neighbors,
             horizon,
             horizon,
             radius_m + margin,
@@ -145,8 +146,8 @@ class OrcaController:
         )
         me = sim.add_agent(
             (0.0, 0.0),
-            cfg.sensing_radius_m,
-            cfg.max_neighbors,
+            sensing_m,
+            max_neighbors,
             horizon,
             horizon,
             radius_m + margin,
@@ -160,7 +161,7 @@ class OrcaController:
             rel[near].tolist(), others.velocity_mps[near].tolist(), radii, speeds, strict=True
         ):
             # A passive agent: no neighbours of its own, keeps its velocity.
-            sim.add_agent(p, cfg.sensing_radius_m, 0, horizon, horizon, r, max(s, 1e-3), v)
+            sim.add_agent(p, sensing_m, 0, horizon, horizon, r, max(s, 1e-3), v)
         sim.do_step()
         new_v = sim.get_agent_velocity(me)
         v_orca = np.array([new_v.x, new_v.y])
@@ -172,7 +173,7 @@ class OrcaController:
             speed = lim.v_max_mps
 
         direction = float(np.arctan2(v_orca[1], v_orca[0])) if speed > 1e-6 else heading_rad
-        v, omega = heading_law(heading_rad, direction, speed, lim, cfg.heading_gain)
+        v, omega = heading_law(heading_rad, direction, speed, lim, HEADING_GAIN)
         if last_command is not None:
             v, omega = clamp_command(
                 v, omega, lim, last_command[0], last_command[1], self.control_period_s

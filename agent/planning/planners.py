@@ -12,16 +12,18 @@
   half-plane keeps `LATENCY_CLEARANCE_FACTOR` x age x |v_j - v_r| more clearance, the
   distance the pair can close before a command planned now takes effect; with fresh poses
   (an undisturbed lockstep run) nothing changes. Last, the braking guard
-  (`agent.planning.safety`, `MpcConfig.braking_guard`) caps the command's speed so the robot can
-  still stop its own approach to every disc it faces.
+  (`agent.planning.safety`; not in the ``paper`` profile) caps the command's speed so the
+  robot can still stop its own approach to every disc it faces.
 - `orca`: ORCA through `pyrvo` (`agent.planning.orca`) plus a heading controller.
 
 Every planner stops (status ARRIVED) once its centre is within half the goal tolerance of
 the goal: half, so that the world, which judges arrival on ground truth at the full
 tolerance, agrees even when the robot's own pose estimate is slightly off.
 
-Planners keep only the memory the method needs (side per threat for eIFP, the MPC's warm
-start); for the same sequence of inputs they return the same decisions. Stage timings are
+Which of this project's additions a planner runs follows from its name and the
+configuration's profile (`agent.planning.ifp.mechanisms`). Planners keep only the memory
+the method needs (side per threat and the threats resolved last cycle for eIFP, the MPC's
+warm start); for the same sequence of inputs they return the same decisions. Stage timings are
 wall time from an injected `timer` (default `time.perf_counter`); they are the only
 non-deterministic output and never influence a decision.
 """
@@ -38,6 +40,7 @@ import numpy as np
 
 from agent.core.config import PLANNER_NAMES, PlannerConfig
 from agent.core.types import Observation, PlanDebug, PlanResult, PlanStatus, Side, StageTimes
+from agent.planning.estimation import ESTIMATION_WINDOW_S
 from agent.planning.safety import (
     braking_speed_limit,
     heading_sweep_rad,
@@ -66,22 +69,17 @@ RECENT_SPEED_MAX_AGE_S = 0.05
 """The braking guard reads the others' recent speeds (`Others.recent_speed_mps`) only from
 poses at most this old; from older ones it keeps the blind bound. The recent-speed bound
 assumes every robot changes speed at most at accel_max, which holds while links are
-healthy. A slow or lossy link breaks it: the world brakes a robot whose command outlived
-its hold and resumes its next command at once (`world.sim.dynamics`), and such a robot's
-speed jumps. Measured (distributed, setup G at 100 +- 30 ms with 10 % loss, stop 16's
-machine): read at every age, 3 of 10 runs touched, one of them a follower into a braking
-leader; the blind bound, 3 of 10 on the same machine. So the gate is not shown to be
-needed, but it keeps the speed terms of every run with a delayed link those of the code
-whose safety envelope was measured (docs/faults.md). Poses are fresh (age 0)
-in an undisturbed lockstep run and a few ms old in a healthy distributed one.
+healthy; on a slow or lossy link the world brakes a robot whose command outlived its hold
+and resumes its next command at once (`world.sim.dynamics`), so its speed can jump. Poses
+are fresh (age 0) in an undisturbed lockstep run and a few ms old in a healthy
+distributed one.
 
-The same age switches the guard's turn allowances on. From poses older than this the
-robot's own heading is swept on through its stop, not only over the reaction time, and
-an other turning towards the robot counts as closing as much faster than its estimate
-shows as its observed turn rate makes it (`agent.planning.safety.unseen_turn_closing_mps`). With
-fresh poses both are left out: no run without link faults has touched, and each cost
-setup G oscillations without faults (the sweep 7.7 -> 9.3 per robot, reading the heading
-instead of the estimate's direction 7.2 -> 10.1; stops 14 and 15)."""
+The same age switches the guard's turn allowances on: from poses older than this the
+robot's own heading is swept on through its stop, not only over the reaction time, and an
+other turning towards the robot counts as closing as much faster than its estimate shows
+as its observed turn rate makes it (`agent.planning.safety.unseen_turn_closing_mps`). With
+fresh poses the estimates are current and both are left out: they only slow the robot in
+crowds where nothing is hidden by delay."""
 
 
 class Planner(Protocol):
@@ -130,7 +128,7 @@ class ViaPointPlanner:
                  control_period_s: float = CONTROL_PERIOD_S,
                  timer: Timer = time.perf_counter) -> None:
         from agent.planning.eifp import EifpSelector
-        from agent.planning.ifp import PAPER_RULES, CycleRules, plan_ifp
+        from agent.planning.ifp import mechanisms, plan_ifp
 
         if name not in ("ifp", "eifp", "eifp-mpc"):
             raise ValueError(f"not a via-point planner: {name!r}")
@@ -138,10 +136,8 @@ class ViaPointPlanner:
         self.config = config
         self.control_period_s = control_period_s
         self._timer = timer
-        # eIFP-MPC's changes to the cycle (threats inside L, via-point margin, escape
-        # hysteresis, head-on hold): measured on eIFP-MPC only; eifp keeps the paper's cycle.
-        rules = CycleRules.from_config(config) if name == "eifp-mpc" else PAPER_RULES
-        self._selector = EifpSelector(config, rules) if name != "ifp" else None
+        self.mech = mechanisms(name, config)
+        self._selector = EifpSelector(config, self.mech) if name != "ifp" else None
         self._plan_ifp = plan_ifp
         self._trackers: dict[object, object] = {}
 
@@ -153,19 +149,20 @@ class ViaPointPlanner:
             tracker.reset()  # type: ignore[attr-defined]
 
     def _mpc(self, observation: Observation):
-        from agent.planning.mpc import MpcTracker
+        from agent.planning.mpc import DEFAULT_TUNING, PAPER_TUNING, MpcTracker
 
         key = observation.limits
         tracker = self._trackers.get(key)
         if tracker is None:
-            tracker = MpcTracker(observation.limits, self.config.mpc)
+            tuning = PAPER_TUNING if self.config.is_paper else DEFAULT_TUNING
+            tracker = MpcTracker(observation.limits, self.config.mpc, tuning)
             self._trackers[key] = tracker
         return tracker
 
     def plan(self, observation: Observation, now_s: float) -> PlanResult:
         """One cycle: threats and via-points, spline, then MPC or the tracking law."""
-        from agent.planning.spline import build_reference
-        from agent.planning.unicycle import track_reference
+        from agent.planning.spline import START_RADIUS_M, build_reference
+        from agent.planning.unicycle import HEADING_GAIN, LOOKAHEAD_S, track_reference
 
         clock = self._timer
         t0 = clock()
@@ -180,7 +177,7 @@ class ViaPointPlanner:
         # Bound the work: the others within the sensing radius, at most max_neighbors,
         # selected once per cycle for the via-points and the MPC alike.
         near = nearby_others(np.array([ego.x_m, ego.y_m]), observation.others,
-                             cfg.sensing_radius_m, cfg.max_neighbors)
+                             cfg.threats.sensing_radius_m, cfg.threats.max_neighbors)
         if near is not observation.others:
             observation = observation.with_others(near)
         if self._selector is None:
@@ -188,19 +185,15 @@ class ViaPointPlanner:
         else:
             via = self._selector.select(observation, clock)
         t1 = clock()
-        mpc_cfg = cfg.mpc
+        mpc_cfg, mech = cfg.mpc, self.mech
+        moving = ego.v_mps >= CLAMP_MIN_SPEED_MPS
         ref = build_reference(
             via.waypoints_m, ego.heading_rad, limits.v_max_mps, limits.accel_max_mps2,
             mpc_cfg.dt_s, mpc_cfg.horizon_steps, v_start_mps=ego.v_mps,
-            clamp_heading=cfg.spline_clamp_heading and ego.v_mps >= CLAMP_MIN_SPEED_MPS,
-            first_leg_segments=cfg.spline_first_leg_segments,
-            # eIFP-MPC only: the tracking law of eifp and ifp cuts the arcs' corners into
-            # contact (stop 22, lockstep, 5 cm jitter, seeds 0-2, runs with contact on the
-            # lines and arcs / on the spline: eifp E 3/3 / 0, F 1/3 / 0, G 2/3 / 0; ifp
-            # B, C, D 2/3 each / 0, F 3/3 / 2/3, G 3/3 / 3/3), so they keep the spline.
-            lines_arcs=cfg.reference_lines_arcs and self.name == "eifp-mpc",
-            corner_radius_m=cfg.path_corner_radius_m,
-            start_radius_m=cfg.path_start_radius_m if ego.v_mps >= CLAMP_MIN_SPEED_MPS else 0.0,
+            clamp_heading=mech.clamp_heading and moving,
+            lines_arcs=mech.lines_arcs,
+            corner_radius_m=cfg.reference.corner_radius_m,
+            start_radius_m=START_RADIUS_M if moving else 0.0,
         )
         t2 = clock()
         last = np.array([ego.v_mps, ego.omega_radps])
@@ -216,13 +209,13 @@ class ViaPointPlanner:
             predicted = res
             if res.status != PlanStatus.OK:
                 status = res.status
-            if mpc_cfg.braking_guard and len(observation.others):
+            if mech.braking_guard and len(observation.others):
                 v = self._braking_guard(observation, v, omega)
         else:
             v, omega = track_reference(
                 ego.x_m, ego.y_m, ego.heading_rad, ref.x_m, ref.y_m,
                 float(ref.v_mps[min(1, ref.n_steps)]),
-                max(cfg.lookahead_s * limits.v_max_mps, 0.3), limits, cfg.heading_gain,
+                max(LOOKAHEAD_S * limits.v_max_mps, 0.3), limits, HEADING_GAIN,
                 last_command=last, dt_s=self.control_period_s,
             )
         t3 = clock()
@@ -264,7 +257,7 @@ class ViaPointPlanner:
         ego, limits, others = observation.ego, observation.limits, observation.others
         reaction_s = observation.pose_age_s + self.control_period_s
         # how much an other robot's velocity estimate may trail its velocity now
-        lag_s = 0.5 * self.config.estimation_window_s + observation.pose_age_s
+        lag_s = 0.5 * ESTIMATION_WINDOW_S + observation.pose_age_s
 
         fresh = observation.pose_age_s <= RECENT_SPEED_MAX_AGE_S
         # the headings the robot sweeps before it stands: up to when a braking command can
@@ -277,7 +270,7 @@ class ViaPointPlanner:
                 (ego.x_m, ego.y_m), ego.heading_rad, observation.radius_m,
                 others.position_m, others.velocity_mps, others.radius_m,
                 reaction_s=reaction_s, decel_mps2=limits.accel_max_mps2,
-                margin_m=self.config.mpc.braking_margin_m,
+                margin_m=self.config.safety.braking_margin_m,
                 sweep_rad=heading_sweep_rad(omega_radps, turning_s), up_to_mps=v_mps,
                 unseen_dv_mps=unseen_dv,
             )

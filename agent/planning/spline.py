@@ -1,8 +1,8 @@
 """The time-parametrised reference through the waypoints (trajectory smoothing).
 
 Two paths (`build_reference`): `LineArcPath`, the waypoint legs joined by arcs (our
-change, the planners' default, `PlannerConfig.reference_lines_arcs`), and the paper's
-cubic spline, described here.
+change, eIFP-MPC's default, `agent.planning.ifp.Mechanisms.lines_arcs`), and the paper's
+cubic spline (Eq. 19), described here.
 
 The paper fits cubic splines S_x(t), S_y(t) through the waypoints with t in [0, 1]. We
 parametrise by cumulative chord length u instead (u_0 = 0, u_i = u_{i-1} + |p_i - p_{i-1}|):
@@ -41,6 +41,11 @@ from agent.planning.threats import require_finite
 # (an emergency, or a new threat) starts natural so the robot turns at once.
 CLAMP_MAX_OFF_HEADING_RAD = math.radians(30.0)
 CLAMP_MAX_COS = math.cos(CLAMP_MAX_OFF_HEADING_RAD)
+
+START_RADIUS_M = 5.0
+"""Radius of `LineArcPath`'s start arc along the robot's heading [m]: gentle enough that a
+via-point that moves a little between cycles bends the path ahead of the robot (a lateral
+offset of 0.1 m over the first 1-2 m) instead of swinging the reference under it."""
 
 # Consecutive waypoints closer than this are merged [m].
 MIN_WAYPOINT_SPACING_M = 1.0e-3
@@ -269,8 +274,8 @@ def distance_profile(
 class LineArcPath:
     """The waypoint polyline with its corners rounded by circular arcs (lines and arcs).
 
-    Our alternative to the paper's cubic spline (`PlannerConfig.reference_lines_arcs`, the
-    default). A via-point is built for a robot that drives the straight leg to it (the
+    Our alternative to the paper's cubic spline (`agent.planning.ifp.Mechanisms.lines_arcs`,
+    eIFP-MPC's default). A via-point is built for a robot that drives the straight leg to it (the
     tangent to the other's inflated disc, reached at the cone time; `agent.planning.viapoints`);
     a cubic spline through robot, via-point and goal bows off that leg and turns along
     the whole of it. Here the reference runs along the legs and turns only where they
@@ -384,31 +389,6 @@ class LineArcPath:
         return self._p0[k] + u0 * along, np.angle(u0) + kappa * sigma
 
 
-def split_first_leg(waypoints_m: np.ndarray, segments: int) -> np.ndarray:
-    """`waypoints_m` with `segments - 1` knots spaced evenly between the first two points.
-
-    Why (not in the paper, which splines the waypoints alone): a via-point is built for a
-    robot that travels the straight leg to it (the tangent to the other's inflated disc,
-    reached at the cone time; `agent.planning.viapoints`). A natural or clamped cubic spline
-    through robot, via-point and goal bows away from that leg, the robot follows the bow,
-    and next cycle's via-point, built from where the bow took it, has moved. Knots along
-    the leg keep the reference on it up to the via-point, where it turns.
-
-    Args:
-        waypoints_m: (M, 2) waypoints, M >= 2 [m].
-        segments: number of equal parts of the first leg (>= 1).
-
-    Returns:
-        (M + segments - 1, 2) waypoints.
-    """
-    if segments < 1:
-        raise ValueError(f"segments: must be >= 1, got {segments!r}")
-    start, via = waypoints_m[0], waypoints_m[1]
-    fractions = np.arange(1, segments)[:, None] / segments
-    inner = start + fractions * (via - start)
-    return np.concatenate((waypoints_m[:1], inner, waypoints_m[1:]))
-
-
 def build_reference(
     waypoints_m: np.ndarray,
     heading_rad: float,
@@ -419,10 +399,9 @@ def build_reference(
     v_start_mps: float | None = None,
     min_spacing_m: float = MIN_WAYPOINT_SPACING_M,
     clamp_heading: bool = False,
-    first_leg_segments: int = 1,
     lines_arcs: bool = False,
     corner_radius_m: float = 1.0,
-    start_radius_m: float = 5.0,
+    start_radius_m: float = START_RADIUS_M,
 ) -> Reference:
     """Spline the waypoints and sample it every dt_s at the speed profile.
 
@@ -441,15 +420,11 @@ def build_reference(
         clamp_heading: start the spline along `heading_rad` (clamped start) when there are
             via-points (M >= 3) and the first one is within `CLAMP_MAX_OFF_HEADING_RAD` of
             the heading; otherwise (and for a two-point plan, a straight line) natural.
-        first_leg_segments: with via-points (M >= 3), cut the first leg (robot to first
-            via-point) into this many equal parts by extra knots, so the spline runs
-            nearly straight along it (`split_first_leg`); 1 leaves the waypoints as they are.
         lines_arcs: with via-points (M >= 3), the reference follows `LineArcPath` (legs
-            joined by arcs) instead of the cubic spline; `clamp_heading` and
-            `first_leg_segments` then do not apply. Its `omega_radps` is 0: the arcs place
-            positions and headings, and the tracker turns as much as their errors ask for
-            (a turn-rate feed-forward along the arcs made the dense crossings weave more;
-            `PlannerConfig.reference_lines_arcs`).
+            joined by arcs) instead of the cubic spline; `clamp_heading` then does not
+            apply. Its `omega_radps` is 0: the arcs place positions and headings, and the
+            tracker turns as much as their errors ask for (a turn-rate feed-forward along
+            the arcs turns the robot early on every re-planned corner).
         corner_radius_m: `LineArcPath` corner radius [m] (>= 0).
         start_radius_m: `LineArcPath` start arc radius, 0 for none [m] (>= 0).
 
@@ -472,8 +447,6 @@ def build_reference(
         if corner_radius_m < 0.0 or start_radius_m < 0.0:
             raise ValueError("build_reference: corner and start radii must be >= 0")
     wp = dedup_waypoints(wp, min_spacing_m)
-    if first_leg_segments > 1 and wp.shape[0] >= 3 and not lines_arcs:
-        wp = split_first_leg(wp, first_leg_segments)
     t = np.arange(horizon_steps + 1) * dt_s
     if wp.shape[0] == 1:
         zeros = np.zeros_like(t)

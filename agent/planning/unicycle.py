@@ -16,6 +16,15 @@ import numpy as np
 
 from agent.core.config import RobotLimits
 
+LOOKAHEAD_S = 0.6
+"""The tracking law of ifp, eifp (`track_reference`) aims this far ahead on the reference, at
+top speed [s]: about the time a heading error takes to decay at `HEADING_GAIN`, so the
+robot aims where it can be on the path once it has turned."""
+
+HEADING_GAIN = 2.5
+"""Proportional gain of the tracking and heading laws on heading error [1/s] (ifp, eifp,
+orca): a 0.6 rad error commands the full 1.5 rad/s turn rate."""
+
 
 def wrap_angle(angle_rad: float | np.ndarray) -> float | np.ndarray:
     """Map angles to [-pi, pi).

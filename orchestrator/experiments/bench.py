@@ -46,6 +46,7 @@ import numpy as np
 
 from agent.core.scenario import Scenario
 from agent.core.types import PlanStatus, PoseSnapshot, StageTimes
+from agent.planning.mpc import DEFAULT_TUNING
 from orchestrator.experiments.families import (
     MIN_START_SPACING_M,
     circle,
@@ -119,7 +120,7 @@ def bench_scenario(n: int, planner: str) -> Scenario:
     base = with_planner(circle(n), planner)
     old_radius_m = math.hypot(*base.robots[0].start[:2])
     radius_m = max(SPACING_M / (2.0 * math.sin(math.pi / n)),
-                   base.planner_config.sensing_radius_m / 2.0)
+                   base.planner_config.threats.sensing_radius_m / 2.0)
     scale = radius_m / old_radius_m
     robots = tuple(
         dataclasses.replace(r, start=(r.start[0] * scale, r.start[1] * scale, r.start[2]),
@@ -192,7 +193,7 @@ def run_bench(planner: str, n: int, cycles: int, seed: int = 0) -> BenchSamples:
         out.episodes += 1
         for round_ in range(max_rounds):
             snapshot = world.snapshot()
-            in_range = _in_range(snapshot, cfg.sensing_radius_m)
+            in_range = _in_range(snapshot, cfg.threats.sensing_radius_m)
             timed = round_ >= WARMUP_ROUNDS
             for k, ctrl in enumerate(controllers):
                 ctrl.observe(snapshot)
@@ -205,7 +206,7 @@ def run_bench(planner: str, n: int, cycles: int, seed: int = 0) -> BenchSamples:
                 elif result.status in EXCLUDED_STATUSES:
                     out.excluded[str(result.status.value)] += 1
                 elif len(out) < cycles:
-                    out.add(elapsed_ms, result.times, int(in_range[k]), cfg.max_neighbors,
+                    out.add(elapsed_ms, result.times, int(in_range[k]), cfg.threats.max_neighbors,
                             str(result.status.value), result.solver_iterations)
             for _ in range(ticks_per_round):
                 world.step(dt_s)
@@ -240,13 +241,13 @@ def summarize(planner: str, n: int, samples: BenchSamples, *, seed: int, wall_s:
         "neighbors_in_range_mean": float(np.mean(samples.in_range)) if len(samples)
         else math.nan,
         "neighbors_in_range_max": int(max(samples.in_range, default=0)),
-        "max_neighbors": cfg.max_neighbors,
-        "sensing_radius_m": cfg.sensing_radius_m,
+        "max_neighbors": cfg.threats.max_neighbors,
+        "sensing_radius_m": cfg.threats.sensing_radius_m,
         "excluded": int(sum(samples.excluded.values())),
         "excluded_statuses": dict(sorted(samples.excluded.items())),
         "warmup_cycles": samples.warmup,
         "statuses": dict(sorted(samples.statuses.items())),
-        **_iteration_figures(samples.solver_iterations, cfg.mpc.max_iter),
+        **_iteration_figures(samples.solver_iterations, DEFAULT_TUNING.max_iter),
         "episodes": samples.episodes,
         "passed_centre": samples.passed_centre,
         "contacts": samples.contacts,

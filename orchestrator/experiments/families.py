@@ -20,7 +20,13 @@ from pathlib import Path
 
 import numpy as np
 
-from agent.core.config import PLANNER_NAMES, PlannerConfig, RobotLimits, profile_config
+from agent.core.config import (
+    PLANNER_NAMES,
+    PlannerConfig,
+    RobotLimits,
+    SafetyConfig,
+    profile_config,
+)
 from agent.core.scenario import ObstacleSpec, RobotSpec, Scenario
 from protocol import MAX_ROBOTS
 from world.scenario_file import ScenarioError, load_scenario, validate_scenario
@@ -116,7 +122,7 @@ def _scenario(name: str, description: str, robots: Sequence[RobotSpec], *,
         description=description,
         time_limit_s=float(limit),
         goal_tolerance_m=0.25,
-        planner_config=PlannerConfig(d_safety_m=D_SAFETY_M),
+        planner_config=PlannerConfig(safety=SafetyConfig(d_safety_m=D_SAFETY_M)),
         robots=tuple(robots),
         obstacles=tuple(obstacles),
     )

@@ -406,7 +406,7 @@ def test_after_its_own_suspension_a_robot_waits_the_longer_rejoin_grace(monkeypa
 
 
 def test_a_configuration_out_of_range_is_refused_and_named_at_start_up() -> None:
-    # The world's reply carries command_hold_periods = -1 (typed right, out of range): the
+    # The world's reply carries threats.t_max_s = -1 (typed right, out of range): the
     # robot must not build a controller from it, and leaves at its start-up deadline naming
     # the field. A fake session stands in for Zenoh: fetch_config only calls get().
     import time
@@ -423,7 +423,7 @@ def test_a_configuration_out_of_range_is_refused_and_named_at_start_up() -> None
                         world_rate_hz=50.0, time_scale=1.0, time_limit_s=60.0,
                         cmd_timeout_s=0.5, known_ids=(3,))
     body = msgpack.unpackb(good.encode())
-    body["planner"]["command_hold_periods"] = -1.0
+    body["planner"]["threats"]["t_max_s"] = -1.0
     payload = msgpack.packb(body, use_bin_type=True)
     reply = SimpleNamespace(ok=SimpleNamespace(
         payload=SimpleNamespace(to_bytes=lambda: payload)), err=None)
@@ -433,14 +433,14 @@ def test_a_configuration_out_of_range_is_refused_and_named_at_start_up() -> None
         node.fetch_config(session, RunKeys("r1"), 3, StopFlag(),
                           deadline=time.monotonic() + 0.25)
     assert caught.value.code == ExitCode.BAD_INPUT
-    assert "config.planner: command_hold_periods: must be > 0" in caught.value.reason
+    assert "config.planner.threats: t_max_s: must be > 0" in caught.value.reason
     assert asked  # it did ask, and kept asking until the deadline
     # the same reply with the field in range is taken
-    body["planner"]["command_hold_periods"] = 1.5
+    body["planner"]["threats"]["t_max_s"] = 6.0
     payload = msgpack.packb(body, use_bin_type=True)
     got = node.fetch_config(session, RunKeys("r1"), 3, StopFlag(),
                             deadline=time.monotonic() + 1.0)
-    assert got.planner.command_hold_periods == 1.5
+    assert got.planner.threats.t_max_s == 6.0
 
 
 def _burn(cpu_s: float) -> None:

@@ -74,18 +74,20 @@ def test_control_rate_must_divide_the_world_rate(tmp_path):
 
 
 @pytest.mark.parametrize("planner", ["eifp", "eifp-mpc"])
-def test_encounter_rules_break_the_mirror_symmetry_of_setup_a(tmp_path, planner):
+def test_encounter_rules_break_the_mirror_symmetry_of_setup_a(tmp_path, planner, monkeypatch):
     # Setup A is mirrored across the x axis: with the paper's cost alone the two robots see
     # mirrored costs, pick mirrored (incompatible) sides and run side by side; with the
     # shared give-way convention one gives way and both go nearly straight.
     from dataclasses import replace
 
+    import agent.planning.ifp as ifp
     from orchestrator.experiments.families import resolve
 
     base = resolve("setup_a", planner=planner)
     on = run_lockstep(base, tmp_path / "on").metrics
-    off_cfg = replace(base.planner_config, encounter_rules=False)
-    off = run_lockstep(replace(base, planner_config=off_cfg), tmp_path / "off").metrics
+    for name in ("EIFP_MECHANISMS", "EIFP_MPC_MECHANISMS"):
+        monkeypatch.setattr(ifp, name, replace(getattr(ifp, name), encounter_rules=False))
+    off = run_lockstep(base, tmp_path / "off").metrics
     assert on.success and on.contacts == 0
     assert on.path_ratio_mean < 1.03 and on.oscillations_per_robot <= 2
     # Without the rules: the dance, a clearly longer path or no arrival at all.
@@ -130,13 +132,14 @@ def test_lost_commands_give_way_to_braking_after_their_hold(tmp_path):
     # Half of all messages lost: a command not followed within 1.5 periods brakes the robot
     # (the end event counts it); a hold of 100 periods (longer than the 0.5 s time-out)
     # turns that off, and the robot keeps driving on its last command instead.
-    import dataclasses
+
+    import agent.planning.controller
 
     def run(hold_periods: float, name: str) -> tuple[dict, list[float]]:
-        lanes = two_lanes()
-        scenario = dataclasses.replace(lanes, planner_config=PlannerConfig(
-            command_hold_periods=hold_periods))
-        out = run_lockstep(scenario, tmp_path / name, faults=build_plan(drop=0.5, seed=1))
+        with pytest.MonkeyPatch.context() as patch:
+            patch.setattr(agent.planning.controller, "COMMAND_HOLD_PERIODS", hold_periods)
+            out = run_lockstep(two_lanes(), tmp_path / name,
+                               faults=build_plan(drop=0.5, seed=1))
         assert out.success, out.metrics
         end = events_of(tmp_path / name)[-1]
         rows = (tmp_path / name / "trajectory.csv").read_text().splitlines()
@@ -184,38 +187,30 @@ def test_latency_compensation_makes_a_measurable_difference(tmp_path):
     print(f"ego error {err_on:.3f} vs {err_off:.3f} m, min gap {gap_on:.3f} vs {gap_off:.3f} m")
 
 
-def stop23_cycle(cfg):
-    """`cfg` with eIFP-MPC's stop-24 and stop-25 cycle rules off (the paper's threat test,
-    via-point margin, escape, no cap on lambda* and no primary fallback).
-
-    The two ablations below were measured on that cycle. With the stop-24 rules on
-    (via-points 0.3 m out of the discs) setup D keeps clear at these latencies without the
-    feature under test too (150 ms, link seed 2: +0.07 m with the half-planes' latency term
-    off; 200 ms, link seeds 8 and 7: +0.14 m without the braking guard, and none of the
-    three cases touched), so they would no longer show what the feature does."""
+def without_cycle_mechanisms(monkeypatch, **more):
+    """eIFP-MPC with the paper's threat test, via-point margin and escape, no commitment and
+    no horizon on via-points (`more`: further `Mechanisms` fields). The ablations below
+    isolate one safety feature; with those mechanisms on, setup D keeps clear at these
+    latencies without the feature under test too, so they would not show what it does."""
     from dataclasses import replace
 
-    return replace(cfg, threats_within_inflated=False, threat_release_margin_m=0.0,
-                   via_margin_m=0.05, escape_hysteresis_m=0.0, head_on_hold_s=0.0,
-                   via_time_max_s=None, primary_fallback=False)
+    import agent.planning.ifp as ifp
+
+    monkeypatch.setattr(ifp, "EIFP_MPC_MECHANISMS", replace(
+        ifp.EIFP_MPC_MECHANISMS, inflated_threats=False, commitment=False,
+        via_margin_m=ifp.VIA_MARGIN_M, escape_band_m=0.0, horizon_via_points=False, **more))
 
 
 def test_latency_aware_half_planes_keep_setup_d_clear_at_150_ms(tmp_path, monkeypatch):
     # 150 ms +- 45 ms on both links of setup D, link seed 2: with the half-planes' clearance
-    # at its fault-free value the robots touch (measured min gap -0.09 m; 5 of seeds 0-9
-    # touch), with 2 x pose age x relative speed on top they keep clear (+0.27 m; 0 of 10).
-    # Figures of stop 18 (slack weight 1e3); with 1e4 it was link seed 8 (-0.15 / +0.30 m,
-    # 8 of 10 touching), which now keeps clear either way (+0.07 / +0.32 m): a run at this
-    # level is chaotic. The braking guard is off here to isolate the half-planes.
-    from dataclasses import replace
-
+    # at its fault-free value the robots touch, with 2 x pose age x relative speed on top
+    # they keep clear. A run at this level is chaotic. The braking guard is off here to
+    # isolate the half-planes.
     import agent.planning.planners
     from orchestrator.experiments.families import resolve
 
     scenario = resolve("setup_d", agents=None, seed=2, start_jitter_m=0.0, planner=None)
-    cfg = stop23_cycle(scenario.planner_config)
-    scenario = replace(scenario, planner_config=replace(
-        cfg, mpc=replace(cfg.mpc, braking_guard=False)))
+    without_cycle_mechanisms(monkeypatch, braking_guard=False)
     faults = build_plan(latency_ms=150, jitter_ms=45, seed=2)
     gaps = {}
     for factor in (0.0, agent.planning.planners.LATENCY_CLEARANCE_FACTOR):
@@ -228,62 +223,38 @@ def test_latency_aware_half_planes_keep_setup_d_clear_at_150_ms(tmp_path, monkey
 
 
 def test_braking_guard_keeps_setup_g_clear_at_100_ms_with_loss(tmp_path):
-    # 100 ms +- 30 ms on both links of setup G with 10 % loss, link seed 3. On the machine
-    # of stop 12 the run without the guard touched (-0.21 m: a robot squeezed between a
-    # stopped neighbour and an approaching one accelerated into the stopped one) and the
-    # guarded one kept clear (+0.12 m). A run at this level is chaotic: on the machine of
-    # stop 13 (another CPU, a fresh install of numpy 2.4.6 / scipy 1.17.1 / osqp 1.1.3) the
-    # same code's unguarded run kept clear too (+0.07 m), so only the guarded run is
-    # asserted here (+0.10 m with the unseen speed-up term; +0.0496 m with the command hold
-    # and the braking term of stop 15, so the bar is "clear", not the guard's 5 cm margin,
-    # which latency may eat into). The cap itself is tested step by step in
-    # tests/agent/test_safety.py.
-
+    # 100 ms +- 30 ms on both links of setup G with 10 % loss, link seed 3: a robot squeezed
+    # between a stopped neighbour and an approaching one must not accelerate into the
+    # stopped one. A run at this level is chaotic, so the bar is "clear", not the guard's
+    # 5 cm margin, which latency may eat into. The cap itself is tested step by step in
+    # tests/unit/agent/planning/test_safety.py.
+    from agent.planning.ifp import EIFP_MPC_MECHANISMS
     from orchestrator.experiments.families import resolve
 
     scenario = resolve("setup_g", agents=None, seed=3, start_jitter_m=0.0, planner=None)
     faults = build_plan(latency_ms=100, jitter_ms=30, drop=0.1, seed=3)
-    cfg = scenario.planner_config
-    assert cfg.mpc.braking_guard  # on by default
+    assert EIFP_MPC_MECHANISMS.braking_guard  # on by default
     out = run_lockstep(scenario, tmp_path / "run", faults=faults)
     assert out.metrics.contacts == 0 and out.metrics.min_gap_m > 0.0, out.metrics.min_gap_m
     assert out.metrics.success
 
 
-def test_braking_guard_makes_the_difference_in_setup_d_at_200_and_250_ms(tmp_path):
-    # Setup D (four robots), latency 200 +- 60 ms and 250 +- 75 ms per link, no loss. With
-    # the guard off, link seed 2 at 200 ms touched (-0.32 m) on the machine of stop 14, and
-    # seeds 2 and 7 at 250 ms (-0.10, -0.05 m; 3 of the 20 runs at 200 and 250 ms); with it
-    # on, all 20 kept clear, these three by +0.36, +0.11 and +0.29 m. Since commands carry
-    # a hold (the world brakes a robot whose next command is late instead of applying the
-    # last one until its time-out) fewer unguarded runs touch: of the 20, only seed 2 at
-    # 200 ms (-0.04 m; guarded +0.18 m; the other two +0.38 / +0.34 and +0.41 / +0.51 m).
-    # With the slack weight of stop 18 (1e3 instead of 1e4) those three keep clear
-    # unguarded too; of link seeds 0-9 at 200 and 250 ms, seed 7 at 200 ms (-0.09 m) and
-    # seed 1 at 250 ms (-0.15 m) touch unguarded, and all 20 keep clear guarded (these two
-    # by +0.25 and +0.27 m). With the 0.75 s estimation window of stop 20, of link seeds 0-9
-    # at 200 and 250 ms five touch unguarded (200 ms: seeds 2, 6; 250 ms: seeds 0, 5, 6;
-    # down to -0.52 m) and all 20 keep clear guarded (at least +0.084 m). With the
-    # lines-and-arcs reference of stop 22, of the same 20 one touches unguarded (200 ms,
-    # seed 8: -0.25 m; the closest other +0.071 m, seed 7 at 200 ms; `orchestrator stress`
-    # on setup D with `mpc: {braking_guard: false}`, `--sweep latency_ms=200,250 --seeds
-    # 10`). A run at this level is chaotic (another CPU or numerics build moves it), so the
-    # test asks for what the guard is for over three cases: the unguarded runs touch in at
-    # least one, the guarded ones in none.
-    from dataclasses import replace
-
+def test_braking_guard_makes_the_difference_in_setup_d_at_200_and_250_ms(tmp_path,
+                                                                          monkeypatch):
+    # Setup D (four robots), latency 200 +- 60 ms and 250 +- 75 ms per link, no loss, with
+    # the cycle mechanisms off (`without_cycle_mechanisms`). A run at this level is chaotic
+    # (another CPU or numerics build moves it), so the test asks for what the guard is for
+    # over three cases: the unguarded runs touch in at least one, the guarded ones in none.
     from orchestrator.experiments.families import resolve
 
     results = {}
     for latency_ms, seed in ((200, 8), (200, 7), (250, 0)):
         scenario = resolve("setup_d", agents=None, seed=seed, start_jitter_m=0.0, planner=None)
-        cfg = stop23_cycle(scenario.planner_config)
-        assert cfg.mpc.braking_guard  # on by default
         faults = build_plan(latency_ms=latency_ms, jitter_ms=0.3 * latency_ms, seed=seed)
         for guard in (False, True):
-            s = replace(scenario, planner_config=replace(
-                cfg, mpc=replace(cfg.mpc, braking_guard=guard)))
-            out = run_lockstep(s, tmp_path / f"{latency_ms}-{seed}-{guard}", faults=faults)
+            without_cycle_mechanisms(monkeypatch, braking_guard=guard)
+            out = run_lockstep(scenario, tmp_path / f"{latency_ms}-{seed}-{guard}",
+                               faults=faults)
             results[latency_ms, seed, guard] = (out.metrics.contacts, out.metrics.min_gap_m)
     off = [v for (_, _, guard), v in results.items() if not guard]
     on = [v for (_, _, guard), v in results.items() if guard]
@@ -356,13 +327,13 @@ def test_dense_circle_with_a_small_neighbour_cap_has_no_contact(tmp_path):
 
     scenario = circle(8)
     cap = 4
-    scenario = dataclasses.replace(scenario, planner_config=dataclasses.replace(
-        scenario.planner_config, max_neighbors=cap))
+    scenario = dataclasses.replace(scenario, planner_config=scenario.planner_config.with_settings(
+        **{"threats.max_neighbors": cap}))
     out = run_lockstep(scenario, tmp_path / "run")
     assert out.metrics.contacts == 0 and out.metrics.success
     assert out.metrics.min_gap_m is not None and out.metrics.min_gap_m > 0.0
     # The cap was binding: at some tick a robot had more than `cap` others in range.
     xy = read_run_dir(tmp_path / "run").trajectory.pose[:, :, :2]
     dist = np.linalg.norm(xy[:, :, None, :] - xy[:, None, :, :], axis=-1)
-    in_range = (dist <= scenario.planner_config.sensing_radius_m).sum(axis=2) - 1
+    in_range = (dist <= scenario.planner_config.threats.sensing_radius_m).sum(axis=2) - 1
     assert in_range.max() > cap

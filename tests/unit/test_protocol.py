@@ -15,7 +15,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import protocol
-from agent.core.config import MpcConfig, PlannerConfig, RobotLimits
+from agent.core.config import SUB_CONFIGS, MpcConfig, PlannerConfig, RobotLimits
 from agent.core.scenario import RobotSpec
 from agent.core.types import PlanDebug, PlanResult, PlanStatus, PoseSnapshot, Side
 from protocol import (
@@ -66,10 +66,11 @@ def make_command(**overrides: object) -> CommandMsg:
 def make_config() -> RunConfigMsg:
     spec = RobotSpec(id=2, start=(-4.0, 0.5, 0.1), goal=(4.0, -0.5), radius_m=0.4,
                      limits=RobotLimits(v_max_mps=0.8, omega_max_radps=1.2), planner="eifp")
-    planner = PlannerConfig(d_safety_m=0.25, d_thresh_m=2.0, ghost_clearance_m=None,
-                            max_neighbors=7, threats_within_inflated=False, via_margin_m=0.2,
-                            head_on_hold_s=1.5, via_time_max_s=None, primary_fallback=False,
-                            mpc=MpcConfig(horizon_steps=15, r_v=0.7))
+    planner = PlannerConfig(mpc=MpcConfig(horizon_steps=15, clearance_margin_m=0.2),
+                            profile="paper").with_settings(**{
+                                "safety.d_safety_m": 0.25, "threats.max_neighbors": 7,
+                                "cost.side_hysteresis": 0.3, "reference.corner_radius_m": 0.5,
+                                "orca.time_horizon_s": 3.0})
     return RunConfigMsg(run_id="run-1", robot=spec, planner=planner, goal_tolerance_m=0.2,
                         control_rate_hz=10.0, world_rate_hz=50.0, time_scale=1.0, time_limit_s=60.0,
                         cmd_timeout_s=0.5, known_ids=(0, 1, 2, -1))
@@ -179,14 +180,15 @@ def test_config_round_trip_rebuilds_nested_dataclasses() -> None:
     back = RunConfigMsg.decode(msg.encode(), expected_run_id="run-1", expected_robot_id=2)
     assert back == msg
     assert isinstance(back.robot, RobotSpec) and isinstance(back.robot.limits, RobotLimits)
-    assert isinstance(back.planner.mpc, MpcConfig)
-    assert back.planner.mpc.horizon_steps == 15 and back.planner.d_thresh_m == 2.0
-    assert back.planner.ghost_clearance_m is None
-    # eIFP-MPC's cycle rules (stop 24) reach a distributed robot as set in the scenario.
-    assert back.planner.threats_within_inflated is False
-    assert back.planner.via_margin_m == 0.2 and back.planner.head_on_hold_s == 1.5
-    # ... and stop 25's (None: no cap on lambda*).
-    assert back.planner.via_time_max_s is None and back.planner.primary_fallback is False
+    for group in SUB_CONFIGS:
+        assert type(getattr(back.planner, group)) is type(getattr(msg.planner, group))
+    assert back.planner.mpc.horizon_steps == 15 and back.planner.mpc.clearance_margin_m == 0.2
+    assert back.planner.safety.d_safety_m == 0.25 and back.planner.threats.max_neighbors == 7
+    assert back.planner.cost.side_hysteresis == 0.3
+    assert back.planner.reference.corner_radius_m == 0.5
+    assert back.planner.orca.time_horizon_s == 3.0
+    # the profile reaches a distributed robot as set in the scenario
+    assert back.planner.profile == "paper" and back.planner.is_paper
     assert back.robot.start == (-4.0, 0.5, 0.1) and back.robot.goal == (4.0, -0.5)
 
 
@@ -204,7 +206,9 @@ def test_config_wire_covers_every_dataclass_field() -> None:
     body = raw(make_config())
     assert set(body["robot"]) == {f.name for f in dataclasses.fields(RobotSpec)}
     assert set(body["planner"]) == {f.name for f in dataclasses.fields(PlannerConfig)}
-    assert set(body["planner"]["mpc"]) == {f.name for f in dataclasses.fields(MpcConfig)}
+    for group in SUB_CONFIGS:
+        sub = getattr(PlannerConfig(), group)
+        assert set(body["planner"][group]) == {f.name for f in dataclasses.fields(sub)}
     assert set(body["robot"]["limits"]) == {f.name for f in dataclasses.fields(RobotLimits)}
 
 
@@ -446,12 +450,13 @@ def test_rejects_non_map_top_level() -> None:
 
 
 @pytest.mark.parametrize(("path", "value", "message"), [
-    (("planner", "command_hold_periods"), -1.0, "command_hold_periods: must be > 0"),
-    (("planner", "sensing_radius_m"), 0.0, "sensing_radius_m: must be > 0"),
-    (("planner", "w_angle"), -0.3, "w_angle: must be >= 0"),
-    (("planner", "max_neighbors"), 0, "max_neighbors: must be > 0"),
-    (("planner", "mpc", "max_iter"), 0, "mpc: max_iter: must be > 0"),
-    (("planner", "mpc", "slack_weight"), -1.0, "slack_weight: must be >= 0"),
+    (("planner", "threats", "t_max_s"), -1.0, "threats: t_max_s: must be > 0"),
+    (("planner", "threats", "sensing_radius_m"), 0.0, "sensing_radius_m: must be > 0"),
+    (("planner", "cost", "w_angle"), -0.3, "cost: w_angle: must be >= 0"),
+    (("planner", "threats", "max_neighbors"), 0, "max_neighbors: must be > 0"),
+    (("planner", "mpc", "horizon_steps"), 0, "mpc: horizon_steps: must be > 0"),
+    (("planner", "safety", "braking_margin_m"), -1.0, "braking_margin_m: must be >= 0"),
+    (("planner", "profile"), "fast", "profile: expected one of default, paper"),
     (("robot", "limits", "accel_max_mps2"), 0.0, "accel_max_mps2: must be > 0"),
     (("robot", "limits", "v_min_mps"), 2.0, "v_min_mps: must be <= v_max_mps"),
 ])
@@ -482,8 +487,13 @@ def test_config_rejects_bad_values() -> None:
         (("robot", "id"), -1),
         (("robot", "start"), [0.0, 0.0]),
         (("robot", "goal"), "here"),
-        (("planner", "max_depth"), 2.5),
-        (("planner", "d_thresh_m"), "none"),
+        (("planner", "reference", "max_depth"), 2.5),
+        (("planner", "reference", "max_depth"), 0),
+        (("planner", "cost", "w_angle"), "none"),
+        (("planner", "cost", "w_angle"), -1.0),
+        (("planner", "profile"), "fast"),
+        (("planner", "profile"), None),
+        (("planner", "safety"), {"d_safety_m": 0.3}),  # a field missing
         (("planner", "mpc", "horizon_steps"), None),
         (("control_rate",), 0.0),
         (("time_scale",), -1.0),

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from agent.core.config import MpcConfig, PlannerConfig, RobotLimits
+from agent.core.config import SUB_CONFIGS, MpcConfig, PlannerConfig, RobotLimits
 from agent.core.scenario import ObstacleSpec, RobotSpec, Scenario
 from world.scenario_file import (
     ScenarioError,
@@ -30,13 +30,15 @@ defaults:
   radius: 0.5
   v_max: 1.1
   omega_max: 1.5
-  d_safety: 0.3
-  t_max: 6
+  safety:
+    d_safety: 0.3
+  threats: {t_max: 6}
+  cost: {w_angle: 1e-1}
   planner: eifp
   mpc:
     horizon_steps: 15
     dt: 0.1
-    slack_weight: 1e4
+    clearance_margin: 0.2
 robots:
   - {id: 0, start: [-10, 0, 0], goal: [10, 0]}
   - id: 1
@@ -78,8 +80,10 @@ def expect_error(path: Path, *fragments: str) -> str:
 def test_good_file_loads_with_defaults_and_overrides(tmp_path):
     s = load_scenario(write(tmp_path, GOOD))
     assert s.name == "good" and s.time_limit_s == 60.0 and s.goal_tolerance_m == 0.3
-    assert s.planner_config.d_safety_m == 0.3 and s.planner_config.t_max_s == 6.0
-    assert s.planner_config.mpc == MpcConfig(horizon_steps=15, dt_s=0.1, slack_weight=1e4)
+    config = s.planner_config
+    assert config.safety.d_safety_m == 0.3 and config.threats.t_max_s == 6.0
+    assert config.cost.w_angle == 0.1 and config.cost.w_length == 1.0  # the rest: defaults
+    assert config.mpc == MpcConfig(horizon_steps=15, dt_s=0.1, clearance_margin_m=0.2)
     r0, r1 = s.robots
     assert r0.start == (-10.0, 0.0, 0.0) and r0.goal == (10.0, 0.0)
     assert r0.radius_m == 0.5 and r0.planner == "eifp"
@@ -114,38 +118,26 @@ def test_file_keys_strip_unit_suffixes():
     assert file_key("max_neighbors") == "max_neighbors"
 
 
-def test_every_planner_and_mpc_field_is_settable(tmp_path):
-    planner = {file_key(f.name): f.name for f in dataclasses.fields(PlannerConfig)}
-    mpc = {file_key(f.name): f.name for f in dataclasses.fields(MpcConfig)}
-    bools = {f.name for f in dataclasses.fields(PlannerConfig) if f.type in (bool, "bool")}
-    defaults = {k: True if planner[k] in bools else 2 if k in ("max_neighbors", "max_depth",
-                                                               "spline_first_leg_segments")
-                else 0.7 for k in planner if k != "mpc"}
-    mpc_bools = {f.name for f in dataclasses.fields(MpcConfig) if f.type in (bool, "bool")}
-    assert mpc_bools  # braking_guard: the bool branch below is exercised
-    defaults["mpc"] = {k: False if mpc[k] in mpc_bools
-                       else 3 if k in ("horizon_steps", "max_constraints", "max_iter",
-                                       "settle_chunk_iter")
-                       else 0.05
-                       for k in mpc}
+def test_every_setting_is_settable(tmp_path):
+    defaults = {}
+    for group in SUB_CONFIGS:
+        sub = getattr(PlannerConfig(), group)
+        defaults[group] = {file_key(f.name): 2 if isinstance(getattr(sub, f.name), int) else 0.7
+                           for f in dataclasses.fields(sub)}
     s = scenario_from_dict({"name": "all", "time_limit": 5, "defaults": defaults,
                             "robots": [{"id": 0, "start": [0, 0, 0], "goal": [2, 0]}]}, "all")
-    for key, name in planner.items():
-        if key != "mpc":
-            assert getattr(s.planner_config, name) == defaults[key]
-    for key, name in mpc.items():
-        assert getattr(s.planner_config.mpc, name) == defaults["mpc"][key]
+    for group in SUB_CONFIGS:
+        sub = getattr(s.planner_config, group)
+        for f in dataclasses.fields(sub):
+            assert getattr(sub, f.name) == defaults[group][file_key(f.name)], (group, f.name)
+            assert getattr(sub, f.name) != getattr(getattr(PlannerConfig(), group), f.name)
 
 
-def test_bool_field_rejects_a_number(tmp_path):
-    with pytest.raises(ScenarioError, match=r"defaults\.threat_commitment: expected true or false"):
-        load_scenario(bad(tmp_path, "  t_max: 6\n", "  t_max: 6\n  threat_commitment: 1\n"))
-
-
-def test_nullable_fields_accept_null(tmp_path):
-    s = load_scenario(bad(tmp_path, "  t_max: 6\n", "  t_max: 6\n  d_thresh: null\n"
-                                                   "  ghost_clearance: 2.0\n"))
-    assert s.planner_config.d_thresh_m is None and s.planner_config.ghost_clearance_m == 2.0
+def test_a_setting_outside_its_sub_config_is_an_unknown_key(tmp_path):
+    expect_error(bad(tmp_path, "  threats: {t_max: 6}\n", "  threats: {t_max: 6}\n  t_max: 6\n"),
+                 "defaults.t_max: unknown key")
+    expect_error(bad(tmp_path, "  cost: {w_angle: 1e-1}\n", "  cost: {t_max: 6}\n"),
+                 "defaults.cost.t_max: unknown key; expected one of side_hysteresis, w_angle")
 
 
 # --- round trip ----------------------------------------------------------------------
@@ -161,7 +153,8 @@ def test_round_trip_through_file(tmp_path):
 def test_round_trip_of_a_scenario_built_in_code(tmp_path):
     s = Scenario(
         name="code", description="x", time_limit_s=12.5, goal_tolerance_m=0.2,
-        planner_config=PlannerConfig(d_thresh_m=3.0, mpc=MpcConfig(r_v=0.1234567890123)),
+        planner_config=PlannerConfig(mpc=MpcConfig(clearance_margin_m=0.1234567890123),
+                                     profile="paper"),
         robots=(
             RobotSpec(0, (0.1, 0.2, 0.30000000000000004), (5.0, 5.0), 0.5,
                       RobotLimits(v_min_mps=-0.2), "ifp"),
@@ -180,7 +173,7 @@ def test_round_trip_of_a_scenario_built_in_code(tmp_path):
 def test_yaml_syntax_error_names_file_and_line(tmp_path):
     path = bad(tmp_path, "  - {id: 0, start: [-10, 0, 0], goal: [10, 0]}",
                "  - {id: 0, start: [-10, 0, 0, goal: [10, 0]}")
-    expect_error(path, "YAML syntax error at line 17")
+    expect_error(path, "YAML syntax error at line 19")
 
 
 def test_duplicate_yaml_key(tmp_path):
@@ -249,14 +242,14 @@ def test_non_finite_inside_a_vector(tmp_path):
     ("time_limit: 60", "time_limit: 0", "time_limit: must be > 0"),
     ("goal_tolerance: 0.3", "goal_tolerance: -1", "goal_tolerance: must be > 0"),
     ("  v_max: 1.1\n", "  v_max: 0\n", "defaults.v_max: must be > 0"),
-    ("  d_safety: 0.3\n", "  d_safety: -0.1\n", "defaults.d_safety: must be >= 0"),
+    ("    d_safety: 0.3\n", "    d_safety: -0.1\n", "defaults.safety.d_safety: must be >= 0"),
     ("    horizon_steps: 15\n", "    horizon_steps: 0\n",
      "defaults.mpc.horizon_steps: must be >= 1"),
     ("    dt: 0.1\n", "    dt: 0.0\n", "defaults.mpc.dt: must be > 0"),
-    ("  d_safety: 0.3\n", "  d_safety: 0.3\n  spline_first_leg_segments: 0\n",
-     "defaults.spline_first_leg_segments: must be >= 1"),
-    ("  d_safety: 0.3\n", "  d_safety: 0.3\n  path_corner_radius: -1\n",
-     "defaults.path_corner_radius: must be >= 0"),
+    ("  cost: {w_angle: 1e-1}\n", "  reference: {max_depth: 0}\n",
+     "defaults.reference.max_depth: must be >= 1"),
+    ("  cost: {w_angle: 1e-1}\n", "  reference: {corner_radius: -1}\n",
+     "defaults.reference.corner_radius: must be >= 0"),
 ])
 def test_zero_or_negative_sizes(tmp_path, old, new, field):
     expect_error(bad(tmp_path, old, new), field)
@@ -269,7 +262,7 @@ def test_v_min_above_v_max(tmp_path):
 
 @pytest.mark.parametrize(("old", "new", "field"), [
     ("description: two robots", "description: two robots\nrobot: []", "robot: unknown key"),
-    ("  d_safety: 0.3\n", "  d_safety_m: 0.3\n", "defaults.d_safety_m: unknown key"),
+    ("    d_safety: 0.3\n", "    d_safety_m: 0.3\n", "defaults.safety.d_safety_m: unknown key"),
     ("    dt: 0.1\n", "    dt_s: 0.1\n", "defaults.mpc.dt_s: unknown key"),
     ("    planner: orca\n", "    planner: orca\n    colour: red\n",
      "robots[1].colour: unknown key"),
@@ -303,9 +296,11 @@ def test_robots_not_a_list(tmp_path):
 
 
 def test_mpc_not_a_mapping(tmp_path):
-    text = GOOD.replace("  mpc:\n    horizon_steps: 15\n    dt: 0.1\n    slack_weight: 1e4\n",
+    text = GOOD.replace("  mpc:\n    horizon_steps: 15\n    dt: 0.1\n    clearance_margin: 0.2\n",
                         "  mpc: fast\n")
     expect_error(write(tmp_path, text), "defaults.mpc: expected a mapping, got 'fast'")
+    expect_error(bad(tmp_path, "  threats: {t_max: 6}\n", "  threats: [6]\n"),
+                 "defaults.threats: expected a mapping")
 
 
 @pytest.mark.parametrize(("old", "new", "field"), [
@@ -382,10 +377,12 @@ def test_defaults_override_the_profile(tmp_path):
     from agent.core.config import is_paper_config
 
     config = _load_profile_doc(tmp_path, "profile: paper",
-                               "encounter_rules: true\n  mpc: {horizon_steps: 12}").planner_config
-    assert config.encounter_rules is True and not is_paper_config(config)
+                               "cost: {side_hysteresis: 0.2}\n  mpc: {horizon_steps: 12}"
+                               ).planner_config
+    assert config.cost.side_hysteresis == 0.2 and not is_paper_config(config)
+    assert config.is_paper  # the profile (the paper's mechanisms) stays under the override
     assert config.mpc.horizon_steps == 12
-    assert config.mpc.q_terminal == 1.0  # the paper's MPC weights stay under the override
+    assert config.threats.sensing_radius_m == 1.0e3  # the profile's other settings too
 
 
 def test_unknown_profile_names_file_and_field(tmp_path):

@@ -1,4 +1,5 @@
-"""Tests of agent/config.py: the range rules every configuration obeys, wherever it is built."""
+"""Tests of agent/core/config.py: the range rules every configuration obeys, wherever it is
+built, the settings list, and the paper profile."""
 
 from __future__ import annotations
 
@@ -11,14 +12,23 @@ from hypothesis import strategies as st
 
 from agent.core.config import (
     POSITIVE_FIELDS,
+    SETTINGS,
     SIGNED_FIELDS,
+    SUB_CONFIGS,
+    CostConfig,
     MpcConfig,
+    OrcaConfig,
     PlannerConfig,
+    ReferenceConfig,
     RobotLimits,
+    SafetyConfig,
+    ThreatConfig,
     field_range_error,
+    setting,
 )
 
-CLASSES = (RobotLimits, MpcConfig, PlannerConfig)
+CLASSES = (RobotLimits, SafetyConfig, ThreatConfig, CostConfig, ReferenceConfig, MpcConfig,
+           OrcaConfig)
 
 
 def numeric_fields(cls: type) -> list[str]:
@@ -40,6 +50,18 @@ def test_defaults_are_valid_and_every_positive_field_exists() -> None:
     assert SIGNED_FIELDS.issubset(names)
 
 
+def test_settings_list_every_sub_config_field_once_and_at_most_15() -> None:
+    config = PlannerConfig()
+    fields = {f"{group}.{f.name}" for group in SUB_CONFIGS
+              for f in dataclasses.fields(getattr(config, group))}
+    assert set(SETTINGS) == fields
+    assert len(SETTINGS) <= 15
+    assert {f.name for f in dataclasses.fields(PlannerConfig)} == {*SUB_CONFIGS, "profile"}
+    for name, planners in SETTINGS.items():
+        assert planners and set(planners) <= {"ifp", "eifp", "eifp-mpc", "orca"}, name
+        setting(config, name)  # resolvable
+
+
 @pytest.mark.parametrize("cls", CLASSES)
 def test_each_numeric_field_rejects_values_below_its_range_by_name(cls: type) -> None:
     fields = numeric_fields(cls)
@@ -56,23 +78,16 @@ def test_each_numeric_field_rejects_values_below_its_range_by_name(cls: type) ->
 
 @pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
 def test_non_finite_numbers_are_rejected(bad: float) -> None:
-    for cls, name in ((RobotLimits, "v_max_mps"), (MpcConfig, "q_heading"),
-                      (PlannerConfig, "t_max_s"), (PlannerConfig, "w_length")):
+    for cls, name in ((RobotLimits, "v_max_mps"), (MpcConfig, "dt_s"),
+                      (ThreatConfig, "t_max_s"), (CostConfig, "w_length")):
         with pytest.raises(ValueError, match=f"^{name}: expected a finite number"):
             cls(**{name: bad})
 
 
 def test_zero_is_allowed_where_only_a_sign_is_ruled_out() -> None:
-    assert PlannerConfig(w_angle=0.0, side_hysteresis=0.0).w_angle == 0.0
-    assert MpcConfig(max_constraints=0, clearance_margin_m=0.0).max_constraints == 0
-
-
-def test_optional_fields_may_be_none_but_not_out_of_range() -> None:
-    assert PlannerConfig(d_thresh_m=None, ghost_clearance_m=None).d_thresh_m is None
-    with pytest.raises(ValueError, match="^d_thresh_m: must be > 0"):
-        PlannerConfig(d_thresh_m=0.0)
-    with pytest.raises(ValueError, match="^ghost_clearance_m: must be >= 0"):
-        PlannerConfig(ghost_clearance_m=-0.1)
+    assert CostConfig(w_angle=0.0, side_hysteresis=0.0).w_angle == 0.0
+    assert MpcConfig(clearance_margin_m=0.0).clearance_margin_m == 0.0
+    assert ReferenceConfig(corner_radius_m=0.0).corner_radius_m == 0.0
 
 
 def test_v_min_may_be_negative_but_not_above_v_max() -> None:
@@ -82,8 +97,25 @@ def test_v_min_may_be_negative_but_not_above_v_max() -> None:
 
 
 def test_replace_is_checked_too() -> None:
-    with pytest.raises(ValueError, match="^command_hold_periods: must be > 0"):
-        dataclasses.replace(PlannerConfig(), command_hold_periods=-1.0)
+    with pytest.raises(ValueError, match="^t_max_s: must be > 0"):
+        dataclasses.replace(ThreatConfig(), t_max_s=-1.0)
+    with pytest.raises(ValueError, match="^profile: expected one of default, paper"):
+        dataclasses.replace(PlannerConfig(), profile="fast")
+
+
+def test_with_settings_replaces_by_dotted_name_and_names_unknown_ones() -> None:
+    config = PlannerConfig().with_settings(**{"cost.w_angle": 0.5, "mpc.dt_s": 0.2,
+                                              "profile": "paper"})
+    assert config.cost.w_angle == 0.5 and config.mpc.dt_s == 0.2 and config.is_paper
+    assert config.cost.w_length == CostConfig().w_length  # the rest kept
+    with pytest.raises(ValueError, match="^cost.w_speed: not a setting of cost"):
+        PlannerConfig().with_settings(**{"cost.w_speed": 1.0})
+    with pytest.raises(ValueError, match="^gains: not a sub-config"):
+        PlannerConfig().with_settings(**{"gains.k": 1.0})
+    with pytest.raises(ValueError, match="^w_angle: not a field"):
+        PlannerConfig().with_settings(w_angle=1.0)
+    with pytest.raises(ValueError, match="^w_angle: must be >= 0"):
+        PlannerConfig().with_settings(**{"cost.w_angle": -1.0})
 
 
 @given(name=st.sampled_from(sorted(POSITIVE_FIELDS)),
@@ -98,24 +130,19 @@ def test_non_numbers_are_left_to_the_type_checks_of_the_loaders() -> None:
         assert field_range_error("t_max_s", value) is None
 
 
-def test_paper_config_turns_every_addition_off():
-    from agent.core.config import (
-        PAPER_MPC_OVERRIDES,
-        PAPER_OVERRIDES,
-        is_paper_config,
-        paper_config,
-    )
+def test_paper_config_sets_the_paper_profile_and_its_settings():
+    from agent.core.config import PAPER_OVERRIDES, is_paper_config, paper_config
 
     cfg = paper_config()
-    assert is_paper_config(cfg)
-    assert not is_paper_config(PlannerConfig())
+    assert is_paper_config(cfg) and cfg.is_paper
+    assert not is_paper_config(PlannerConfig()) and not PlannerConfig().is_paper
     for name, value in PAPER_OVERRIDES.items():
-        assert getattr(cfg, name) == value, name
-    for name, value in PAPER_MPC_OVERRIDES.items():
-        assert getattr(cfg.mpc, name) == value, name
-    assert cfg.dcpa_threshold_m(0.5) == 5 * 0.5 + cfg.d_safety_m  # D_thresh of Eq. (6)
-    # overrides apply last; the profile is still frozen and hashable
-    assert paper_config(t_max_s=5.0).t_max_s == 5.0
+        assert setting(cfg, name) == value, name
+    assert cfg.cost.side_hysteresis == 0.0  # plain argmin (Eq. 17)
+    assert cfg.dcpa_threshold_m(0.5) == 5 * 0.5 + cfg.safety.d_safety_m  # D_thresh of Eq. (6)
+    # settings apply last; the profile is still frozen and hashable
+    assert paper_config(**{"threats.t_max_s": 5.0}).threats.t_max_s == 5.0
+    assert not is_paper_config(paper_config(**{"profile": "default"}))
     hash(cfg)
 
 
@@ -123,7 +150,9 @@ def test_paper_file_defaults_load_as_the_paper_config():
     from agent.core.config import is_paper_config, paper_file_defaults
     from world.scenario_file import scenario_from_dict
 
-    data = {"name": "x", "time_limit": 10.0, "goal_tolerance": 0.25,
+    data = {"name": "x", "time_limit": 10.0, "goal_tolerance": 0.25, "profile": "paper",
             "defaults": paper_file_defaults(),
             "robots": [{"id": 0, "start": [0.0, 0.0, 0.0], "goal": [5.0, 0.0]}]}
     assert is_paper_config(scenario_from_dict(data).planner_config)
+    data["profile"] = "default"
+    assert not is_paper_config(scenario_from_dict(data).planner_config)

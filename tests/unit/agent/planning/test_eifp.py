@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agent.core.config import PlannerConfig, RobotLimits
+from agent.core.config import CostConfig, PlannerConfig, RobotLimits
 from agent.core.types import EgoState, Observation, Others, PlanStatus, Side
 from agent.planning.eifp import (
     LENGTH_EPS_M,
@@ -19,11 +19,17 @@ from agent.planning.eifp import (
     segment_distance,
     update_side_memory,
 )
-from agent.planning.ifp import ESCAPE_STANDING_MPS, ViaPlan
+from agent.planning.ifp import EIFP_MECHANISMS, ESCAPE_STANDING_MPS, ViaPlan
 from agent.planning.threats import as_complex
 
 R = 0.2
 CFG = PlannerConfig()
+
+
+def _eifp(observation, config=CFG, side_memory=None, **kw):
+    """eIFP with eifp's mechanisms in the default profile (right-hand margin included)."""
+    kw.setdefault("mech", EIFP_MECHANISMS)
+    return plan_eifp(observation, config, side_memory, **kw)
 RIGHT, LEFT = 0, 1  # index in SIDES
 
 
@@ -140,7 +146,7 @@ def test_head_on_robots_both_pass_on_their_right_and_separate():
     b = observe(
         others([[0, 0]], [[1, 0]], ids=[1]), x=8.0, heading=math.pi, robot_id=2, goal=(-2, 0)
     )
-    plan_a, plan_b = plan_eifp(a, CFG), plan_eifp(b, CFG)
+    plan_a, plan_b = _eifp(a, CFG), _eifp(b, CFG)
     assert plan_a.side is Side.RIGHT and plan_b.side is Side.RIGHT
     assert plan_a.via_point_m[1] < -0.5 and plan_b.via_point_m[1] > 0.5
     # Driving their first legs at full speed, they never come closer than 2 R.
@@ -179,15 +185,15 @@ def test_nearly_head_on_robots_still_pass_on_opposite_sides():
         v=1.1,
         goal=(5.0, -0.01),
     )
-    plan_a, plan_b = plan_eifp(a, CFG), plan_eifp(b, CFG)
+    plan_a, plan_b = _eifp(a, CFG), _eifp(b, CFG)
     assert plan_a.side is Side.RIGHT and plan_b.side is Side.RIGHT
     assert plan_a.via_point_m[1] > 0.5 and plan_b.via_point_m[1] < -0.5
 
 
 def test_right_hand_margin_applies_to_robots_not_obstacles():
     # Slightly below the line: LEFT (above) is a little shorter.
-    robot = plan_eifp(observe(others([[5, -0.05]], linearity=0.0, robot=True)), CFG)
-    obstacle = plan_eifp(observe(others([[5, -0.05]], linearity=0.0, robot=False)), CFG)
+    robot = _eifp(observe(others([[5, -0.05]], linearity=0.0, robot=True)), CFG)
+    obstacle = _eifp(observe(others([[5, -0.05]], linearity=0.0, robot=False)), CFG)
     assert robot.side is Side.RIGHT and obstacle.side is Side.LEFT
 
 
@@ -195,17 +201,17 @@ def test_side_hysteresis_keeps_the_side_through_a_small_change():
     def scene(dy):  # a static obstacle a little above (dy > 0) or below the direct line
         return observe(others([[5, dy]], linearity=0.0, robot=False, ids=[-3]))
 
-    selector = EifpSelector(CFG)
+    selector = EifpSelector(CFG, EIFP_MECHANISMS)
     first = selector.select(scene(-0.1))  # obstacle below: passing above (LEFT) is shorter
     assert first.side is Side.LEFT and selector.side_memory == {-3: Side.LEFT}
     second = selector.select(scene(+0.1))  # now RIGHT is shorter, but by less than 15 %
     assert second.side is Side.LEFT
-    assert plan_eifp(scene(+0.1), CFG).side is Side.RIGHT  # without memory
+    assert _eifp(scene(+0.1), CFG).side is Side.RIGHT  # without memory
     selector.reset()
     assert selector.side_memory == {}
     assert selector.select(scene(+0.1)).side is Side.RIGHT
     # No hysteresis: the memory does not hold the side.
-    loose = EifpSelector(PlannerConfig(side_hysteresis=0.0))
+    loose = EifpSelector(PlannerConfig(cost=CostConfig(side_hysteresis=0.0)), EIFP_MECHANISMS)
     loose.select(scene(-0.1))
     assert loose.select(scene(+0.1)).side is Side.RIGHT
 
@@ -233,24 +239,21 @@ def threat_and_flankers(flankers):
 
 
 def test_candidate_near_a_ghost_path_is_discarded():
-    assert plan_eifp(observe(threat_and_flankers([])), CFG).side is Side.RIGHT  # the tie
+    assert _eifp(observe(threat_and_flankers([])), CFG).side is Side.RIGHT  # the tie
     # A robot's ghost path along y = -1.2 passes ~0.45 m from the RIGHT candidate (< L).
-    plan = plan_eifp(observe(threat_and_flankers([-1.2])), CFG)
+    plan = _eifp(observe(threat_and_flankers([-1.2])), CFG)
     assert plan.resolved_id == 1 and plan.side is Side.LEFT
-    # With a smaller clearance the RIGHT candidate is allowed again.
-    small = PlannerConfig(ghost_clearance_m=0.2)
-    assert plan_eifp(observe(threat_and_flankers([-1.2])), small).side is Side.RIGHT
 
 
 def test_all_candidates_near_ghost_paths_still_gives_a_plan():
-    plan = plan_eifp(observe(threat_and_flankers([-1.2, 1.2])), CFG)
+    plan = _eifp(observe(threat_and_flankers([-1.2, 1.2])), CFG)
     assert plan.status is PlanStatus.OK and plan.resolved_id == 1
     assert plan.side is Side.RIGHT  # the full set, tie -> RIGHT
 
 
 def test_the_resolved_threat_own_ghost_path_does_not_discard_its_candidates():
     # A head-on robot's ghost path runs through both of its own tangent candidates' area.
-    plan = plan_eifp(observe(others([[6, 0]], [[-1, 0]], track_start=np.array([[8.0, 0.0]]))), CFG)
+    plan = _eifp(observe(others([[6, 0]], [[-1, 0]], track_start=np.array([[8.0, 0.0]]))), CFG)
     assert plan.status is PlanStatus.OK and plan.side is Side.RIGHT
 
 
@@ -258,8 +261,9 @@ def test_interaction_terms_change_the_choice():
     # A robot above the direct line, moving left to right: its path pushes the choice
     # below (RIGHT) even though the obstacle ahead sits slightly below the line.
     o = others([[5, -0.05], [1, 2.0]], [[0, 0], [1, 0]], linearity=[0.0, 1.0], robot=[False, True])
-    assert plan_eifp(observe(o), PlannerConfig(w_distance=0.0, w_angle=0.0)).side is Side.LEFT
-    assert plan_eifp(observe(o), PlannerConfig(w_distance=3.0)).side is Side.RIGHT
+    no_terms = PlannerConfig(cost=CostConfig(w_distance=0.0, w_angle=0.0))
+    assert _eifp(observe(o), no_terms).side is Side.LEFT
+    assert _eifp(observe(o), PlannerConfig(cost=CostConfig(w_distance=3.0))).side is Side.RIGHT
 
 
 # --- determinism, bad input, properties -----------------------------------------------
@@ -271,7 +275,7 @@ def test_selector_is_deterministic():
     for _ in range(6):
         pos = rng.uniform([1, -3], [10, 3], (8, 2))
         seq.append(observe(others(pos, rng.uniform(-1, 1, (8, 2)), linearity=0.7)))
-    a, b = EifpSelector(CFG), EifpSelector(CFG)
+    a, b = EifpSelector(CFG, EIFP_MECHANISMS), EifpSelector(CFG, EIFP_MECHANISMS)
     plans_a = [a.select(o) for o in seq]
     plans_b = [b.select(o) for o in seq]
     for pa, pb in zip(plans_a, plans_b):
@@ -285,17 +289,17 @@ def test_selector_is_deterministic():
 
 
 @pytest.mark.parametrize(
-    "fields",
+    "setting, value",
     [
-        {"w_angle": math.nan},
-        {"ghost_horizon_s": math.inf},
-        {"side_hysteresis": math.nan},
+        ("cost.w_angle", math.nan),
+        ("cost.side_hysteresis", math.nan),
+        ("cost.w_distance", math.inf),
     ],
 )
-def test_bad_configuration_raises(fields):
+def test_bad_configuration_raises(setting, value):
     # Refused when the configuration is built, so no planner ever runs with it.
-    with pytest.raises(ValueError, match=f"^{next(iter(fields))}: "):
-        plan_eifp(observe(others([[5, 0]])), PlannerConfig(**fields))
+    with pytest.raises(ValueError, match=f"^{setting.split('.')[1]}: "):
+        _eifp(observe(others([[5, 0]])), CFG.with_settings(**{setting: value}))
 
 
 coord = st.floats(-15, 15, allow_nan=False)
@@ -313,11 +317,11 @@ coord = st.floats(-15, 15, allow_nan=False)
 def test_property_finite_inputs_give_finite_plans(rows, v, heading):
     arr = np.array(rows).reshape(-1, 5)
     o = others(arr[:, :2], arr[:, 2:4], linearity=arr[:, 4]) if len(rows) else Others.empty()
-    selector = EifpSelector(CFG)
+    selector = EifpSelector(CFG, EIFP_MECHANISMS)
     for step in range(2):
         plan = selector.select(observe(o, v=v, heading=heading + 0.1 * step))
         assert np.all(np.isfinite(plan.waypoints_m))
-        assert 2 <= len(plan.waypoints_m) <= CFG.max_depth + 2
+        assert 2 <= len(plan.waypoints_m) <= CFG.reference.max_depth + 2
         if plan.status is PlanStatus.ESCAPE and v < ESCAPE_STANDING_MPS:
             assert len(plan.waypoints_m) == 2  # out of the disc first, the goal next cycle
         else:
@@ -325,40 +329,17 @@ def test_property_finite_inputs_give_finite_plans(rows, v, heading):
     assert set(selector.side_memory) <= set(o.ids.tolist())
 
 
-# --- threat commitment ------------------------------------------------------------------
-
-
-def test_committed_threat_stays_a_threat_until_passed():
-    # The robot has already swerved right (heading -0.5 rad) for robot 1, which comes
-    # head-on 2 m off the x axis. At the measured velocity its DCPA is 3.92 m > D_thresh
-    # (2.8 m), and the direct leg to the goal clears it (2 m > L = 1.3 m): without
-    # commitment the robot would turn back; with it, it keeps resolving robot 1.
-    o = others([[8.0, 2.0]], vel=[[-1.0, 0.0]])
-    obs = observe(o, heading=-0.5, goal=(20.0, 0.0))
-    free = plan_eifp(obs, PlannerConfig(threat_commitment=False), {1: Side.RIGHT})
-    assert free.resolved_id is None and free.threats == ()
-    kept = plan_eifp(obs, PlannerConfig(threat_commitment=True), {1: Side.RIGHT})
-    assert kept.resolved_id == 1
-    assert [t.other_id for t in kept.threats] == [1]
-    assert kept.threats[0].tcpa_s == pytest.approx(3.745, abs=1e-3)
-
-
-def test_committed_threat_is_released_once_passed():
-    # Robot 1 is behind and moving away: TCPA < 0, so the commitment ends.
-    o = others([[-3.0, 2.0]], vel=[[-1.0, 0.0]])
-    obs = observe(o, heading=-0.5, goal=(20.0, 0.0))
-    plan = plan_eifp(obs, PlannerConfig(threat_commitment=True), {1: Side.RIGHT})
-    assert plan.resolved_id is None and plan.threats == ()
+# --- the mechanisms of eifp-mpc ---------------------------------------------------------
 
 
 def test_selector_carries_an_escape_into_the_next_cycle_under_the_band():
     from agent.planning.eifp import EifpSelector
-    from agent.planning.ifp import PAPER_RULES, CycleRules
+    from agent.planning.ifp import PAPER_MECHANISMS, Mechanisms
 
-    inflated = 2 * R + CFG.d_safety_m
+    inflated = 2 * R + CFG.safety.d_safety_m
     inside = observe(others([[0.0, inflated - 0.02]]))
     just_out = observe(others([[0.0, inflated + 0.05]]))
-    banded = EifpSelector(CFG, CycleRules(escape_hysteresis_m=0.1))
+    banded = EifpSelector(CFG, Mechanisms(escape_band_m=0.1))
     assert banded.select(inside).status is PlanStatus.ESCAPE
     assert banded.select(just_out).status is PlanStatus.ESCAPE  # still in the band
     far = observe(others([[0.0, inflated + 0.2]]))
@@ -367,30 +348,16 @@ def test_selector_carries_an_escape_into_the_next_cycle_under_the_band():
     banded.select(inside)
     banded.reset()
     assert banded.select(just_out).status is PlanStatus.OK  # reset forgets the escape
-    paper = EifpSelector(CFG, PAPER_RULES)
+    paper = EifpSelector(CFG, PAPER_MECHANISMS)
     paper.select(inside)
     assert paper.select(just_out).status is PlanStatus.OK
 
 
-def test_only_eifp_mpc_runs_the_changed_cycle():
-    from agent.planning.ifp import PAPER_RULES, CycleRules
+def test_each_planner_runs_its_mechanisms():
+    from agent.core.config import paper_config
+    from agent.planning.ifp import EIFP_MPC_MECHANISMS, PAPER_MECHANISMS
     from agent.planning.planners import make_planner
 
-    mpc = make_planner("eifp-mpc", CFG)
-    assert mpc._selector.rules == CycleRules.from_config(CFG)
-    assert mpc._selector.rules != PAPER_RULES  # the defaults change the cycle
-    assert make_planner("eifp", CFG)._selector.rules == PAPER_RULES
-
-
-def test_selector_remembers_what_it_resolved_for_the_release_margin():
-    from agent.planning.eifp import EifpSelector
-    from agent.planning.ifp import CycleRules
-
-    rules = CycleRules(threats_within_inflated=True, threat_release_margin_m=0.5)
-    selector = EifpSelector(CFG, rules)
-    # DCPA 0.3 m < L = 0.7: resolved; then DCPA 1.0 m (< L + 0.5): still a threat.
-    selector.select(observe(others([[5.0, 0.3]], [[-1.0, 0.0]])))
-    wide = observe(others([[4.9, 1.0]], [[-1.0, 0.0]]))
-    assert [t.other_id for t in selector.select(wide).threats] == [1]
-    selector.reset()
-    assert selector.select(wide).threats == ()
+    assert make_planner("eifp-mpc", CFG)._selector.mech == EIFP_MPC_MECHANISMS
+    assert make_planner("eifp", CFG)._selector.mech == EIFP_MECHANISMS
+    assert make_planner("eifp-mpc", paper_config())._selector.mech == PAPER_MECHANISMS

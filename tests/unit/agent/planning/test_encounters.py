@@ -72,8 +72,8 @@ def test_obstacles_slow_robots_and_a_robot_that_barely_moves_itself():
 def roles_of(heading, me, pos, vel, tcpa, dcpa, memory=None, inflated=1.3):
     o = one(pos, vel)
     return Role(int(encounter_roles(heading, V, np.asarray(me, float), o, np.array([tcpa]),
-                                    np.array([dcpa]), np.array([inflated]), 2.0,
-                                    memory or {})[0]))
+                                    np.array([dcpa]), np.array([inflated]),
+                                    memory or {}, emergency_s=2.0)[0]))
 
 
 def test_stream_neighbours_outside_the_inflated_radius_are_left_alone():

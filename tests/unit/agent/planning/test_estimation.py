@@ -205,14 +205,16 @@ def test_recent_turn_rate_is_the_wrapped_heading_change_over_the_newest_interval
 
 @pytest.mark.parametrize("rate_hz", [10.0, 50.0])
 def test_the_default_window_spans_about_the_same_at_10_and_50_hz(rate_hz):
-    # PlannerConfig's 0.75 s window. Poses 0.1 s apart: every pose is kept and the 8-sample
-    # history holds 0.7 s. Poses 0.02 s apart: samples are kept about window / 6 apart and
-    # the fit reaches back to the oldest one inside the window (0.72 s here). The ghost
+    # The 0.75 s window (`ESTIMATION_WINDOW_S`). Poses 0.1 s apart: every pose is kept and
+    # the 8-sample history holds 0.7 s. Poses 0.02 s apart: samples are kept about
+    # window / 6 apart and the fit reaches back to the oldest one inside the window (0.72 s
+    # here). The ghost
     # start is the oldest sample fitted; at 1 m/s its distance back is its age.
-    from agent.core.config import PlannerConfig
+    from agent.planning.estimation import ESTIMATION_WINDOW_S
 
-    window_s = PlannerConfig().estimation_window_s
+    window_s = ESTIMATION_WINDOW_S
     assert window_s == 0.75
+    assert NeighborTracker(own_id=0).window_s == window_s  # the default
     tr = NeighborTracker(own_id=0, window_s=window_s)
     dt = 1.0 / rate_hz
     n = round(3.0 / dt)

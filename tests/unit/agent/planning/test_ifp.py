@@ -7,14 +7,14 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from agent.core.config import PlannerConfig, RobotLimits
+from agent.core.config import PlannerConfig, ReferenceConfig, RobotLimits
 from agent.core.types import EgoState, Observation, Others, PlanStatus, Side
 from agent.planning.ifp import ESCAPE_STANDING_MPS, VIA_MARGIN_M, ViaPlan, plan_ifp, select_earliest
 from agent.planning.viapoints import ESCAPE_MARGIN_M, via_point_candidates
 
 R = 0.2  # robot and obstacle radius
 CFG = PlannerConfig()  # d_safety 0.3 -> L = 0.7 between two 0.2 m discs
-L = 2 * R + CFG.d_safety_m
+L = 2 * R + CFG.safety.d_safety_m
 
 
 def others(pos, vel=None, ids=None, radius=R, linearity=1.0):
@@ -117,7 +117,7 @@ def test_iteration_resolves_a_second_obstacle_behind_the_first():
     plan = plan_ifp(observe(o, v=1.0, goal=(14.0, 0.0)), CFG)
     assert plan.status is PlanStatus.OK
     wps = plan.waypoints_m
-    assert 3 <= len(wps) <= CFG.max_depth + 2
+    assert 3 <= len(wps) <= CFG.reference.max_depth + 2
     for a, b in zip(wps[:-1], wps[1:]):
         for c in o.position_m:
             assert segment_clearance(a, b, c) >= L - 1e-6
@@ -128,7 +128,8 @@ def test_depth_limit_is_respected():
     rng = np.random.default_rng(11)
     o = others(rng.uniform([2, -2], [12, 2], size=(12, 2)))
     for depth in (1, 2, 3):
-        plan = plan_ifp(observe(o, v=1.0, goal=(14.0, 0.0)), PlannerConfig(max_depth=depth))
+        config = PlannerConfig(reference=ReferenceConfig(max_depth=depth))
+        plan = plan_ifp(observe(o, v=1.0, goal=(14.0, 0.0)), config)
         assert len(plan.waypoints_m) - 2 <= depth
 
 
@@ -196,19 +197,18 @@ def _decision(plan: ViaPlan):
 
 
 @pytest.mark.parametrize(
-    "fields",
+    "setting, value",
     [
-        {"d_safety_m": math.nan},
-        {"t_max_s": math.inf},
-        {"w_length": math.nan},
-        {"ghost_clearance_m": math.nan},
-        {"max_depth": 0},
+        ("safety.d_safety_m", math.nan),
+        ("threats.t_max_s", math.inf),
+        ("cost.w_length", math.nan),
+        ("reference.max_depth", 0),
     ],
 )
-def test_bad_configuration_raises(fields):
+def test_bad_configuration_raises(setting, value):
     # Refused when the configuration is built, so no planner ever runs with it.
-    with pytest.raises(ValueError, match=f"^{next(iter(fields))}: "):
-        plan_ifp(observe(others([[5, 0]]), v=1.0), PlannerConfig(**fields))
+    with pytest.raises(ValueError, match=f"^{setting.split('.')[1]}: "):
+        plan_ifp(observe(others([[5, 0]]), v=1.0), CFG.with_settings(**{setting: value}))
 
 
 def test_non_finite_observation_raises():
@@ -226,7 +226,7 @@ def test_non_finite_observation_raises():
 
 def test_sensing_radius_and_neighbour_cap_apply():
     o = others([[5, 0]], [[-1, 0]])
-    plan = plan_ifp(observe(o, v=1.0), PlannerConfig(sensing_radius_m=4.0))
+    plan = plan_ifp(observe(o, v=1.0), CFG.with_settings(**{"threats.sensing_radius_m": 4.0}))
     assert plan.threats == () and plan.waypoints_m.shape == (2, 2)
 
 
@@ -249,7 +249,7 @@ def test_property_finite_inputs_give_a_finite_well_formed_plan(rows, v, heading,
     plan = plan_ifp(observe(o, v=v, heading=heading, goal=goal), CFG)
     wps = plan.waypoints_m
     assert np.all(np.isfinite(wps))
-    assert 2 <= len(wps) <= CFG.max_depth + 2
+    assert 2 <= len(wps) <= CFG.reference.max_depth + 2
     np.testing.assert_array_equal(wps[0], [0, 0])
     if plan.status is PlanStatus.ESCAPE and v < ESCAPE_STANDING_MPS:
         assert len(wps) == 2  # out of the disc first, the goal next cycle
@@ -261,93 +261,62 @@ def test_property_finite_inputs_give_a_finite_well_formed_plan(rows, v, heading,
 
 
 def test_ignored_others_are_neither_resolved_nor_on_any_leg_but_still_escaped():
-    from agent.planning.ifp import plan_via_points
+    from agent.planning.ifp import IFP_MECHANISMS, plan_via_points
 
     # Two discs on the way: ignoring 1 (a stand-on encounter) resolves only 2.
     o = others([[4, 0], [8, -0.6]])
     obs = observe(o, v=1.0, goal=(14.0, 0.0))
-    plan = plan_via_points(obs, CFG, lambda _o: select_earliest, ignored_ids=frozenset({1}))
+    plan = plan_via_points(obs, CFG, lambda _o: select_earliest, ignored_ids=frozenset({1}),
+                           mech=IFP_MECHANISMS)
     assert {i for i, _ in plan.resolved_sides} == {2}
     assert 1 in [t.other_id for t in plan.threats]  # still reported
     # Ignoring both: the direct line.
-    both = plan_via_points(obs, CFG, lambda _o: select_earliest, ignored_ids=frozenset({1, 2}))
+    both = plan_via_points(obs, CFG, lambda _o: select_earliest, ignored_ids=frozenset({1, 2}),
+                           mech=IFP_MECHANISMS)
     assert both.waypoints_m.shape == (2, 2) and both.resolved_sides == ()
     # Inside an ignored disc: still the escape.
     inside = plan_via_points(observe(others([[0.5, 0]]), v=1.0), CFG,
-                             lambda _o: select_earliest, ignored_ids=frozenset({1}))
+                             lambda _o: select_earliest, ignored_ids=frozenset({1}),
+                           mech=IFP_MECHANISMS)
     assert inside.status is PlanStatus.ESCAPE
 
 
-@pytest.mark.parametrize("margin_s", [1.0, 0.6])
-def test_primary_threat_keeps_its_rank_within_the_margin(margin_s):
-    from dataclasses import replace
-
-    from agent.planning.ifp import plan_via_points
-
-    cfg = replace(CFG, primary_margin_s=margin_s)
-
-    def plan(o, goal, primary, config=cfg):
-        return plan_via_points(observe(o, v=1.0, goal=goal), config, lambda _o: select_earliest,
-                               primary_id=primary)
-
-    # Two head-on threats, TCPA 3.0 s (id 1) and 3.5 s (id 2): 1 is resolved first ...
-    o = others([[6, 0.3], [7, -0.3]], [[-1, 0], [-1, 0]])
-    plain = plan(o, (20.0, 0.0), None)
-    assert plan(o, (20.0, 0.0), 1).waypoints_m.tolist() == plain.waypoints_m.tolist()
-    # ... unless 2 was the primary last cycle: within the margin it is resolved first.
-    assert plan(o, (20.0, 0.0), 2).waypoints_m.tolist() != plain.waypoints_m.tolist()
-    # A margin below the 0.5 s between them: the ranking stands.
-    narrow = replace(cfg, primary_margin_s=0.4)
-    assert (plan(o, (20.0, 0.0), 2, narrow).waypoints_m.tolist()
-            == plan(o, (20.0, 0.0), None, narrow).waypoints_m.tolist())
-    # Far beyond the margin the most imminent one is first again.
-    far = others([[3, 0.3], [12, -0.3]], [[-1, 0], [-1, 0]])
-    assert (plan(far, (30.0, 0.0), 2).waypoints_m.tolist()
-            == plan(far, (30.0, 0.0), None).waypoints_m.tolist())
-
-
-# eIFP-MPC's changes to the cycle (`CycleRules`): each against the paper's cycle.
+# The mechanisms (`Mechanisms`): each against the paper's cycle.
 
 
 def _rules(**kw):
-    from agent.planning.ifp import CycleRules
+    from agent.planning.ifp import Mechanisms
 
-    return CycleRules(**kw)
+    return Mechanisms(**kw)
 
 
-def _plan(obs, rules, config=CFG, **kw):
+def _plan(obs, mech, config=CFG, **kw):
     from agent.planning.ifp import plan_via_points
 
-    return plan_via_points(obs, config, lambda _o: select_earliest, rules=rules, **kw)
+    return plan_via_points(obs, config, lambda _o: select_earliest, mech=mech, **kw)
 
 
-def test_threats_within_inflated_drops_a_pass_outside_l_but_inside_d_thresh():
-    from dataclasses import replace
-
-    from agent.planning.ifp import PAPER_RULES
+def test_inflated_threats_drop_a_pass_outside_l_but_inside_d_thresh():
+    from agent.planning.ifp import PAPER_MECHANISMS
 
     # Head-on, DCPA 1.0 m: outside L = 0.7, inside the paper's D_thresh = 5 r + d = 1.3.
     wide = observe(others([[5.0, 1.0]], [[-1.0, 0.0]]), v=1.0)
-    assert [t.other_id for t in _plan(wide, PAPER_RULES).threats] == [1]
-    inside_l = _plan(wide, _rules(threats_within_inflated=True))
+    assert [t.other_id for t in _plan(wide, PAPER_MECHANISMS).threats] == [1]
+    inside_l = _plan(wide, _rules(inflated_threats=True))
     assert inside_l.threats == () and inside_l.waypoints_m.shape == (2, 2)
     # DCPA 0.5 m < L: a threat either way, resolved by a via-point.
     near = observe(others([[5.0, 0.5]], [[-1.0, 0.0]]), v=1.0)
-    plan = _plan(near, _rules(threats_within_inflated=True))
+    plan = _plan(near, _rules(inflated_threats=True))
     assert [t.other_id for t in plan.threats] == [1] and plan.resolved_id == 1
-    # A configured D_thresh still wins.
-    set_thresh = replace(CFG, d_thresh_m=1.2)
-    assert [t.other_id for t in _plan(wide, _rules(threats_within_inflated=True),
-                                      set_thresh).threats] == [1]
 
 
-def test_threats_within_inflated_uses_each_pairs_own_l():
+def test_inflated_threats_use_each_pairs_own_l():
     # Two head-on others at DCPA 1.0 m: radius 0.2 (L = 0.7) and 0.6 (L = 1.1).
     o = Others(ids=np.array([1, 2]), position_m=np.array([[5.0, 1.0], [8.0, -1.0]]),
                velocity_mps=np.array([[-1.0, 0.0], [-1.0, 0.0]]),
                radius_m=np.array([0.2, 0.6]), linearity=np.ones(2),
                track_start_m=np.array([[5.5, 1.0], [8.5, -1.0]]), is_robot=np.ones(2, bool))
-    plan = _plan(observe(o, v=1.0), _rules(threats_within_inflated=True))
+    plan = _plan(observe(o, v=1.0), _rules(inflated_threats=True))
     assert [t.other_id for t in plan.threats] == [2]
 
 
@@ -360,9 +329,9 @@ def test_via_margin_sets_how_far_out_of_the_disc_the_via_point_lies(margin_m):
         L + margin_m, abs=1e-9)
 
 
-def test_escape_hysteresis_keeps_escaping_until_a_band_clear():
+def test_escape_band_keeps_escaping_until_a_band_clear():
     band = 0.1
-    rules = _rules(escape_hysteresis_m=band)
+    rules = _rules(escape_band_m=band)
     # 0.05 m outside the disc of other 1 (L = 0.7), beside the robot's path.
     o = others([[0.0, L + 0.05]])
     obs = observe(o, v=1.0)
@@ -380,32 +349,32 @@ def test_escape_hysteresis_keeps_escaping_until_a_band_clear():
     assert _plan(obs, _rules(), escape_id=1).status is PlanStatus.OK
 
 
-def test_head_on_hold_keeps_a_head_on_primary_first_and_no_other():
+def test_commitment_keeps_a_head_on_primary_first_and_no_other(monkeypatch):
+    import agent.planning.ifp as ifp
+
     def wps(plan):
         return plan.waypoints_m.tolist()
 
-    # Head-on, TCPA 2.0 s (id 1) and 4.5 s (id 2): 2.5 s apart, outside primary_margin_s.
+    # Head-on, TCPA 2.0 s (id 1) and 4.5 s (id 2): 2.5 s apart, within PRIMARY_HOLD_S.
+    assert ifp.PRIMARY_HOLD_S > 2.5
     head_on = others([[4, 0.3], [9, -0.3]], [[-1, 0], [-1, 0]])
     obs = observe(head_on, v=1.0, goal=(30.0, 0.0))
-    rules = _rules(head_on_hold_s=3.0)
+    rules = _rules(commitment=True)
     plain = _plan(obs, rules)
     assert wps(_plan(obs, rules, primary_id=1)) == wps(plain)
     # Id 2 taken first: another plan (the leg to its via-point then meets id 1).
     assert wps(_plan(obs, rules, primary_id=2)) != wps(plain)
-    # Without the hold (the paper's rules), or a hold shorter than the 2.5 s between them:
-    # the ranking stands.
+    # Without commitment (the paper's cycle), or a hold shorter than the 2.5 s between
+    # them: the ranking stands.
     assert wps(_plan(obs, _rules(), primary_id=2)) == wps(plain)
-    assert wps(_plan(obs, _rules(head_on_hold_s=2.0), primary_id=2)) == wps(plain)
+    monkeypatch.setattr(ifp, "PRIMARY_HOLD_S", 2.0)
+    assert wps(_plan(obs, rules, primary_id=2)) == wps(plain)
+    monkeypatch.undo()
     # Id 2 crossing from the right (course 90 degrees off reciprocal), TCPA 4.5 s: not held.
     crossing = others([[4, 0.3], [4.5, -4.5]], [[-1, 0], [0, 1]])
     obs = observe(crossing, v=1.0, goal=(30.0, 0.0))
     assert [t.other_id for t in _plan(obs, rules).threats] == [1, 2]
     assert wps(_plan(obs, rules, primary_id=2)) == wps(_plan(obs, rules))
-    # ... unless every primary is held (`primary_hysteresis`, margin 3 s).
-    from dataclasses import replace
-
-    every = replace(CFG, primary_hysteresis=True, primary_margin_s=3.0)
-    assert wps(_plan(obs, rules, every, primary_id=2)) != wps(_plan(obs, rules))
 
 
 def test_is_head_on():
@@ -422,27 +391,11 @@ def test_is_head_on():
     assert not is_head_on(0.0, 1.0, 0.1 * course(180.0))  # nor does the other
 
 
-def test_threat_release_margin_keeps_a_resolved_threat_until_past_l_plus_margin():
-    rules = _rules(threats_within_inflated=True, threat_release_margin_m=0.5)
-    # Head-on, DCPA 1.0 m: outside L = 0.7, inside L + 0.5.
-    obs = observe(others([[5.0, 1.0]], [[-1.0, 0.0]]), v=1.0)
-    assert _plan(obs, rules).threats == ()  # not resolved last cycle: not a threat
-    kept = _plan(obs, rules, resolved_ids=frozenset({1}))
-    assert [t.other_id for t in kept.threats] == [1]
-    # Past L + margin (DCPA 1.3 m) it is released; another id's record does not count.
-    far = observe(others([[5.0, 1.3]], [[-1.0, 0.0]]), v=1.0)
-    assert _plan(far, rules, resolved_ids=frozenset({1})).threats == ()
-    assert _plan(obs, rules, resolved_ids=frozenset({2})).threats == ()
-    # Without threats_within_inflated the margin has nothing to act on: D_thresh rules.
-    assert [t.other_id for t in _plan(obs, _rules(threat_release_margin_m=0.5)).threats] == [1]
-
-
-
 def _alongside_and_head_on():
     """Ego at the origin heading +x at 1.08 m/s; both others' discs give L = 1.6 m.
 
     Other 1 runs alongside, just ahead, at nearly the robot's speed: TCPA 1.6 s, DCPA 2.1 m
-    (a threat only while a release margin of 0.6 m keeps it); its tangent points recede
+    (a threat only while a commitment keeps it); its tangent points recede
     almost as fast as the robot can close, so its candidates take 24 s and 11 s to meet.
     Other 2 comes head-on: TCPA 4.4 s, DCPA 0.3 m, candidates at about 4.3 s.
     """
@@ -450,47 +403,46 @@ def _alongside_and_head_on():
     return observe(o, v=1.08, goal=(30.0, 0.0), v_max=1.1)
 
 
-def test_via_time_max_drops_far_candidates_and_the_fallback_resolves_the_next_threat():
+def test_horizon_via_points_drop_far_candidates_and_resolve_the_next_threat():
     obs = _alongside_and_head_on()
-    base = dict(threats_within_inflated=True, threat_release_margin_m=0.6, via_margin_m=0.3)
+    base = dict(inflated_threats=True, via_margin_m=0.3)
     kept = frozenset({1})
-    # Without a cap, other 1 is resolved (after other 2, which its first leg met) by a
+    # Without the cap, other 1 is resolved (after other 2, which its first leg met) by a
     # via-point over 10 m away, down its track.
-    plan = _plan(obs, _rules(**base), resolved_ids=kept)
+    plan = _plan(obs, _rules(**base), committed_ids=kept)
     assert [t.other_id for t in plan.threats] == [1, 2]
     assert plan.status is PlanStatus.OK
     assert [i for i, _ in plan.resolved_sides] == [2, 1]
     assert math.hypot(*plan.waypoints_m[2]) > 10.0
-    # Capped at 8 s, other 1 has no candidate: the paper's cycle gives up (to the goal) ...
-    capped = _plan(obs, _rules(**base, via_time_max_s=8.0), resolved_ids=kept)
-    assert capped.status is PlanStatus.NO_FEASIBLE and capped.via_point_m is None
-    np.testing.assert_array_equal(capped.waypoints_m, [[0, 0], [30, 0]])
-    # ... the fallback resolves the next threat in rank order that has a candidate.
-    rules = _rules(**base, via_time_max_s=8.0, primary_fallback=True)
-    fallback = _plan(obs, rules, resolved_ids=kept)
+    # Capped at T_max = 8 s, other 1 has no candidate and the next threat in rank order
+    # that has one gets the first via-point.
+    rules = _rules(**base, horizon_via_points=True)
+    fallback = _plan(obs, rules, committed_ids=kept)
     assert fallback.status is PlanStatus.OK and fallback.resolved_id == 2
     assert [i for i, _ in fallback.resolved_sides] == [2]
     assert fallback.waypoints_m.shape == (3, 2) and math.hypot(*fallback.via_point_m) < 5.0
     assert [t.other_id for t in fallback.threats] == [1, 2]  # still reported
-    # With no threat resolvable within the cap the cycle still gives up.
-    none = _plan(obs, _rules(**base, via_time_max_s=4.0, primary_fallback=True),
-                 resolved_ids=kept)
+    # With no threat resolvable within the horizon (T_max 4 s) the cycle gives up.
+    short = CFG.with_settings(**{"threats.t_max_s": 4.0})
+    none = _plan(obs, rules, short, committed_ids=kept)
     assert none.status is PlanStatus.NO_FEASIBLE
+    np.testing.assert_array_equal(none.waypoints_m, [[0, 0], [30, 0]])
 
 
-def test_via_time_max_and_fallback_come_from_the_config():
-    from dataclasses import replace
+def test_mechanisms_follow_the_planner_and_the_profile():
+    from agent.core.config import paper_config
+    from agent.planning.ifp import PAPER_MECHANISMS, Mechanisms, mechanisms
 
-    from agent.planning.ifp import PAPER_RULES, CycleRules
-
-    rules = CycleRules.from_config(PlannerConfig())
-    assert rules.via_time_max_s == 8.0 and rules.primary_fallback is True
-    off = CycleRules.from_config(replace(PlannerConfig(), via_time_max_s=None,
-                                         primary_fallback=False))
-    assert math.isinf(off.via_time_max_s) and off.primary_fallback is False
-    assert math.isinf(PAPER_RULES.via_time_max_s) and PAPER_RULES.primary_fallback is False
-    with pytest.raises(ValueError, match="via_time_max_s"):
-        PlannerConfig(via_time_max_s=0.0)
+    paper = paper_config()
+    for name in ("ifp", "eifp", "eifp-mpc"):
+        assert mechanisms(name, paper) == PAPER_MECHANISMS == Mechanisms()
+    mpc = mechanisms("eifp-mpc", CFG)
+    assert mpc.inflated_threats and mpc.commitment and mpc.horizon_via_points
+    assert mpc.lines_arcs and mpc.encounter_rules and mpc.escape_band_m > 0.0
+    eifp = mechanisms("eifp", CFG)
+    assert eifp.encounter_rules and not eifp.lines_arcs and not eifp.commitment
+    ifp_ = mechanisms("ifp", CFG)
+    assert ifp_.direct_leg_check and ifp_.goal_tcpa_filter and not ifp_.encounter_rules
 
 
 def _setup_a_at_8s():
@@ -504,10 +456,9 @@ def _setup_a_at_8s():
 
 
 def test_paper_config_declares_threats_by_eq6_alone():
-    """The weaving of the paper profile on setup A (notes/paper-profile.md): IFP's check of
-    the direct leg declared the other a threat while Eq. (6) did not (its TCPA is past
-    T_max), and dropped it again a few cycles later as both swerved. In the paper profile a
-    cycle without an Eq. (6) threat plans straight to the goal."""
+    """IFP's check of the direct leg declares the other a threat while Eq. (6) does not (its
+    TCPA is past T_max); in the paper profile a cycle without an Eq. (6) threat plans
+    straight to the goal."""
     from agent.core.config import paper_config
     from agent.planning.eifp import plan_eifp
 
@@ -518,8 +469,8 @@ def test_paper_config_declares_threats_by_eq6_alone():
         assert plan.status == PlanStatus.OK
         assert plan.waypoints_m.shape == (2, 2)  # [P, goal]: no via-point
         assert plan.via_point_m is None
-    # the old behaviour (the project's default): the direct-leg check declares a threat
-    old = plan_ifp(obs, paper_config(direct_leg_check=True))
+    # with the direct-leg check (the default profile's) the leg declares a threat
+    old = _plan(obs, _rules(direct_leg_check=True), paper)
     assert old.threats == () and old.via_point_m is not None
 
 

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 from agent.core.config import MpcConfig, RobotLimits
 from agent.core.types import PlanStatus
-from agent.planning.mpc import MpcResult, MpcTracker
+from agent.planning.mpc import MpcResult, MpcTracker, MpcTuning
 from agent.planning.unicycle import step, wrap_angle
 
 LIM = RobotLimits()
@@ -108,7 +108,7 @@ def test_predicted_states_are_a_rollout_from_the_state():
 def test_without_neighbour_slots_it_tracks_and_ignores_neighbours():
     # max_constraints = 0 is a valid configuration (a scenario may set it): no half-plane
     # rows, no slack. It once failed while building the QP.
-    tracker = MpcTracker(LIM, MpcConfig(max_constraints=0))
+    tracker = MpcTracker(LIM, CFG, MpcTuning(max_constraints=0))
     preds = np.broadcast_to(np.array([2.0, 0.0]), (1, N + 1, 2))  # on the line: not a constraint
     states, results = run(tracker, [0.0, 0.3, 0.0], line_ref, 80, lambda i: preds,
                           np.array([0.8]))
@@ -183,7 +183,7 @@ def test_a_gap_too_narrow_stops_the_robot_centred_before_it():
 
 
 def test_nearest_neighbours_become_the_constraints():
-    tracker = MpcTracker(LIM, MpcConfig(max_constraints=2))
+    tracker = MpcTracker(LIM, CFG, MpcTuning(max_constraints=2))
     far = np.array([[40.0 + 3 * j, 30.0] for j in range(15)])
     centres = np.vstack([far[:7], [[3.0, 0.0]], far[7:]])  # the one ahead is 8th of 16
     preds = np.broadcast_to(centres[:, None, :], (16, N + 1, 2))
@@ -265,7 +265,7 @@ def test_public_and_extension_osqp_calls_agree():
 
 
 def test_iteration_cap_gives_an_inaccurate_but_bounded_command():
-    tracker = MpcTracker(LIM, MpcConfig(max_iter=1, eps_abs=1e-12, eps_rel=1e-12))
+    tracker = MpcTracker(LIM, CFG, MpcTuning(max_iter=1, eps_abs=1e-12, eps_rel=1e-12))
     last = np.array([0.3, -0.2])
     res = tracker.solve(np.array([0.0, 0.5, 0.2]), last, circle_ref(0.0))
     assert res.status is PlanStatus.SOLVER_INACCURATE
@@ -274,9 +274,9 @@ def test_iteration_cap_gives_an_inaccurate_but_bounded_command():
     assert_within_limits((res.v_mps, res.omega_radps), last)
 
 
-def _crowded_solve(config):
+def _crowded_solve(tuning):
     """One cycle with three neighbours closing in (a QP with several active half-planes)."""
-    tracker = MpcTracker(LIM, config)
+    tracker = MpcTracker(LIM, CFG, tuning)
     times = DT * np.arange(N + 1)
     starts = np.array([[2.0, 0.4], [2.5, -0.6], [1.5, 1.2]])
     vels = np.array([[-0.8, 0.0], [-0.6, 0.3], [-0.3, -0.7]])
@@ -290,10 +290,10 @@ def test_chunks_are_one_admm_run():
     # Never "settled" (tolerances 0): chunks of 25 (and 30, rounded up to 50) give the very
     # result of one call, iterations included. A warm start between chunks would not (it
     # resets OSQP's z = A x: slower every 25 iterations, diverging every 5).
-    whole, _ = _crowded_solve(MpcConfig(settle_chunk_iter=0))
+    whole, _ = _crowded_solve(MpcTuning(settle_chunk_iter=0))
     assert whole.status is PlanStatus.OK and whole.iterations > 50
     for chunk in (25, 30):
-        chunked, _ = _crowded_solve(MpcConfig(
+        chunked, _ = _crowded_solve(MpcTuning(
             settle_chunk_iter=chunk, settle_v_tol_mps=0.0, settle_omega_tol_radps=0.0))
         assert chunked.status is PlanStatus.OK
         assert chunked.iterations == whole.iterations
@@ -305,8 +305,8 @@ def test_a_settled_first_command_stops_the_solve_before_the_cap():
     # stops at the first chunk boundary at which the first command moved < 0.01 over a
     # chunk (at least two chunks), with a first command close to that of the long run.
     tight = dict(eps_abs=1e-12, eps_rel=1e-12, max_iter=2000)
-    long_run, _ = _crowded_solve(MpcConfig(settle_chunk_iter=0, **tight))
-    settled, last = _crowded_solve(MpcConfig(settle_chunk_iter=50, **tight))
+    long_run, _ = _crowded_solve(MpcTuning(settle_chunk_iter=0, **tight))
+    settled, last = _crowded_solve(MpcTuning(settle_chunk_iter=50, **tight))
     assert long_run.status is PlanStatus.OK and long_run.iterations > 300
     assert settled.status is PlanStatus.SOLVER_INACCURATE
     assert 100 <= settled.iterations < long_run.iterations and settled.iterations % 50 == 0

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agent.core.config import PlannerConfig, RobotLimits
+from agent.core.config import PlannerConfig, RobotLimits, ThreatConfig
 from agent.core.types import Others
 from agent.planning.orca import OrcaCommand, OrcaController
 from agent.planning.unicycle import step
@@ -152,7 +152,7 @@ def test_neighbour_ahead_deflects_the_velocity():
 
 
 def test_sensing_radius_and_neighbour_cap_select_the_nearest():
-    cfg = PlannerConfig(max_neighbors=2, sensing_radius_m=5.0)
+    cfg = PlannerConfig(threats=ThreatConfig(max_neighbors=2, sensing_radius_m=5.0))
     ctrl = OrcaController(LIM, cfg, DT)
     seen = others_of(
         [[4.0, 1.0], [1.5, 0.5], [3.0, -1.0], [6.0, 0.0]], np.zeros((4, 2)), np.full(4, RADIUS)

@@ -119,36 +119,6 @@ def test_threat_ahead_gets_a_via_point_and_side():
     assert res.waypoints_m.shape[0] >= 3
 
 
-def test_first_leg_segments_reach_the_reference(monkeypatch):
-    import agent.planning.spline
-
-    seen = []
-    build = agent.planning.spline.build_reference
-
-    def spy(*args, **kwargs):
-        seen.append(kwargs["first_leg_segments"])
-        return build(*args, **kwargs)
-
-    monkeypatch.setattr(agent.planning.spline, "build_reference", spy)
-    obs = observation(0.0, 0.0, 0.0, 1.0, [[6.0, 0.2]], [[-1.0, 0.0]])
-    spline = PlannerConfig(reference_lines_arcs=False)  # the option shapes the spline only
-    plain = make_planner("eifp-mpc", spline).plan(obs, 0.0)
-    split = make_planner("eifp-mpc", replace(spline, spline_first_leg_segments=3)).plan(obs, 0.0)
-    assert seen == [1, 3]
-    np.testing.assert_array_equal(plain.waypoints_m, split.waypoints_m)  # same via-points
-    assert (plain.v_mps, plain.omega_radps) != (split.v_mps, split.omega_radps)
-
-
-def test_first_leg_segments_head_on_pair_passes():
-    from dataclasses import replace
-
-    scenario = head_on("eifp-mpc", offset_m=0.3)
-    scenario = replace(scenario, planner_config=PlannerConfig(spline_first_leg_segments=3,
-                                                              reference_lines_arcs=False))
-    sim, _ = run_loop(scenario, 60.0)
-    assert sim.contact_count == 0 and sim.all_arrived()
-
-
 def test_lines_arcs_reference_is_the_default_and_reaches_the_reference(monkeypatch):
     import agent.planning.spline
 
@@ -160,11 +130,16 @@ def test_lines_arcs_reference_is_the_default_and_reaches_the_reference(monkeypat
         return build(*args, **kwargs)
 
     monkeypatch.setattr(agent.planning.spline, "build_reference", spy)
+    from agent.core.config import ReferenceConfig
+
     moving = observation(0.0, 0.0, 0.0, 1.0, [[6.0, 0.2]], [[-1.0, 0.0]])
     arcs = make_planner("eifp-mpc", PlannerConfig()).plan(moving, 0.0)
-    spline = make_planner("eifp-mpc", PlannerConfig(reference_lines_arcs=False)).plan(moving, 0.0)
+    on_spline = make_planner("eifp-mpc", PlannerConfig())
+    on_spline.mech = replace(on_spline.mech, lines_arcs=False)
+    spline = on_spline.plan(moving, 0.0)
     standing = observation(0.0, 0.0, 0.0, 0.0, [[6.0, 0.2]], [[-1.0, 0.0]])
-    make_planner("eifp-mpc", PlannerConfig(path_corner_radius_m=2.0)).plan(standing, 0.0)
+    wide = PlannerConfig(reference=ReferenceConfig(corner_radius_m=2.0))
+    make_planner("eifp-mpc", wide).plan(standing, 0.0)
     # Defaults R = 1 m, start arc 5 m; a standing robot turns on the spot (no start arc).
     make_planner("eifp", PlannerConfig()).plan(moving, 0.0)  # the tracking law: the spline
     assert seen == [(True, 1.0, 5.0), (False, 1.0, 5.0), (True, 2.0, 0.0), (False, 1.0, 5.0)]
@@ -172,13 +147,26 @@ def test_lines_arcs_reference_is_the_default_and_reaches_the_reference(monkeypat
     assert (arcs.v_mps, arcs.omega_radps) != (spline.v_mps, spline.omega_radps)
 
 
-@pytest.mark.parametrize("planner", ["eifp-mpc", "eifp", "ifp"])
-def test_spline_reference_head_on_pair_passes(planner):
-    from dataclasses import replace
+def test_the_paper_profile_runs_the_papers_tracker_without_the_guard():
+    from agent.core.config import paper_config
+    from agent.planning.mpc import DEFAULT_TUNING, PAPER_TUNING
 
-    scenario = head_on(planner, offset_m=0.3)
-    scenario = replace(scenario, planner_config=PlannerConfig(reference_lines_arcs=False))
-    sim, _ = run_loop(scenario, 60.0)
+    obs = observation(0.0, 0.0, 0.0, 1.0, [[6.0, 0.2]], [[-1.0, 0.0]])
+    default, paper = make_planner("eifp-mpc", PlannerConfig()), make_planner(
+        "eifp-mpc", paper_config())
+    assert default._mpc(obs).tuning == DEFAULT_TUNING and default.mech.braking_guard
+    assert paper._mpc(obs).tuning == PAPER_TUNING and not paper.mech.braking_guard
+    assert (PAPER_TUNING.q_terminal, PAPER_TUNING.r_dv, PAPER_TUNING.r_domega) == (1.0, 0.0, 0.0)
+
+
+@pytest.mark.parametrize("planner", ["eifp-mpc", "eifp", "ifp"])
+def test_spline_reference_head_on_pair_passes(planner, monkeypatch):
+    import agent.planning.ifp as ifp
+
+    # eifp and ifp follow the spline; eifp-mpc here too, with the spline's clamped start.
+    monkeypatch.setattr(ifp, "EIFP_MPC_MECHANISMS", replace(
+        ifp.EIFP_MPC_MECHANISMS, lines_arcs=False, clamp_heading=True))
+    sim, _ = run_loop(head_on(planner, offset_m=0.3), 60.0)
     assert sim.contact_count == 0 and sim.all_arrived()
 
 

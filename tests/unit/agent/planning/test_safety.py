@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agent.core.config import MpcConfig, PlannerConfig, RobotLimits
+from agent.core.config import PlannerConfig, RobotLimits, SafetyConfig
 from agent.core.types import EgoState, Observation, Others
 from agent.planning.planners import RECENT_SPEED_MAX_AGE_S, make_planner
 from agent.planning.safety import (
@@ -295,26 +295,36 @@ def _observation(ahead_m: float, pose_age_s: float, is_robot: bool = False,
                        limits=RobotLimits(), others=others, pose_age_s=pose_age_s)
 
 
-def _config(margin_m: float, guard: bool = True) -> PlannerConfig:
+@pytest.fixture(autouse=True)
+def _half_second_window(monkeypatch):
     # The guard tests' arithmetic takes a 0.5 s estimation window: estimates lag 0.25 s.
+    import agent.planning.planners
+
+    monkeypatch.setattr(agent.planning.planners, "ESTIMATION_WINDOW_S", 0.5)
+
+
+def _planner(margin_m: float, guard: bool = True):
     # On the spline reference the MPC keeps 1.1 m/s in these scenes (on the lines-and-arcs
     # reference it slows to 1.04 m/s for the turn at the start of its path), so the speeds
     # below are the guard's alone.
-    return PlannerConfig(estimation_window_s=0.5, reference_lines_arcs=False,
-                         mpc=replace(MpcConfig(), braking_guard=guard, braking_margin_m=margin_m))
+    config = PlannerConfig(safety=SafetyConfig(braking_margin_m=margin_m))
+    planner = make_planner("eifp-mpc", config)
+    planner.mech = replace(planner.mech, lines_arcs=False, clamp_heading=True,
+                           braking_guard=guard)
+    return planner
 
 
 def test_eifp_mpc_speed_is_capped_by_the_guard_and_braking_stays_within_the_rate_limit():
     # The other is 3.5 m ahead: far outside the MPC's half-planes, which let it keep 1.1 m/s.
     # A guard margin of 2.0 m leaves 0.5 m of room: v_safe = 1.5 (-0.2 + sqrt(0.04 + 1 / 1.5))
     obs = _observation(3.5, pose_age_s=0.1)
-    free = make_planner("eifp-mpc", _config(2.0, guard=False)).plan(obs, 0.0)
+    free = _planner(2.0, guard=False).plan(obs, 0.0)
     assert free.v_mps > 1.09
-    capped = make_planner("eifp-mpc", _config(2.0)).plan(obs, 0.0)
+    capped = _planner(2.0).plan(obs, 0.0)
     assert capped.v_mps == pytest.approx(1.5 * (-0.2 + math.sqrt(0.04 + 1.0 / 1.5)), rel=1e-9)
     # 0.2 m of room asks for v_safe = 0.53 m/s, below one period of braking: the hardest
     # braking the rate limit allows (1.1 - 1.5 x 0.1), not a jump
-    hard = make_planner("eifp-mpc", _config(2.3)).plan(obs, 0.0)
+    hard = _planner(2.3).plan(obs, 0.0)
     assert hard.v_mps == pytest.approx(1.1 - 0.15, abs=1e-9)
 
 
@@ -324,26 +334,26 @@ def test_a_robot_at_rest_may_have_set_off_since_its_estimate():
     # Margin 1.8 m: room 0.7 - (0.525 x 0.2 + 0.525^2 / 3) = 0.503125 m, v_safe 0.965 m/s
     # (above one period of braking, 0.95); the obstacle's 0.7 m allow 1.18 m/s.
     obs = _observation(3.5, pose_age_s=0.1, is_robot=True)
-    capped = make_planner("eifp-mpc", _config(1.8)).plan(obs, 0.0)
+    capped = _planner(1.8).plan(obs, 0.0)
     room = 0.7 - (0.525 * 0.2 + 0.525**2 / 3.0)
     assert capped.v_mps == pytest.approx(1.5 * (-0.2 + math.sqrt(0.04 + 2 * room / 1.5)),
                                          rel=1e-9)
-    obstacle = make_planner("eifp-mpc", _config(1.8)).plan(_observation(3.5, 0.1), 0.0)
+    obstacle = _planner(1.8).plan(_observation(3.5, 0.1), 0.0)
     assert capped.v_mps < obstacle.v_mps - 0.1
     # seen facing the robot, the same; seen facing away (it cannot have turned round in
     # 0.35 s at 1.5 rad/s), as an obstacle
-    facing = make_planner("eifp-mpc", _config(1.8)).plan(
+    facing = _planner(1.8).plan(
         _observation(3.5, 0.1, is_robot=True, heading_rad=math.pi), 0.0)
     assert facing.v_mps == pytest.approx(capped.v_mps, rel=1e-12)
-    away = make_planner("eifp-mpc", _config(1.8)).plan(
+    away = _planner(1.8).plan(
         _observation(3.5, 0.1, is_robot=True, heading_rad=0.0), 0.0)
     assert away.v_mps == pytest.approx(obstacle.v_mps, rel=1e-12)
 
 
 def test_the_guard_leaves_a_robot_alone_that_faces_away():
     obs = _observation(-2.2, pose_age_s=0.1)  # the other is behind
-    a = make_planner("eifp-mpc", _config(2.0)).plan(obs, 0.0)
-    b = make_planner("eifp-mpc", _config(2.0, guard=False)).plan(obs, 0.0)
+    a = _planner(2.0).plan(obs, 0.0)
+    b = _planner(2.0, guard=False).plan(obs, 0.0)
     assert a.v_mps == b.v_mps
 
 
@@ -351,7 +361,7 @@ def _one_pass_guard(planner, obs: Observation, v_mps: float, omega_radps: float)
     """The guard as the module docstring defines it: the exact unseen speed-ups, one pass."""
     ego, limits, others = obs.ego, obs.limits, obs.others
     reaction_s = obs.pose_age_s + planner.control_period_s
-    lag_s = 0.5 * planner.config.estimation_window_s + obs.pose_age_s
+    lag_s = 0.5 * 0.5 + obs.pose_age_s
     unseen = unseen_speed_up_mps(
         (ego.x_m, ego.y_m), others.position_m, others.heading_rad, others.is_robot,
         accel_mps2=limits.accel_max_mps2, turn_rate_radps=limits.omega_max_radps, lag_s=lag_s,
@@ -370,7 +380,7 @@ def _one_pass_guard(planner, obs: Observation, v_mps: float, omega_radps: float)
     v_safe = braking_speed_limit(
         (ego.x_m, ego.y_m), ego.heading_rad, obs.radius_m, others.position_m,
         others.velocity_mps, others.radius_m, reaction_s=reaction_s,
-        decel_mps2=limits.accel_max_mps2, margin_m=planner.config.mpc.braking_margin_m,
+        decel_mps2=limits.accel_max_mps2, margin_m=planner.config.safety.braking_margin_m,
         sweep_rad=heading_sweep_rad(omega_radps, turning_s), unseen_dv_mps=unseen)
     if v_mps <= v_safe:
         return v_mps
@@ -406,7 +416,7 @@ def test_the_guards_cheap_first_pass_never_changes_its_result(seed, k, pose_age_
                    v_mps=float(rng.uniform(0.0, 1.1)), omega_radps=0.0)
     obs = Observation(robot_id=1, ego=ego, goal_m=np.array([20.0, 0.0]), radius_m=R,
                       limits=RobotLimits(), others=others, pose_age_s=pose_age_s)
-    planner = make_planner("eifp-mpc", _config(0.1))
+    planner = _planner(0.1)
     assert planner._braking_guard(obs, v_mps, omega_radps) == \
         _one_pass_guard(planner, obs, v_mps, omega_radps)
 
@@ -426,7 +436,7 @@ def _follower(pose_age_s: float, recent: float | None) -> Observation:
 
 
 def test_the_guard_reads_recent_speeds_from_fresh_poses_only():
-    planner = make_planner("eifp-mpc", _config(0.05))
+    planner = _planner(0.05)
     # fresh poses: a leader seen keeping its speed is allowed a braking of a_max over half
     # the interval only, so the follower may go faster than under the blind bound
     fresh_blind = planner._braking_guard(_follower(0.0, None), 1.1, 0.0)
@@ -497,7 +507,7 @@ def _crosser(pose_age_s: float, turn: float | None, ahead_m: float = 1.6) -> Obs
 
 
 def test_the_guard_reads_the_others_turns_from_delayed_poses_only():
-    planner = make_planner("eifp-mpc", _config(0.05))
+    planner = _planner(0.05)
     old = RECENT_SPEED_MAX_AGE_S + 0.05
     # delayed poses: one turning towards the robot's path limits the robot more than the
     # same other seen with no turn, and more still than one turning away
@@ -527,7 +537,7 @@ def _behind_right(pose_age_s: float) -> Observation:
 
 
 def test_under_delayed_poses_the_guard_sweeps_its_own_turn_on_through_the_stop():
-    planner = make_planner("eifp-mpc", _config(0.05))
+    planner = _planner(0.05)
     # fresh poses: the turn over the reaction time (1.5 x 0.1 rad) does not face it
     assert planner._braking_guard(_behind_right(0.0), 1.1, -1.5) == 1.1
     # delayed (0.1 s): turning right at 1.5 rad/s until stopped, the robot faces it

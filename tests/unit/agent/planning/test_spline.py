@@ -243,42 +243,6 @@ def test_clamp_heading_only_with_a_via_point_ahead():
             sharp.heading_rad[0] / (2 * math.pi)), natural.heading_rad[0], atol=1e-12)
 
 
-def test_split_first_leg_inserts_evenly_spaced_knots():
-    from agent.planning.spline import split_first_leg
-
-    wp = np.array([[0.0, 0.0], [6.0, 1.5], [40.0, 0.0]])
-    out = split_first_leg(wp, 3)
-    np.testing.assert_allclose(out, [[0, 0], [2, 0.5], [4, 1], [6, 1.5], [40, 0]])
-    np.testing.assert_array_equal(split_first_leg(wp, 1), wp)
-    with pytest.raises(ValueError, match="segments"):
-        split_first_leg(wp, 0)
-
-
-@pytest.mark.parametrize("clamp", [False, True])
-def test_first_leg_segments_keep_the_reference_on_the_leg_to_the_via_point(clamp):
-    # Robot at the origin heading +x, via-point (6, 1.5), goal (40, 0). Through the three
-    # points alone the spline bows off the leg (0.05 m natural, 0.26 m clamped); with the
-    # leg cut in three it stays within a few centimetres after leaving the heading.
-    wp = np.array([[0.0, 0.0], [6.0, 1.5], [40.0, 0.0]])
-    leg = wp[1] / np.hypot(*wp[1])
-
-    def off_leg(segments):
-        ref = build_reference(wp, 0.0, V_MAX, ACCEL, DT, 60, v_start_mps=V_MAX,
-                              clamp_heading=clamp, first_leg_segments=segments)
-        p = np.stack([ref.x_m, ref.y_m], axis=1)
-        along, lateral = p @ leg, np.abs(p[:, 0] * leg[1] - p[:, 1] * leg[0])
-        return lateral[(along > 2.0) & (along < 0.9 * np.hypot(*wp[1]))].max()
-
-    assert off_leg(1) > 0.04
-    assert off_leg(3) < 0.025
-    assert off_leg(3) < 0.5 * off_leg(1)
-    # Without via-points there is no leg to keep: the straight line is unchanged.
-    two = np.array([[0.0, 0.0], [10.0, 2.0]])
-    a = build_reference(two, 0.0, V_MAX, ACCEL, DT, N, first_leg_segments=3)
-    b = build_reference(two, 0.0, V_MAX, ACCEL, DT, N)
-    np.testing.assert_array_equal(a.x_m, b.x_m)
-
-
 # --- lines and arcs (`LineArcPath`, `build_reference(lines_arcs=True)`) -------------------
 
 

@@ -92,7 +92,7 @@ def test_bench_scenario_is_a_dense_circle():
         assert math.remainder(r.start[2] - toward_goal, math.tau) == pytest.approx(0.0, abs=1e-5)
     small = bench.bench_scenario(3, "ifp")
     assert bench.circle_radius_m(small) == pytest.approx(
-        small.planner_config.sensing_radius_m / 2.0)
+        small.planner_config.threats.sensing_radius_m / 2.0)
 
 
 def test_arrived_cycles_are_excluded_and_counted(monkeypatch):

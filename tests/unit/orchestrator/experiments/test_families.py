@@ -56,7 +56,7 @@ def test_setup_files_match_their_generators_and_the_paper_scale(name):
     expected = 76.0 if name in ("setup_f", "setup_g") else 36.0
     np.testing.assert_allclose(straight(s), expected, atol=0.02)
     assert all(r.radius_m == 0.5 and r.limits.v_max_mps == 1.1 for r in s.robots)
-    assert s.planner_config.d_safety_m == 0.3
+    assert s.planner_config.safety.d_safety_m == 0.3
     assert s.time_limit_s >= 4.0 * expected / 1.1
     assert min_pair_distance(starts(s)) >= 2.5
     # Headings point at the goals.
@@ -168,7 +168,7 @@ def test_circles_tile_small_antipodal_swaps(n):
         i, j = np.triu_indices(n, k=1)
         other = np.any(np.round(centre[i], 2) != np.round(centre[j], 2), axis=1)
         closest = np.hypot(*(st[i] - st[j]).T)[other].min()
-        assert closest < s.planner_config.sensing_radius_m
+        assert closest < s.planner_config.threats.sensing_radius_m
 
 
 def test_circle_grows_when_crowded():
