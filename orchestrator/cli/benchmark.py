@@ -129,9 +129,11 @@ def run(args: argparse.Namespace) -> int:
     if args.readme is not None:
         try:
             text = args.readme.read_text(encoding="utf-8")
+            table = (bm.format_readme_summary(rows) + "\nEvery case, seed and column: "
+                     "[docs/results.md](docs/results.md) (`benchmark.md` of the run).\n")
             args.readme.write_text(bm.replace_results(
-                text, (out / "benchmark.md").read_text(encoding="utf-8"),
-                "orchestrator " + " ".join(getattr(args, "argv", []))), encoding="utf-8")
+                text, table, "orchestrator " + " ".join(getattr(args, "argv", []))),
+                encoding="utf-8")
         except (OSError, ValueError) as exc:
             raise BadInput(f"--readme: {args.readme}: {exc}") from None
         paths.append(args.readme)

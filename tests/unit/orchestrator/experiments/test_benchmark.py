@@ -193,3 +193,25 @@ def test_the_readme_results_section_is_replaced_between_its_markers() -> None:
     assert replace_results(new, "| c |\n", "cmd").count(RESULTS_BEGIN) == 1
     with pytest.raises(ValueError, match="expected"):
         replace_results("no markers", "| a |", "cmd")
+
+
+def test_the_readme_summary_groups_families_and_puts_planners_side_by_side() -> None:
+    from orchestrator.experiments.benchmark import format_readme_summary
+
+    def row(family: str, case: str, planner: str, success: float, osc: float, worst: float,
+            time_ratio: float | None, contacts: int = 0) -> dict:
+        return {"family": family, "case": case, "planner": planner, "runs": 5,
+                "success_rate": success, "contacts": contacts, "osc_per_robot_median": osc,
+                "osc_per_robot_max": worst, "time_ratio_mean": time_ratio}
+
+    rows = [row("circle", "circle_8", "eifp-mpc", 1.0, 4, 9, 1.1),
+            row("circle", "circle_16", "eifp-mpc", 1.0, 8, 12, 1.3),
+            row("circle", "circle_8", "orca", 0.0, 0, 0, None),
+            row("circle", "circle_16", "orca", 0.4, 2, 50, 2.0, contacts=1)]
+    text = format_readme_summary(rows)
+    lines = text.strip().splitlines()
+    assert "eifp-mpc:" in lines[0] and "orca:" in lines[0]
+    circles = next(line for line in lines if line.startswith("| antipodal circles"))
+    assert "| 10/10, 0, 6 (12), 1.20 |" in circles  # median of 4 and 8; worst 12; mean time
+    assert "| 2/10, 1, 1 (50), 2.00 |" in circles
+    assert "| setups A-G | - | - |" in text  # a group with no runs says so
