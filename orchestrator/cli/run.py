@@ -22,9 +22,11 @@ from orchestrator.cli.common import (
     MODES,
     BadInput,
     add_fault_args,
+    add_tls_args,
     fault_plan,
     make_dir,
     planner_label,
+    tls_ca,
 )
 from world.scenario_file import dump_scenario
 
@@ -52,6 +54,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", help="run directory (default runs/<setup>-<planner>-<seed>-<time>)")
     p.add_argument("--gif", action="store_true", help="also write trajectory.gif")
     p.add_argument("--quiet", action="store_true", help="no progress line and no summary")
+    add_tls_args(p)
     add_fault_args(p)
     p.set_defaults(func=run)
 
@@ -160,7 +163,7 @@ def _run_distributed(scenario: Scenario, out_dir: Path, args: argparse.Namespace
     run_id = f"{safe_name(scenario.name)[:24]}-{args.seed}-{secrets.token_hex(4)}"
     status = run_distributed(scenario_path, out_dir, run_id, rate_hz=50.0,
                              time_scale=args.time_scale or 1.0, on_progress=progress,
-                             faults=faults)
+                             faults=faults, tls=not args.insecure, tls_ca=tls_ca(args))
     if not (out_dir / "trajectory.csv").exists():
         return None, status
     try:

@@ -287,8 +287,9 @@ class _Payload:
 
 
 class _Sample:
-    def __init__(self, data: bytes) -> None:
+    def __init__(self, data: bytes, source_info: object = None) -> None:
         self.payload = _Payload(data)
+        self.source_info = source_info
 
 
 def test_the_robot_times_the_next_pose_from_when_the_last_one_arrived_not_when_read() -> None:
@@ -306,10 +307,12 @@ def test_the_robot_times_the_next_pose_from_when_the_last_one_arrived_not_when_r
     node.pose_arrived = threading.Event()
     node.pose_ring = deque(maxlen=2)
     node.known_ids = frozenset({0, 1})
-    node.counts = {k: 0 for k in ("rejected", "skipped", "stale", "link_dropped")}
+    node.counts = {k: 0 for k in ("rejected", "skipped", "stale", "link_dropped",
+                                  "refused_poses")}
     node.last_rx_wall = None
+    node.world_zid = None
     node.clock_tick, node.clock_stamp_s, node.clock_wall = -1, 0.0, 0.0
-    node.config = SimpleNamespace(time_scale=1.0)
+    node.config = SimpleNamespace(time_scale=1.0, world_rate_hz=50.0, time_limit_s=60.0)
     node.pose_link = FaultyLink(LinkFaults(), None)
     node.controller = RobotController(spec, PlannerConfig(), 0.25)
     node.newest = None
@@ -426,9 +429,9 @@ def test_a_configuration_out_of_range_is_refused_and_named_at_start_up() -> None
     body["planner"]["command_hold_periods"] = -1.0
     payload = msgpack.packb(body, use_bin_type=True)
     reply = SimpleNamespace(ok=SimpleNamespace(
-        payload=SimpleNamespace(to_bytes=lambda: payload)), err=None)
+        payload=SimpleNamespace(to_bytes=lambda: payload)), err=None, replier_id=None)
     asked = []
-    session = SimpleNamespace(get=lambda key, timeout: asked.append(key) or [reply])
+    session = SimpleNamespace(get=lambda key, timeout, **kw: asked.append(key) or [reply])
     with pytest.raises(node._Exit) as caught:
         node.fetch_config(session, RunKeys("r1"), 3, StopFlag(),
                           deadline=time.monotonic() + 0.25)

@@ -112,9 +112,10 @@ def test_distributed_mode_calls_run_distributed_and_computes_metrics(tmp_path, m
 
     calls = {}
 
-    def fake(scenario_path, out_dir, run_id, *, rate_hz, time_scale, on_progress, faults):
+    def fake(scenario_path, out_dir, run_id, *, rate_hz, time_scale, on_progress, faults,
+             tls, tls_ca):
         calls.update(path=Path(scenario_path), run_id=run_id, rate_hz=rate_hz,
-                     time_scale=time_scale, faults=faults)
+                     time_scale=time_scale, faults=faults, tls=tls, tls_ca=tls_ca)
         run_lockstep(load_scenario(scenario_path), out_dir, on_progress=on_progress)
         (Path(out_dir) / "metrics.json").unlink()  # the world does not write metrics
         return 0
@@ -123,6 +124,7 @@ def test_distributed_mode_calls_run_distributed_and_computes_metrics(tmp_path, m
     out = tmp_path / "dist"
     rc = main(["run", "setup_a", "--planner", "ifp", "--time-scale", "4", "--out", str(out)])
     assert rc in (0, 1)
+    assert calls["tls"] is True and calls["tls_ca"] is None  # secure by default
     assert calls["time_scale"] == 4.0 and calls["rate_hz"] == 50.0
     assert calls["faults"] is None  # no fault flag given
     assert calls["path"].parent == out and calls["run_id"].startswith("setup_a-0-")
