@@ -445,6 +445,7 @@ class RobotNode:
                        "token_timeouts": 0, "refused_poses": 0, "refused_control": 0,
                        "refused_config": refused_config}
         self.world_zid = world_zid
+        self.refused_in_callback = 0  # poses the callback refused (`_on_pose`)
         self.seq = 0
         # CPU time of the loop by part (thread CPU clock of this, the main, thread) and the
         # process's CPU clock at the loop's start: see `cpu_summary`.
@@ -491,7 +492,15 @@ class RobotNode:
 
     def _on_pose(self, sample: zenoh.Sample) -> None:
         """Zenoh callback: keep the sample and its arrival time (the ring drops the oldest),
-        wake the loop."""
+        wake the loop.
+
+        A sample that is not from the world's session never enters the ring (counted in
+        ``refused_poses``): a flood of forged poses must not push the world's out of it."""
+        if self.world_zid is not None:
+            info = sample.source_info
+            if info is None or str(info.source_id.zid) != self.world_zid:
+                self.refused_in_callback += 1
+                return
         self.pose_ring.append((time.monotonic(), sample))
         self.pose_arrived.set()
 
@@ -779,7 +788,11 @@ class RobotNode:
 
     def summary(self) -> str:
         """Counters and `cpu_summary` as key=value pairs (integers)."""
-        fields = {**self.counts, "seq": self.seq, **self.cpu_summary()}
+        counts = dict(self.counts)
+        refused = getattr(self, "refused_in_callback", 0)
+        if refused:
+            counts["refused_poses"] = counts.get("refused_poses", 0) + refused
+        fields = {**counts, "seq": self.seq, **self.cpu_summary()}
         return " ".join(f"{k}={v}" for k, v in fields.items())
 
 
