@@ -48,8 +48,8 @@ from world.sim.schedule import plan_pose_slot as plan_pose_slot  # contract
 from world.sim.schedule import pose_slot_count as pose_slot_count
 from world.sim.schedule import pose_slot_of_tick as pose_slot_of_tick
 
-SCHEMA_VERSION = 2
-"""Bumped on any incompatible change of a message schema (2: `CommandMsg` gained ``hold``)."""
+SCHEMA_VERSION = 3
+"""Bumped on any incompatible change of a message schema."""
 
 KEY_ROOT = "eifp"
 MAX_MESSAGE_BYTES = 1 << 20
@@ -70,6 +70,7 @@ MAX_TIME_S = 1.0e7
 MAX_REASON_CHARS = 256
 MAX_SEQ = 2**63 - 1
 MAX_RUN_ID_CHARS = 64
+MAX_CLOCK_ID = 2**31 - 1
 """Upper bound on `pose_slot_count` (a world ticking 1000 times per control period)."""
 
 _RUN_ID_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")
@@ -625,6 +626,9 @@ class PosesMsg:
         obstacle_ids: (m,) ids < 0, unique, m <= `MAX_OBSTACLES`.
         obstacle_xy_m: (m, 2) obstacle centres.
         obstacle_radius_m: (m,) radii > 0.
+        pub_ns: wall time the world published it, `time.monotonic_ns()` on its host (0:
+            not stamped); `clock_id` names that clock.
+        clock_id: the publishing host's monotonic clock (`WallStamps`); 0: unknown.
 
     Arrays are stored as read-only copies; an invalid message raises `ProtocolError`.
     """
@@ -637,6 +641,8 @@ class PosesMsg:
     obstacle_ids: np.ndarray
     obstacle_xy_m: np.ndarray
     obstacle_radius_m: np.ndarray
+    pub_ns: int = 0
+    clock_id: int = 0
 
     TYPE: typing.ClassVar[str] = "poses"
 
@@ -648,6 +654,8 @@ class PosesMsg:
         known = _known_set(known_ids)
         set_(self, "t_s", _float(self.t_s, "poses.t", 0.0, MAX_TIME_S))
         set_(self, "tick", _int(self.tick, "poses.tick", 0, MAX_SEQ))
+        set_(self, "pub_ns", _int(self.pub_ns, "poses.pub_ns", 0, MAX_SEQ))
+        set_(self, "clock_id", _int(self.clock_id, "poses.clock", 0, MAX_CLOCK_ID))
         try:
             rid = np.asarray(self.robot_ids)
             oid = np.asarray(self.obstacle_ids)
@@ -697,6 +705,8 @@ class PosesMsg:
         return _pack(self.TYPE, {
             "t": self.t_s,
             "tick": self.tick,
+            "pub_ns": self.pub_ns,
+            "clock": self.clock_id,
             "robots": {
                 "id": self.robot_ids.astype(_I4).tobytes(),
                 "x": self.robot_pose[:, 0].astype(_F8).tobytes(),
@@ -715,7 +725,8 @@ class PosesMsg:
     @classmethod
     def decode(cls, data: object, *, known_ids: Collection[int] | None = None) -> PosesMsg:
         """Parse and validate; `known_ids` (robot and obstacle ids) rejects strangers."""
-        body = _open_envelope(data, cls.TYPE, ("t", "tick", "robots", "obstacles"))
+        body = _open_envelope(data, cls.TYPE,
+                              ("t", "tick", "pub_ns", "clock", "robots", "obstacles"))
         robots = _as_map(body["robots"], "poses.robots", ("id", "x", "y", "theta", "radius"))
         obstacles = _as_map(body["obstacles"], "poses.obstacles", ("id", "x", "y", "radius"))
         rid = _column(robots["id"], "poses.robots.id", _I4, None, MAX_ROBOTS)
@@ -734,6 +745,8 @@ class PosesMsg:
         for name, value in {
             "t_s": body["t"],
             "tick": body["tick"],
+            "pub_ns": body["pub_ns"],
+            "clock_id": body["clock"],
             "robot_ids": rid,
             "robot_pose": np.stack(robot_cols[:3], axis=1).reshape(n, 3),
             "robot_radius_m": robot_cols[3],
@@ -746,7 +759,8 @@ class PosesMsg:
         return msg
 
     @classmethod
-    def from_snapshot(cls, snapshot: PoseSnapshot) -> PosesMsg:
+    def from_snapshot(cls, snapshot: PoseSnapshot, *, pub_ns: int = 0,
+                      clock_id: int = 0) -> PosesMsg:
         """Split a world snapshot into robots (ids >= 0) and obstacles (ids < 0)."""
         robots = snapshot.ids >= 0
         return cls(
@@ -758,6 +772,8 @@ class PosesMsg:
             obstacle_ids=snapshot.ids[~robots],
             obstacle_xy_m=snapshot.pose[~robots, :2],
             obstacle_radius_m=snapshot.radius_m[~robots],
+            pub_ns=pub_ns,
+            clock_id=clock_id,
         )
 
     def to_snapshot(self) -> PoseSnapshot:
@@ -778,12 +794,59 @@ _STATUS_VALUES = frozenset(s.value for s in PlanStatus)
 
 
 @dataclass(frozen=True)
+class WallStamps:
+    """Wall-clock stamps of one command's way from a pose to the world, in integer ns.
+
+    Each stamp is `time.monotonic_ns()` of the host that took it. Monotonic clocks agree
+    between the processes of one Linux host (one boot); `clock_id` (robot) and
+    `pose_clock_id` (world) name the clocks, so stages that cross processes are measured
+    only when both ends share a clock (`orchestrator.analysis.metrics`). 0: not stamped.
+
+    Args:
+        clock_id: the robot's clock.
+        pose_clock_id: the world's clock (echoed from the pose's `PosesMsg.clock_id`).
+        pose_pub_ns: the world published the pose the plan used (echoed, world's clock).
+        pose_rx_ns: the robot received that pose.
+        plan_start_ns, plan_end_ns: the robot's planning cycle.
+        pub_ns: the robot published the command.
+    """
+
+    clock_id: int = 0
+    pose_clock_id: int = 0
+    pose_pub_ns: int = 0
+    pose_rx_ns: int = 0
+    plan_start_ns: int = 0
+    plan_end_ns: int = 0
+    pub_ns: int = 0
+
+    FIELDS: typing.ClassVar[tuple[str, ...]] = (
+        "clock_id", "pose_clock_id", "pose_pub_ns", "pose_rx_ns", "plan_start_ns",
+        "plan_end_ns", "pub_ns")
+
+    def __post_init__(self) -> None:
+        for name in self.FIELDS:
+            hi = MAX_CLOCK_ID if name.endswith("clock_id") else MAX_SEQ
+            object.__setattr__(self, name, _int(getattr(self, name), f"cmd.wall.{name}", 0, hi))
+
+    def as_list(self) -> list[int]:
+        """The stamps in `FIELDS` order (the wire form)."""
+        return [getattr(self, name) for name in self.FIELDS]
+
+    @classmethod
+    def from_list(cls, value: object) -> WallStamps:
+        """Parse the wire form; `ProtocolError` unless a list of `len(FIELDS)` ints."""
+        if not isinstance(value, list | tuple) or len(value) != len(cls.FIELDS):
+            raise ProtocolError(f"cmd.wall: expected a list of {len(cls.FIELDS)} integers")
+        return cls(*value)
+
+
+@dataclass(frozen=True)
 class CommandMsg:
     """Robot -> world: one velocity command.
 
     Wire body: ``robot`` (int), ``seq`` (int), ``pose_stamp`` (float), ``v``, ``omega``,
     ``plan_ms`` (float), ``status`` (str), ``side`` (-1|0|1), ``resolved`` (int or nil),
-    ``hold`` (float or nil).
+    ``hold`` (float or nil), ``wall`` (`WallStamps` as a list of ints).
 
     Args:
         robot_id: sender (must match the key's id; checked by `decode(expected_robot_id=)`).
@@ -798,6 +861,7 @@ class CommandMsg:
             if no newer one arrives; after that it brakes the robot (a command is good for
             the period it was planned for, not until a lost link's time-out). None: until
             the world's own command time-out.
+        wall: wall-clock stamps of the command's way (`WallStamps`).
     """
 
     robot_id: int
@@ -810,6 +874,7 @@ class CommandMsg:
     side: int = 0
     resolved_id: int | None = None
     hold_s: float | None = None
+    wall: WallStamps = WallStamps()
 
     TYPE: typing.ClassVar[str] = "cmd"
 
@@ -831,6 +896,8 @@ class CommandMsg:
                  _int(self.resolved_id, "cmd.resolved", MIN_OBSTACLE_ID, MAX_ROBOT_ID))
         if self.hold_s is not None:
             set_(self, "hold_s", _float(self.hold_s, "cmd.hold", 0.0, MAX_HOLD_S, lo_open=True))
+        if not isinstance(self.wall, WallStamps):
+            raise ProtocolError(f"cmd.wall: expected WallStamps, got {type(self.wall).__name__}")
 
     def encode(self) -> bytes:
         """Serialise to msgpack."""
@@ -845,6 +912,7 @@ class CommandMsg:
             "side": self.side,
             "resolved": self.resolved_id,
             "hold": self.hold_s,
+            "wall": self.wall.as_list(),
         })
 
     @classmethod
@@ -858,7 +926,7 @@ class CommandMsg:
         """
         body = _open_envelope(data, cls.TYPE, (
             "robot", "seq", "pose_stamp", "v", "omega", "plan_ms", "status", "side", "resolved",
-            "hold",
+            "hold", "wall",
         ))
         msg = cls(
             robot_id=body["robot"],
@@ -871,6 +939,7 @@ class CommandMsg:
             side=body["side"],
             resolved_id=body["resolved"],
             hold_s=body["hold"],
+            wall=WallStamps.from_list(body["wall"]),
         )
         if known_ids is not None and msg.robot_id not in known_ids:
             raise ProtocolError(f"cmd.robot: unknown robot id {msg.robot_id}")

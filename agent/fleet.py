@@ -86,6 +86,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--connect", required=True, help="router endpoint (tcp/HOST:PORT)")
     parser.add_argument("--connect-id", type=_override, action="append", default=[],
                         metavar="ID=ENDPOINT", help="robot ID connects here instead")
+    parser.add_argument("--robot-arg", action="append", default=[], metavar="ARG",
+                        help="a further `python -m agent` argument for every robot "
+                             "(repeatable; e.g. --robot-arg=--no-plan)")
     parser.add_argument("--log-dir", required=True, type=Path, help="robot_<id>.log go here")
     parser.add_argument("--startup-timeout-s", default="30.0",
                         help="passed to every robot (python -m agent)")
@@ -104,11 +107,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def robot_argv(run_id: str, robot_id: int, endpoint: str, startup_timeout_s: str,
-               tls_dir: str | None = None) -> list[str]:
+               extra: Sequence[str] = (), tls_dir: str | None = None) -> list[str]:
     """The ``python -m agent`` arguments of one robot."""
     return ["--run", run_id, "--id", str(robot_id), "--connect", endpoint,
             "--startup-timeout-s", startup_timeout_s,
-            *(("--tls", tls_dir) if tls_dir else ())]
+            *(("--tls", tls_dir) if tls_dir else ()), *extra]
 
 
 def warm_up_planners() -> None:
@@ -246,7 +249,7 @@ def run_fleet(args: argparse.Namespace) -> int:
             if pending:
                 break
             argv = robot_argv(args.run, rid, overrides.get(rid, args.connect),
-                              args.startup_timeout_s, args.tls)
+                              args.startup_timeout_s, args.robot_arg, args.tls)
             # Signals wait until the child has its own handlers (never run _forward there).
             signal.pthread_sigmask(signal.SIG_BLOCK, FORWARDED)
             pid = os.fork()

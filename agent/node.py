@@ -84,6 +84,7 @@ from agent.process import (
     check_tls_files,
     close_session,
     die_with_launcher,
+    monotonic_clock_id,
     open_session,
     stop_on_signals,
 )
@@ -95,6 +96,7 @@ from protocol import (
     RunConfigMsg,
     RunKeys,
     TlsFiles,
+    WallStamps,
     check_pose_time,
     plan_pose_slot,
     pose_slot_count,
@@ -165,6 +167,8 @@ class AgentOptions:
         world_zid: the world's Zenoh id; poses, control and configuration replies from any
             other session are refused. None: the router this robot is connected to (the
             world is the run's router).
+        plan: False: command a stop every cycle without planning (``--no-plan``: measures
+            the process's own cost per cycle, `orchestrator bench --process`).
     """
 
     run_id: str
@@ -178,6 +182,7 @@ class AgentOptions:
     control_phase_s: float = 0.0
     plan_delay_ms: float = 0.0
     compensate_latency: bool = True
+    plan: bool = True
     tls_dir: Path | None = None
     world_zid: str | None = None
 
@@ -213,6 +218,9 @@ def parse_args(argv: list[str] | None = None) -> AgentOptions:
                         help="mutual TLS with DIR/ca.pem, DIR/robot-<id>.pem, DIR/robot-<id>.key")
     parser.add_argument("--world-zid", default=None, metavar="HEX",
                         help="the world's Zenoh id (default: the router connected to)")
+    parser.add_argument("--no-plan", action="store_true",
+                        help="sense and command a stop every cycle without planning (to "
+                             "measure the process's own cost)")
     args = parser.parse_args(argv)
     return AgentOptions(run_id=args.run, robot_id=args.id, connect=args.connect,
                         control_rate_hz=args.control_rate_hz,
@@ -222,7 +230,7 @@ def parse_args(argv: list[str] | None = None) -> AgentOptions:
                         fault_seed=args.fault_seed, control_phase_s=args.control_phase_s,
                         plan_delay_ms=args.plan_delay_ms,
                         compensate_latency=not args.no_latency_compensation,
-                        tls_dir=args.tls, world_zid=args.world_zid)
+                        plan=not args.no_plan, tls_dir=args.tls, world_zid=args.world_zid)
 
 
 class _Exit(Exception):
@@ -453,6 +461,8 @@ class RobotNode:
         self.cpu_start: tuple[float, float] | None = None
         self.last_rx_wall: float | None = None
         self.newest: PosesMsg | None = None
+        self.newest_rx_ns = 0
+        self.clock_id = monotonic_clock_id()
         self.world_alive = False
         self.world_seen = False
         self.world_gone_wall: float | None = None
@@ -465,7 +475,7 @@ class RobotNode:
         self.clock_tick = -1
         self.clock_stamp_s = 0.0
         self.clock_wall = 0.0
-        self.pose_link: FaultyLink[PosesMsg] = FaultyLink(
+        self.pose_link: FaultyLink[tuple[PosesMsg, int]] = FaultyLink(
             options.link, link_rng(options.fault_seed, LINK_POSES, self.robot_id))
 
         # Only the pose slot this robot plans on (a K-th of the stream, K = world ticks per
@@ -624,13 +634,13 @@ class RobotNode:
             if newest.tick > self.clock_tick:
                 self.clock_tick, self.clock_stamp_s, self.clock_wall = (
                     newest.tick, newest.t_s, arrived)
-            self.pose_link.send(self.sim_now(), newest)
+            self.pose_link.send(self.sim_now(), (newest, round(arrived * 1e9)))
         fresh = False
-        for msg in self.pose_link.receive(self.sim_now()):
+        for msg, rx_ns in self.pose_link.receive(self.sim_now()):
             if not self.controller.observe(msg.to_snapshot()):
                 self.counts["stale"] += 1
                 continue
-            self.newest = msg
+            self.newest, self.newest_rx_ns = msg, rx_ns
             fresh = True
         self.counts["link_dropped"] = self.pose_link.counts.dropped
         return fresh
@@ -646,8 +656,11 @@ class RobotNode:
             return
         now_s = self.sim_now()
         cpu0 = time.thread_time()
+        plan_start_ns = time.monotonic_ns()
         try:
-            if now_s - msg.t_s > STALE_PLAN_S:
+            if not self.options.plan:
+                result = self.controller.brake()
+            elif now_s - msg.t_s > STALE_PLAN_S:
                 self.counts["stale_plans"] += 1
                 result = self.controller.brake()
             else:
@@ -657,6 +670,7 @@ class RobotNode:
             if self.counts["plan_errors"] <= 3:
                 log.exception("robot %d: planner raised; braking", self.robot_id)
             result = self.controller.brake()
+        plan_end_ns = time.monotonic_ns()
         cpu1 = time.thread_time()
         self.cpu_s["plan"] += cpu1 - cpu0
         if self.options.plan_delay_ms > 0.0:  # a CPU-starved robot: the command leaves late
@@ -667,6 +681,10 @@ class RobotNode:
             omega_radps=result.omega_radps, plan_ms=max(0.0, result.times.total_ms),
             status=result.status, side=int(result.side), resolved_id=result.resolved_id,
             hold_s=self.controller.command_hold_s,
+            wall=WallStamps(clock_id=self.clock_id, pose_clock_id=msg.clock_id,
+                            pose_pub_ns=msg.pub_ns, pose_rx_ns=self.newest_rx_ns,
+                            plan_start_ns=plan_start_ns, plan_end_ns=plan_end_ns,
+                            pub_ns=time.monotonic_ns()),
         ).encode())
         self.cpu_s["send"] += time.thread_time() - cpu1
         self.seq += 1

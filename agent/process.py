@@ -11,11 +11,13 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import enum
+import functools
 import logging
 import os
 import signal
 import threading
 import time
+import zlib
 from collections.abc import Iterator, Mapping
 from types import FrameType
 from typing import Any
@@ -199,3 +201,21 @@ def die_with_launcher() -> None:
     text = os.environ.get(PARENT_PID_ENV, "")
     if text.isdigit():
         die_with_parent(int(text))
+
+
+BOOT_ID_PATH = "/proc/sys/kernel/random/boot_id"
+
+
+@functools.cache
+def monotonic_clock_id() -> int:
+    """A 31-bit id of this host's `time.monotonic_ns` clock: the kernel's boot id, hashed.
+
+    Processes (and containers) of one host share the clock and so the id; stamps taken on
+    hosts with different ids cannot be subtracted. 1 where the boot id cannot be read.
+    """
+    try:
+        with open(BOOT_ID_PATH, encoding="ascii") as f:
+            boot = f.read().strip()
+    except OSError:
+        return 1
+    return (zlib.crc32(boot.encode("ascii")) & 0x7FFFFFFF) or 1

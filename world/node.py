@@ -48,6 +48,7 @@ import math
 import os
 import sys
 import time
+from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -62,6 +63,7 @@ from agent.process import (
     check_tls_files,
     close_session,
     die_with_launcher,
+    monotonic_clock_id,
     open_session,
     stop_on_signals,
 )
@@ -237,15 +239,19 @@ class WorldNode:
                        "bad_queries": 0, "overruns": 0, "seq_jumps": 0, "future_cmds": 0}
         self.rejected_by_key: dict[str, int] = {}
         self.rejected_by_reason: dict[str, int] = {}
-        self.cmd_links: dict[int, FaultyLink[CommandMsg]] = {
+        self.cmd_links: dict[int, FaultyLink[tuple[int, CommandMsg]]] = {
             rid: FaultyLink(options.link, link_rng(options.fault_seed, LINK_COMMANDS, rid))
             for rid in sorted(self.robot_ids)}
 
         n = len(scenario.robots)
         # Handler channels, read from the loop: callbacks never run project code.
         self.queryable = session.declare_queryable(self.keys.config_all)
-        self.cmd_sub = session.declare_subscriber(
-            self.keys.cmd_all, zenoh.handlers.RingChannel(max(1024, 32 * n)))
+        # Commands are stamped on arrival (the callback only stamps and enqueues; the loop
+        # decodes): the wall stage "command received by the world" is the arrival, not the
+        # next tick that drains it.
+        self.cmd_queue: deque[tuple[int, zenoh.Sample]] = deque(maxlen=max(1024, 32 * n))
+        self.cmd_sub = session.declare_subscriber(self.keys.cmd_all, self._on_command)
+        self.clock_id = monotonic_clock_id()
         self.alive_sub = session.liveliness().declare_subscriber(
             self.keys.alive_robot_all, history=True)
         # One publisher per pose slot: tick t goes out on poses/<t mod K>, so a robot that
@@ -342,7 +348,8 @@ class WorldNode:
     def apply_commands(self) -> None:
         """Validate each command, pass it through its robot's command link, and hold the
         newest one the link releases (zero-order hold; older ``seq`` are dropped)."""
-        while (sample := self.cmd_sub.try_recv()) is not None:
+        while self.cmd_queue:
+            rx_ns, sample = self.cmd_queue.popleft()
             key = str(sample.key_expr)
             try:
                 rid = self.keys.robot_id_of_cmd(key)
@@ -368,22 +375,32 @@ class WorldNode:
                              f"world's {self.sim.t_s:.3f} s", key)
                 continue
             self.rx_seq[rid] = max(msg.seq, self.rx_seq.get(rid, -1))
-            self.cmd_links[rid].send(self.sim.t_s, msg)
+            self.cmd_links[rid].send(self.sim.t_s, (rx_ns, msg))
         for rid, link in self.cmd_links.items():
-            for msg in link.receive(self.sim.t_s):
-                self._hold(rid, msg)
+            for rx_ns, msg in link.receive(self.sim.t_s):
+                self._hold(rid, msg, rx_ns)
 
-    def _hold(self, rid: int, msg: CommandMsg) -> None:
+    def _on_command(self, sample: zenoh.Sample) -> None:
+        """Zenoh's thread: stamp the arrival and enqueue (the deque drops the oldest)."""
+        self.cmd_queue.append((time.monotonic_ns(), sample))
+
+    def _hold(self, rid: int, msg: CommandMsg, rx_ns: int) -> None:
         """Apply one released command unless its ``seq`` is not newer."""
         if check_seq(msg.seq, self.last_seq.get(rid)) == "stale":
             self.counts["stale"] += 1
             return
         self.last_seq[rid] = msg.seq
         self.sim.set_command(rid, msg.v_mps, msg.omega_radps, msg.hold_s)
+        applied_ns = time.monotonic_ns()
         self.counts["commands"] += 1
         self.recorder.record_command(
             self.sim.t_s, rid, msg.seq, msg.pose_stamp_s, msg.v_mps, msg.omega_radps,
             msg.plan_ms, msg.status, msg.side, msg.resolved_id)
+        w = msg.wall
+        self.recorder.record_timing(rid, msg.seq, (
+            w.clock_id, w.pose_clock_id, w.pose_pub_ns, w.pose_rx_ns, w.plan_start_ns,
+            w.plan_end_ns, w.pub_ns, rx_ns,
+            applied_ns))
 
     # --- phases ------------------------------------------------------------------------------
 
@@ -408,7 +425,8 @@ class WorldNode:
         """One `PosesMsg` with the current ground truth (dropped, never blocking, if slow),
         on the pose slot of the current tick."""
         pub = self.poses_pubs[pose_slot_of_tick(self.sim.tick, self.pose_slots)]
-        pub.put(PosesMsg.from_snapshot(self.sim.snapshot()).encode(),
+        pub.put(PosesMsg.from_snapshot(self.sim.snapshot(), pub_ns=time.monotonic_ns(),
+                                       clock_id=self.clock_id).encode(),
                 source_info=zenoh.SourceInfo(pub.id, self.sim.tick))
 
     def tick(self) -> None:

@@ -6,12 +6,16 @@ Files (SI units):
 - `commands.csv`: `t_applied,robot,seq,pose_stamp,v,omega,plan_ms,status,side,resolved`
   (the first eight columns are the documented format; `side` and `resolved` let metrics
   count avoidance-side flips).
+- `timing.csv`: `robot,seq,` then the wall-clock stamps of each applied command's way
+  (`TIMING_COLUMNS`, integer ns of `time.monotonic_ns`; distributed runs only: a lockstep
+  run has no wall clock to speak of).
 - `events.jsonl`: one JSON object per line with at least `kind` and `t`.
 """
 
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from pathlib import Path
 from typing import IO, Any
 
@@ -21,6 +25,12 @@ from agent.core.scenario import Scenario
 
 TRAJECTORY_HEADER = "t,robot,x,y,theta,v,omega\n"
 COMMANDS_HEADER = "t_applied,robot,seq,pose_stamp,v,omega,plan_ms,status,side,resolved\n"
+TIMING_COLUMNS = ("robot_clock", "world_clock", "pose_pub_ns", "pose_rx_ns", "plan_start_ns",
+                  "plan_end_ns", "cmd_pub_ns", "cmd_rx_ns", "applied_ns")
+"""Wall stamps per applied command: the robot's and the world's clock ids, then the pose
+published (world), received (robot), planning started and ended, the command published
+(robot), received and applied (world)."""
+TIMING_HEADER = "robot,seq," + ",".join(TIMING_COLUMNS) + "\n"
 
 
 class RunRecorder:
@@ -36,6 +46,8 @@ class RunRecorder:
         self._traj.write(TRAJECTORY_HEADER)
         self._cmds: IO[str] = open(self.out_dir / "commands.csv", "w", buffering=1 << 16)
         self._cmds.write(COMMANDS_HEADER)
+        self._timing: IO[str] = open(self.out_dir / "timing.csv", "w", buffering=1 << 16)
+        self._timing.write(TIMING_HEADER)
         self._events: IO[str] = open(self.out_dir / "events.jsonl", "w", buffering=1)
         self.event_counts: dict[str, int] = {}
         self._closed = False
@@ -60,6 +72,13 @@ class RunRecorder:
             f"{omega:.5f},{plan_ms:.4f},{status},{int(side)},{res}\n"
         )
 
+    def record_timing(self, robot_id: int, seq: int, stamps: Sequence[int]) -> None:
+        """The wall stamps of one applied command, in `TIMING_COLUMNS` order."""
+        if len(stamps) != len(TIMING_COLUMNS):
+            raise ValueError(f"expected {len(TIMING_COLUMNS)} stamps, got {len(stamps)}")
+        self._timing.write(f"{int(robot_id)},{int(seq)}," + ",".join(str(int(s)) for s in stamps)
+                           + "\n")
+
     def event(self, kind: str, t_s: float, **fields: Any) -> None:
         """Append one event line; flushed at once so watchers see it."""
         record = {"kind": kind, "t": round(float(t_s), 4), **fields}
@@ -68,7 +87,7 @@ class RunRecorder:
 
     def flush(self) -> None:
         """Push buffered rows to disk."""
-        for f in (self._traj, self._cmds, self._events):
+        for f in (self._traj, self._cmds, self._timing, self._events):
             f.flush()
 
     def close(self) -> None:
@@ -76,7 +95,7 @@ class RunRecorder:
         if self._closed:
             return
         self._closed = True
-        for f in (self._traj, self._cmds, self._events):
+        for f in (self._traj, self._cmds, self._timing, self._events):
             f.close()
 
     def __enter__(self) -> RunRecorder:

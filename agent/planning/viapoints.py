@@ -142,8 +142,10 @@ def cone_time(offset_m: np.ndarray, velocity_mps: np.ndarray, cone_speed_mps: fl
     root = np.sqrt(np.where(real, disc, 0.0))
     q = -0.5 * (b + np.where(b >= 0.0, root, -root))
     inf = np.full_like(a, np.inf)
-    lam1 = np.divide(q, a, out=inf.copy(), where=real & (np.abs(a) > _LINEAR_A_TOL))
-    lam2 = np.divide(c, q, out=inf.copy(), where=real & (q != 0.0))
+    # A quotient too large for a float is a root beyond any horizon: inf, as "no root".
+    with np.errstate(over="ignore"):
+        lam1 = np.divide(q, a, out=inf.copy(), where=real & (np.abs(a) > _LINEAR_A_TOL))
+        lam2 = np.divide(c, q, out=inf.copy(), where=real & (q != 0.0))
     lam1 = np.where(lam1 > 0.0, lam1, np.inf)
     lam2 = np.where(lam2 > 0.0, lam2, np.inf)
     return np.minimum(lam1, lam2)

@@ -93,11 +93,19 @@ def run_summary(metrics: dict[str, Any], label: str) -> str:
         ("side_flips_per_robot", "side flips per robot"),
         ("plan_ms_p50", "planning p50 [ms]"), ("plan_ms_p99", "planning p99 [ms]"),
         ("plan_ms_max", "planning max [ms]"),
-        ("latency_ms_p50", "latency p50 [ms]"), ("latency_ms_p99", "latency p99 [ms]"),
+        ("sim_latency_ms_p50", "command age p50 [sim ms]"),
+        ("sim_latency_ms_p99", "command age p99 [sim ms]"),
         ("deadline_miss_rate", "deadline miss rate"), ("sim_time_s", "sim time [s]"),
     ]
     rows = [[label_, metrics.get(k)] for k, label_ in keys]
     rows[1][1] = f"{metrics.get('arrived')}/{metrics.get('robots')}"
+    wall = metrics.get("wall_latency_ms") or {}
+    for stage, label_ in (("sense_to_act", "sense to act"), ("end_to_end", "pose to applied"),
+                          ("plan", "plan (wall)")):
+        if stage in wall:
+            w = wall[stage]
+            rows.append([f"{label_} p50/p99/max [wall ms]",
+                         f"{w['p50']:.1f} / {w['p99']:.1f} / {w['max']:.1f}"])
     end = metrics.get("end") or {}
     rows += [["end reason", end.get("reason")],
              ["robots lost", ", ".join(map(str, end.get("lost") or [])) or "none"],

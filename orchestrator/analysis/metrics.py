@@ -49,7 +49,8 @@ end of the trajectory if it never arrives):
   such consecutive pairs ("cycles").
 
 Aggregate means (`path_ratio_mean`, `time_ratio_mean`, ...) are over the robots that
-arrived; `oscillations_per_robot` and `side_flips_per_robot` over all robots. Values that
+arrived; `oscillations_per_robot` and `side_flips_per_robot` over all robots;
+`oscillations_max` is the largest count of one robot (0 without robots). Values that
 do not exist (no robot arrived, no commands) are None in JSON.
 """
 
@@ -63,6 +64,7 @@ from typing import Any
 import numpy as np
 
 from agent.core.scenario import Scenario
+from world.recorder import TIMING_COLUMNS
 
 CONTACT_OVERLAP_M = 1.0e-3
 TURN_RATE_MIN_RADPS = 0.05
@@ -256,6 +258,7 @@ class RunMetrics:
     makespan_s: float | None
     oscillations_per_robot: float
     oscillations_total: int
+    oscillations_max: int
     reversal_causes_per_robot: dict[str, float]
     side_flips_per_robot: float | None
     plan_ms_mean: float | None
@@ -263,8 +266,8 @@ class RunMetrics:
     plan_ms_p99: float | None
     plan_ms_max: float | None
     plan_cycles: int
-    latency_ms_p50: float | None
-    latency_ms_p99: float | None
+    sim_latency_ms_p50: float | None
+    sim_latency_ms_p99: float | None
     deadline_misses: int
     deadline_miss_rate: float | None
     sim_time_s: float
@@ -272,10 +275,58 @@ class RunMetrics:
     control_period_s: float
     world_dt_s: float
     per_robot: list[RobotMetrics]
+    wall_latency_ms: dict[str, dict[str, float | None]] = field(default_factory=dict)
 
     def to_json_dict(self) -> dict[str, Any]:
         """Plain JSON types; NaN and infinities become None."""
         return _jsonable(asdict(self))
+
+
+# --------------------------------------------------------------------------------------
+# Wall-clock latency by stage
+# --------------------------------------------------------------------------------------
+
+WALL_STAGES: tuple[tuple[str, str, str, bool], ...] = (
+    ("pose_to_robot", "pose_pub_ns", "pose_rx_ns", True),
+    ("robot_wait", "pose_rx_ns", "plan_start_ns", False),
+    ("plan", "plan_start_ns", "plan_end_ns", False),
+    ("send", "plan_end_ns", "cmd_pub_ns", False),
+    ("cmd_to_world", "cmd_pub_ns", "cmd_rx_ns", True),
+    ("world_wait", "cmd_rx_ns", "applied_ns", False),
+    ("sense_to_act", "pose_pub_ns", "cmd_rx_ns", False),
+    ("end_to_end", "pose_pub_ns", "applied_ns", False),
+)
+"""(stage, from stamp, to stamp, crosses clocks). ``sense_to_act``: the world published a
+pose -> the world received the command planned on it; ``end_to_end``: ... and applied it.
+Both ends of those are the world's clock, so they hold across hosts too. A stage that
+crosses clocks (world <-> robot) is measured only for commands whose robot shares the
+world's clock (one host)."""
+
+
+def wall_latency_ms(stamps: np.ndarray) -> dict[str, dict[str, float | None]]:
+    """p50, p99 and max [ms] and the count of every `WALL_STAGES` stage.
+
+    Args:
+        stamps: (K, 9) int64, one row per applied command, columns `TIMING_COLUMNS`
+            (0: not stamped).
+
+    Returns:
+        stage -> {"p50", "p99", "max", "n"}; stages with no measurable command are left out.
+    """
+    stamps = np.asarray(stamps, dtype=np.int64).reshape(-1, len(TIMING_COLUMNS))
+    col = {name: stamps[:, k] for k, name in enumerate(TIMING_COLUMNS)}
+    same_clock = (col["robot_clock"] == col["world_clock"]) & (col["robot_clock"] != 0)
+    out: dict[str, dict[str, float | None]] = {}
+    for stage, start, end, crosses in WALL_STAGES:
+        ok = (col[start] > 0) & (col[end] > 0)
+        if crosses:
+            ok &= same_clock
+        ms = (col[end][ok] - col[start][ok]) / 1e6
+        if ms.size:
+            out[stage] = {"p50": round(float(np.percentile(ms, 50)), 3),
+                          "p99": round(float(np.percentile(ms, 99)), 3),
+                          "max": round(float(ms.max()), 3), "n": int(ms.size)}
+    return out
 
 
 # --------------------------------------------------------------------------------------
@@ -621,6 +672,7 @@ def compute_metrics(traj: Trajectory, commands: Commands, spec: RunSpec, *,
                     if arrived and len(arrived) == n else None),
         oscillations_per_robot=float(np.mean([r.oscillations for r in per_robot])) if n else 0.0,
         oscillations_total=sum(r.oscillations for r in per_robot),
+        oscillations_max=max((r.oscillations for r in per_robot), default=0),
         reversal_causes_per_robot={
             c: (float(np.mean([r.reversal_causes[c] for r in per_robot])) if n else 0.0)
             for c in REVERSAL_CAUSES
@@ -632,8 +684,8 @@ def compute_metrics(traj: Trajectory, commands: Commands, spec: RunSpec, *,
         plan_ms_p99=_pct(plan_all, 99),
         plan_ms_max=float(plan_all.max()) if plan_all.size else None,
         plan_cycles=int(plan_all.size),
-        latency_ms_p50=_pct(latency, 50),
-        latency_ms_p99=_pct(latency, 99),
+        sim_latency_ms_p50=_pct(latency, 50),
+        sim_latency_ms_p99=_pct(latency, 99),
         deadline_misses=misses_total,
         deadline_miss_rate=misses_total / cycles_total if cycles_total else None,
         sim_time_s=float(traj.t_s[-1]) if traj.t_s.size else 0.0,

@@ -16,8 +16,9 @@ from matplotlib.collections import PatchCollection
 from matplotlib.figure import Figure
 from matplotlib.patches import Circle
 
-from orchestrator.analysis.metrics import RunSpec, contact_episodes
-from orchestrator.analysis.rundir import RunData, read_run_dir
+from orchestrator.analysis.metrics import WALL_STAGES, RunSpec, contact_episodes
+from orchestrator.analysis.rundir import RunData, read_run_dir, read_timing
+from world.recorder import TIMING_COLUMNS
 
 DISC_INTERVAL_S = 10.0
 """Robot discs are drawn every this many seconds along the paths."""
@@ -249,7 +250,122 @@ def write_run_plots(out_dir: Path, *, gif: bool) -> None:
     try:
         data = read_run_dir(out_dir)
         plot_trajectories(data, out_dir / "trajectory.png")
+        stamps = read_timing(out_dir)
+        if stamps.shape[0]:
+            plot_wall_latency(stamps, out_dir / "latency.png")
         if gif:
             animate(data, out_dir / "trajectory.gif")
     except Exception as exc:  # noqa: BLE001 - the run itself is done; keep its result
         print(f"warning: plotting failed: {type(exc).__name__}: {exc}", file=sys.stderr)
+
+
+def plot_wall_latency(stamps: np.ndarray, path: Path) -> Path | None:
+    """latency.png: a histogram per wall-clock stage (`metrics.WALL_STAGES`), p50 and p99
+    marked; None (nothing written) if no stage could be measured.
+
+    Args:
+        stamps: (K, 9) timing.csv stamps (`world.recorder.TIMING_COLUMNS`).
+        path: the PNG to write.
+    """
+    stamps = np.asarray(stamps, dtype=np.int64).reshape(-1, len(TIMING_COLUMNS))
+    col = {name: stamps[:, k] for k, name in enumerate(TIMING_COLUMNS)}
+    same = (col["robot_clock"] == col["world_clock"]) & (col["robot_clock"] != 0)
+    panels = []
+    for stage, start, end, crosses in WALL_STAGES:
+        ok = (col[start] > 0) & (col[end] > 0) & (same if crosses else True)
+        ms = (col[end][ok] - col[start][ok]) / 1e6
+        if ms.size:
+            panels.append((stage, ms))
+    if not panels:
+        return None
+    cols = 2
+    rows = (len(panels) + cols - 1) // cols
+    fig = _figure(5.0 * cols, 2.4 * rows)
+    axes = fig.subplots(rows, cols, squeeze=False).ravel()
+    for ax, (stage, ms) in zip(axes, panels):
+        ax.hist(ms, bins=min(60, max(10, ms.size // 20)), color="tab:blue", alpha=0.8)
+        for q, style in ((50, "-"), (99, "--")):
+            v = float(np.percentile(ms, q))
+            ax.axvline(v, color="black", ls=style, lw=0.8, label=f"p{q} {v:.2f} ms")
+        ax.set_title(stage, fontsize=9)
+        ax.set_xlabel("wall ms")
+        ax.legend(fontsize=7)
+    for ax in axes[len(panels):]:
+        ax.set_visible(False)
+    path = Path(path)
+    fig.savefig(path, dpi=100)
+    return path
+
+
+def plot_benchmark(rows: Sequence[Mapping], path: Path, *, title: str = "") -> Path:
+    """The benchmark at a glance: per case, planners side by side, three panels.
+
+    Success rate (%); oscillations per robot (bar: median over the robots, tick: the
+    largest one robot had); time ratio (mean). Bars of a (case, planner) in which not every
+    run succeeded are hatched in the lower panels, so a good-looking ratio of a failing
+    planner is not mistaken for a result.
+
+    Args:
+        rows: `orchestrator.experiments.benchmark.summarize` rows (keys case, planner,
+            success_rate, osc_per_robot_median, osc_per_robot_max, time_ratio_mean).
+        path: the PNG to write.
+    """
+    cases = list(dict.fromkeys(r["case"] for r in rows))
+    planners = list(dict.fromkeys(r["planner"] for r in rows))
+    by = {(r["case"], r["planner"]): r for r in rows}
+    fig = _figure(max(7.0, 0.55 * len(cases) * max(1, len(planners)) / 2.0 + 2.5), 8.0)
+    axes = fig.subplots(3, 1, sharex=True)
+    colours = robot_colours(max(1, len(planners)))
+    width = 0.8 / max(1, len(planners))
+    x = np.arange(len(cases))
+
+    def values(key: str, planner: str) -> np.ndarray:
+        return np.array([np.nan if by.get((c, planner), {}).get(key) is None
+                         else float(by[(c, planner)][key]) for c in cases], dtype=float)
+
+    for j, planner in enumerate(planners):
+        xs = x + (j - (len(planners) - 1) / 2.0) * width
+        success = values("success_rate", planner)
+        failed = np.isfinite(success) & (success < 1.0)
+        axes[0].bar(xs, np.nan_to_num(100.0 * success), width, color=colours[j],
+                    label=planner)
+        for xk, sk in zip(xs, success):
+            if np.isfinite(sk):
+                axes[0].text(xk, 100.0 * sk + 1.5, f"{100.0 * sk:.0f}", ha="center",
+                             va="bottom", fontsize=6,
+                             color="black" if sk >= 1.0 else "red")
+        for k, key in ((1, "osc_per_robot_median"), (2, "time_ratio_mean")):
+            v = values(key, planner)
+            bars = axes[k].bar(xs, np.nan_to_num(v), width, color=colours[j],
+                               edgecolor="black", linewidth=0.3)
+            for bar, bad in zip(bars, failed):
+                if bad:
+                    bar.set_hatch("///")
+            missing = ~np.isfinite(v) & np.isfinite(success)
+            axes[k].scatter(xs[missing], np.zeros(int(missing.sum())), marker="x",
+                            color="red", s=25, zorder=3,
+                            label="no value (no robot arrived)" if j == 0 and k == 2
+                            else None)
+        top = values("osc_per_robot_max", planner)
+        axes[1].scatter(xs, top, marker="_", s=60, color="black", zorder=3,
+                        label="max (one robot)" if j == 0 else None)
+    axes[0].set_ylabel("success %\n(runs)")
+    axes[0].set_ylim(0, 115)
+    axes[1].set_ylabel("oscillations / robot\n(median, max)")
+    axes[2].set_ylabel("time ratio\n(mean, arrived robots)")
+    axes[2].axhline(1.0, color="grey", lw=0.6, ls=":")
+    for ax in axes:
+        ax.grid(True, axis="y", lw=0.3, alpha=0.5)
+    fig.legend(*axes[0].get_legend_handles_labels(), loc="outside upper center",
+               ncols=max(1, len(planners)), fontsize=8)
+    axes[1].legend(fontsize=7, loc="upper left")
+    if any(h for h in axes[2].get_legend_handles_labels()[0]):
+        axes[2].legend(fontsize=7, loc="upper left")
+    axes[2].set_xticks(x, cases, rotation=40, ha="right", fontsize=8)
+    axes[2].text(0.995, 0.97, "hatched: not every run succeeded", transform=axes[2].transAxes,
+                 ha="right", va="top", fontsize=7)
+    if title:
+        axes[0].set_title(title, fontsize=9)
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    return path

@@ -14,14 +14,22 @@ import os
 import re
 import uuid
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from agent.core.scenario import Scenario
-from orchestrator.analysis.metrics import Commands, RunMetrics, RunSpec, Trajectory, compute_metrics
+from orchestrator.analysis.metrics import (
+    Commands,
+    RunMetrics,
+    RunSpec,
+    Trajectory,
+    compute_metrics,
+    wall_latency_ms,
+)
+from world.recorder import TIMING_COLUMNS
 from world.scenario_file import load_scenario
 
 REQUIRED_COMMAND_COLUMNS = ("t_applied", "robot", "seq", "pose_stamp", "v", "omega",
@@ -207,12 +215,31 @@ def metrics_from_run_dir(run_dir: Path, *, control_period_s: float | None = None
     """Compute the metrics of a finished (or killed) run directory."""
     data = read_run_dir(Path(run_dir))
     period, tick = run_rates(data)
-    return compute_metrics(
+    metrics = compute_metrics(
         data.trajectory, data.commands, RunSpec.from_scenario(data.scenario),
         control_period_s=control_period_s or period,
         world_dt_s=world_dt_s or tick,
         contact_events=contact_events(data.events),
     )
+    return replace(metrics, wall_latency_ms=wall_latency_ms(read_timing(Path(run_dir))))
+
+
+def read_timing(run_dir: Path) -> np.ndarray:
+    """timing.csv's stamps as (K, 9) int64 (`metrics.TIMING_COLUMNS`); (0, 9) if none."""
+    path = Path(run_dir) / "timing.csv"
+    rows: list[list[int]] = []
+    if path.is_file():
+        with open(path, encoding="utf-8", newline="") as f:
+            reader = csv.reader(f)
+            next(reader, None)
+            for row in reader:
+                try:
+                    values = [int(v) for v in row[2:]]
+                except ValueError:
+                    continue  # a killed run's half-written last line
+                if len(values) == len(TIMING_COLUMNS):
+                    rows.append(values)
+    return np.array(rows, dtype=np.int64).reshape(-1, len(TIMING_COLUMNS))
 
 
 def write_json(path: Path, content: Any) -> Path:

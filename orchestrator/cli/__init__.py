@@ -18,6 +18,7 @@ from typing import Any
 from agent.process import ExitCode
 from orchestrator.cli import (
     bench,
+    benchmark,
     catalog,
     compose,
     paper,
@@ -38,6 +39,7 @@ COMMANDS: dict[str, ModuleType] = {
     "report": report,
     "paper": paper,
     "bench": bench,
+    "benchmark": benchmark,
     "scale": scale,
     "compose": compose,
 }

@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import datetime as dt
 import math
-import secrets
 import sys
 import time
 from pathlib import Path
@@ -28,7 +27,6 @@ from orchestrator.cli.common import (
     planner_label,
     tls_ca,
 )
-from world.scenario_file import dump_scenario
 
 RUN_ENDINGS = frozenset({ExitCode.OK, ExitCode.CONTACT, ExitCode.INCOMPLETE, ExitCode.ROBOT_LOST,
                          ExitCode.INTERRUPTED})
@@ -40,8 +38,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--profile", choices=PROFILES, default=None,
                    help="planner configuration: default or paper (the paper\'s method as "
                         "written); default: the scenario\'s own")
-    p.add_argument("setup", help="setup_a..setup_g (or a..g), circle, crossing, crossing4, "
-                                 "random, or a scenario .yaml file")
+    p.add_argument("setup", help="setup_a..setup_g (or a..g), a family (circle, crossing, "
+                                 "crossing4, random, ...: orchestrator list), or a scenario "
+                                 ".yaml file")
     p.add_argument("--agents", type=int, help="robot count (setup_f, setup_g, families)")
     p.add_argument("--planner", choices=PLANNER_NAMES,
                    help="every robot uses this planner (default: the scenario's)")
@@ -155,20 +154,9 @@ def _partial_metrics(out_dir: Path) -> Any:
 def _run_distributed(scenario: Scenario, out_dir: Path, args: argparse.Namespace,
                      progress: ProgressLine, faults: Any = None) -> tuple[Any, int]:
     """Run the real processes; (metrics or None, the world's exit status)."""
-    from orchestrator.analysis.rundir import RunDirError, metrics_from_run_dir, write_metrics
-    from orchestrator.experiments.distributed import run_distributed
+    from orchestrator.experiments.distributed import run_scenario_distributed
 
-    scenario_path = out_dir / "scenario.input.yaml"
-    dump_scenario(scenario, scenario_path)
-    run_id = f"{safe_name(scenario.name)[:24]}-{args.seed}-{secrets.token_hex(4)}"
-    status = run_distributed(scenario_path, out_dir, run_id, rate_hz=50.0,
-                             time_scale=args.time_scale or 1.0, on_progress=progress,
-                             faults=faults, tls=not args.insecure, tls_ca=tls_ca(args))
-    if not (out_dir / "trajectory.csv").exists():
-        return None, status
-    try:
-        metrics = metrics_from_run_dir(out_dir)
-    except RunDirError:
-        return None, status
-    write_metrics(out_dir, metrics)
-    return metrics, status
+    return run_scenario_distributed(scenario, out_dir, args.seed,
+                                    time_scale=args.time_scale or 1.0,
+                                    on_progress=progress, faults=faults,
+                                    tls=not args.insecure, tls_ca=tls_ca(args))

@@ -62,6 +62,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--out", type=Path, required=True, help="output directory")
     parser.add_argument("--json", action="store_true",
                         help="also print {\"rows\": [...]} as the last line")
+    parser.add_argument("--no-plan", action="store_true",
+                        help="robots sense and command a stop every cycle without planning: "
+                             "the CPU columns are then the process's own cost per cycle")
+    parser.add_argument("--seconds", type=positive, default=None,
+                        help="end every run after this much sim time (default: the "
+                             "scenario's time limit)")
     parser.add_argument("--world-bench", action="store_true",
                         help="instead of runs: time the world's per-tick work in-process for "
                              "each N (no processes, no transport)")
@@ -100,7 +106,7 @@ def run(args: argparse.Namespace) -> int:
         rows.append(row)
         print(f"scale: N={n}: success {row['success']}, miss rate "
               f"{_fmt(row['deadline_miss_rate'], 4)}, latency p99 "
-              f"{_fmt(row['latency_ms_p99'], 1)} ms, alive {_fmt(row['alive_s'], 1)} s, "
+              f"{_fmt(row['sim_latency_ms_p99'], 1)} ms, alive {_fmt(row['alive_s'], 1)} s, "
               f"PSS total {_fmt(row['mem_total_mib'], 0)} MiB, wall {row['wall_s']:.0f} s",
               file=sys.stderr, flush=True)
         write_outputs(rows, out_root, argv)  # after every N: a long sweep keeps its rows

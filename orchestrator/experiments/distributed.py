@@ -42,7 +42,9 @@ from pathlib import Path
 from types import FrameType
 from typing import IO
 
+from agent.core.scenario import Scenario
 from agent.process import PARENT_PID_ENV
+from orchestrator.analysis.metrics import RunMetrics
 from protocol import tls_endpoint, validate_run_id
 from world.scenario_file import load_scenario
 from world.sim.faults import FaultPlan, ProcessFault
@@ -312,9 +314,10 @@ def fleet_command(run_id: str, robot_ids: Sequence[int], endpoint: str, log_dir:
                   startup_timeout_s: float = 30.0,
                   robot_endpoints: Mapping[int, str] | None = None,
                   nice: int = 0, cpu_tokens: int | None = None,
-                  tls_dir: Path | None = None) -> list[str]:
+                  tls_dir: Path | None = None,
+                  robot_args: Sequence[str] = ()) -> list[str]:
     """Command line of one `agent.fleet` process that forks every robot process
-    (`cpu_tokens` None: the fleet's default, none)."""
+    (`cpu_tokens` None: the fleet's default, none; `robot_args` go to every robot)."""
     overrides = [arg for rid, ep in sorted((robot_endpoints or {}).items())
                  for arg in ("--connect-id", f"{int(rid)}={ep}")]
     return [
@@ -324,6 +327,7 @@ def fleet_command(run_id: str, robot_ids: Sequence[int], endpoint: str, log_dir:
         "--startup-timeout-s", repr(float(startup_timeout_s)), "--nice", str(int(nice)),
         *(() if cpu_tokens is None else ("--cpu-tokens", str(int(cpu_tokens)))),
         *_tls_args(tls_dir), *overrides,
+        *(f"--robot-arg={arg}" for arg in robot_args),
     ]
 
 
@@ -384,6 +388,7 @@ def run_distributed(
     cpu_tokens: int | None = None,
     tls: bool = True,
     tls_ca: Path | None = None,
+    robot_args: Sequence[str] = (),
 ) -> int:
     """Run one scenario as real processes; return the world's exit status.
 
@@ -412,10 +417,11 @@ def run_distributed(
             plain TCP, which `endpoint` may then not listen on every interface with.
         tls_ca: sign the run's certificates with this CA (``ca.pem``, ``ca.key``) instead of
             a fresh one whose key is never written.
+        robot_args: further ``python -m agent`` arguments for every robot (``--no-plan``).
 
     Returns:
-        The world's exit status: 0 if every robot arrived with no contact, 1 if not,
-        2 for a setup error; a world killed by signal N gives 128 + N.
+        The world's exit status (`agent.process.ExitCode`); a world killed by signal N
+        gives 128 + N.
     """
     validate_run_id(run_id)
     if robot_launcher == "fork" and faults is not None:
@@ -466,7 +472,8 @@ def run_distributed(
             address = (robot_endpoints or {}).get(rid, endpoint)
             proc = spawn_logged(robot_command(run_id, rid, address,
                                               startup_timeout_s=startup_timeout_s,
-                                              extra_args=robot_fault_args(faults, rid),
+                                              extra_args=[*robot_fault_args(faults, rid),
+                                                          *robot_args],
                                               tls_dir=tls_dir),
                                 out_dir / name)
             robots.append(proc)
@@ -478,7 +485,8 @@ def run_distributed(
                 fleet_command(run_id, robot_ids, endpoint, out_dir,
                               startup_timeout_s=startup_timeout_s,
                               robot_endpoints=robot_endpoints, nice=robot_nice,
-                              cpu_tokens=cpu_tokens, tls_dir=tls_dir),
+                              cpu_tokens=cpu_tokens, robot_args=robot_args,
+                              tls_dir=tls_dir),
                 out_dir / "fleet.log"))
         else:
             current = {rid: spawn_robot(rid) for rid in robot_ids}
@@ -532,6 +540,50 @@ def _record_transport(out_dir: Path, info: dict) -> None:
 
     path = Path(out_dir) / "run.json"
     write_json(path, {**read_json(path), "zenoh": info})
+
+
+def run_scenario_distributed(scenario: Scenario, out_dir: Path, seed: int, *,
+                             time_scale: float = 1.0,
+                             on_progress: Callable[[DistributedProgress], None] | None = None,
+                             faults: FaultPlan | None = None, tls: bool = True,
+                             tls_ca: Path | None = None
+                             ) -> tuple[RunMetrics | None, int]:
+    """One resolved scenario as real processes, with its metrics: `orchestrator run`'s path.
+
+    Writes `scenario.input.yaml` into out_dir, runs `run_distributed` (50 Hz world, a run
+    id from the scenario name, the seed and a random token) and, when the world left a
+    trajectory, computes and writes `metrics.json`. `tls`, `tls_ca`: as `run_distributed`.
+
+    Returns:
+        (the metrics, or None when the run left no readable trajectory; the world's exit
+        status).
+    """
+    import secrets
+
+    from orchestrator.analysis.rundir import (
+        RunDirError,
+        metrics_from_run_dir,
+        safe_name,
+        write_metrics,
+    )
+    from world.scenario_file import dump_scenario
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    scenario_path = out_dir / "scenario.input.yaml"
+    dump_scenario(scenario, scenario_path)
+    run_id = f"{safe_name(scenario.name)[:24]}-{seed}-{secrets.token_hex(4)}"
+    status = run_distributed(scenario_path, out_dir, run_id, rate_hz=50.0,
+                             time_scale=time_scale, on_progress=on_progress, faults=faults,
+                             tls=tls, tls_ca=tls_ca)
+    if not (out_dir / "trajectory.csv").exists():
+        return None, status
+    try:
+        metrics = metrics_from_run_dir(out_dir)
+    except RunDirError:
+        return None, status
+    write_metrics(out_dir, metrics)
+    return metrics, status
 
 
 def _progress(events: list[dict], out_dir: Path, t0: float, n_robots: int,

@@ -7,7 +7,8 @@ setup files in `orchestrator/setups/`).
 Scale (the paper's grid units read as metres): robot radius 0.5 m, v_max 1.1 m/s,
 d_safety 0.3 m; straight start-goal distance 36 m for setups A-E, 76 m for F and G;
 lanes of one cohort 3 m apart (starts >= 2.5 m apart); time limit 4x the ideal time
-(longest straight line / v_max), rounded up to 10 s.
+(longest straight line / v_max), rounded up to 10 s; the benchmark families (circle_mixed,
+crossing_<angle>, swap_pairs, swap_grid, random_<density>, obstacles_circle) 3x + 30 s.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from agent.core.config import PLANNER_NAMES, PlannerConfig, RobotLimits, profile_config
-from agent.core.scenario import RobotSpec, Scenario
+from agent.core.scenario import ObstacleSpec, RobotSpec, Scenario
 from protocol import MAX_ROBOTS
 from world.scenario_file import ScenarioError, load_scenario, validate_scenario
 
@@ -41,6 +42,9 @@ MIN_START_SPACING_M = 2.5
 MIN_CIRCLE_RADIUS_M = 18.0
 TIME_LIMIT_FACTOR = 4.0
 """Time limit = this many times the ideal time, rounded up to 10 s."""
+BENCH_TIME_LIMIT_FACTOR = 3.0
+BENCH_TIME_MARGIN_S = 30.0
+"""Benchmark families (`benchmark_time_limit_s`): 3x the ideal time + 30 s."""
 COORD_DECIMALS = 4
 HEADING_DECIMALS = 6
 
@@ -62,7 +66,8 @@ _SETUP_E = (
 # --------------------------------------------------------------------------------------
 
 def _robot(robot_id: int, start_xy: Sequence[float], goal_xy: Sequence[float], *,
-           exact: bool = False) -> RobotSpec:
+           exact: bool = False, radius_m: float = ROBOT_RADIUS_M,
+           v_max_mps: float = V_MAX_MPS) -> RobotSpec:
     """A robot at the setups' scale, heading straight at its goal.
 
     Coordinates are rounded to 0.1 mm and headings to 1 urad (short, readable files)
@@ -78,8 +83,8 @@ def _robot(robot_id: int, start_xy: Sequence[float], goal_xy: Sequence[float], *
         id=robot_id,
         start=(sx, sy, heading),
         goal=(gx, gy),
-        radius_m=ROBOT_RADIUS_M,
-        limits=RobotLimits(v_max_mps=V_MAX_MPS, omega_max_radps=OMEGA_MAX_RADPS),
+        radius_m=float(radius_m),
+        limits=RobotLimits(v_max_mps=float(v_max_mps), omega_max_radps=OMEGA_MAX_RADPS),
     )
 
 
@@ -91,8 +96,21 @@ def ideal_time_s(robots: Sequence[RobotSpec]) -> float:
     )
 
 
-def _scenario(name: str, description: str, robots: Sequence[RobotSpec]) -> Scenario:
-    limit = math.ceil(TIME_LIMIT_FACTOR * ideal_time_s(robots) / 10.0) * 10.0
+def benchmark_time_limit_s(robots: Sequence[RobotSpec]) -> float:
+    """The benchmark families' limit: 3x the ideal time + 30 s, rounded up to 10 s.
+
+    Generous, so a slow planner fails by time rather than by a tight limit; short runs
+    (a swap over 12 m, ideal 11 s) get the margin, long ones the factor.
+    """
+    ideal = ideal_time_s(robots)
+    return math.ceil((BENCH_TIME_LIMIT_FACTOR * ideal + BENCH_TIME_MARGIN_S) / 10.0) * 10.0
+
+
+def _scenario(name: str, description: str, robots: Sequence[RobotSpec], *,
+              obstacles: Sequence[ObstacleSpec] = (),
+              time_limit_s: float | None = None) -> Scenario:
+    limit = time_limit_s if time_limit_s is not None else \
+        math.ceil(TIME_LIMIT_FACTOR * ideal_time_s(robots) / 10.0) * 10.0
     scenario = Scenario(
         name=name,
         description=description,
@@ -100,6 +118,7 @@ def _scenario(name: str, description: str, robots: Sequence[RobotSpec]) -> Scena
         goal_tolerance_m=0.25,
         planner_config=PlannerConfig(d_safety_m=D_SAFETY_M),
         robots=tuple(robots),
+        obstacles=tuple(obstacles),
     )
     return validate_scenario(scenario, name)
 
@@ -283,11 +302,20 @@ def circles(n: int, rng: np.random.Generator | None = None) -> Scenario:
     return dataclasses.replace(scenario, time_limit_s=CIRCLES_TIME_LIMIT_S)
 
 
-def crossing(n: int, rng: np.random.Generator | None = None, *, flows: int = 2) -> Scenario:
-    """Perpendicular flows of n/flows robots crossing a 36 m square.
+def crossing(n: int, rng: np.random.Generator | None = None, *, flows: int = 2,
+             angle_deg: float | None = None) -> Scenario:
+    """Flows of n/flows robots crossing a square (36 m across, wider for wide cohorts).
 
     flows=2: left to right and bottom to top. flows=4: all four directions, opposing
     flows on interleaved lanes (half a lane apart). `rng` is unused.
+
+    angle_deg (flows=2 only): the second cohort's direction of travel at this angle to the
+    first's (counter-clockwise, 0 < angle < 180): 90 is the perpendicular crossing (the
+    same robots as without an angle), 45 two cohorts merging at a shallow angle, 135
+    nearly head-on. Both cohorts' lanes cross at the origin; for shallow angles the run is
+    lengthened (in 1 m steps) until the two cohorts' starts, and their goals, keep the
+    generators' 2.5 m spacing. The scenario is then named `crossing_<angle>_<n>` and has
+    the benchmark time limit (`benchmark_time_limit_s`).
     """
     _require(flows in (2, 4), f"crossing: flows must be 2 or 4, got {flows}")
     _require(n >= flows and n % flows == 0,
@@ -295,6 +323,9 @@ def crossing(n: int, rng: np.random.Generator | None = None, *, flows: int = 2) 
     k = n // flows
     h = _half_run(k + 1, SHORT_RUN_M / 2.0)  # k + 1: interleaved lanes reach half a lane out
     lanes = _lanes(k)
+    if angle_deg is not None:
+        _require(flows == 2, "crossing: an angle needs flows=2")
+        return _angled_crossing(k, lanes, h, float(angle_deg))
     if flows == 2:
         spec = [("left_to_right", lanes), ("bottom_to_top", lanes)]
         name = f"crossing_{n}"
@@ -306,14 +337,55 @@ def crossing(n: int, rng: np.random.Generator | None = None, *, flows: int = 2) 
     return _scenario(name, f"{flows} perpendicular flows of {k} robots", _cohorts(spec, h))
 
 
-def random_scenario(n: int, rng: np.random.Generator, *, max_tries: int = 20_000) -> Scenario:
+def _angled_crossing(k: int, lanes: np.ndarray, h: float, angle_deg: float) -> Scenario:
+    _require(math.isfinite(angle_deg) and 0.0 < angle_deg < 180.0,
+             f"crossing: the angle must be in (0, 180) deg, got {angle_deg!r}")
+    phi = math.radians(angle_deg)
+    directions = (np.array([1.0, 0.0]), np.array([math.cos(phi), math.sin(phi)]))
+    # Lane offsets along the left normal of the first cohort and the right normal of the
+    # second: at 90 deg these are exactly the `left_to_right` and `bottom_to_top` flows.
+    normals = (np.array([0.0, 1.0]), np.array([math.sin(phi), -math.cos(phi)]))
+    for _ in range(200):
+        starts = np.array([-h * d + s * nrm for d, nrm in zip(directions, normals)
+                           for s in lanes])
+        goals = np.array([h * d + s * nrm for d, nrm in zip(directions, normals)
+                          for s in lanes])
+        if min(_min_spacing(starts), _min_spacing(goals)) >= MIN_START_SPACING_M:
+            break
+        h += 1.0
+    else:  # pragma: no cover - 200 m more always separates the cohorts
+        raise ScenarioError(f"crossing: could not separate the cohorts at {angle_deg:g} deg")
+    robots = [_robot(i, s, g) for i, (s, g) in enumerate(zip(starts, goals))]
+    n = 2 * k
+    label = f"{angle_deg:g}"
+    return _scenario(f"crossing_{label}_{n}", f"two cohorts of {k} crossing at {label} deg "
+                     f"({2.0 * h:g} m runs)", robots, time_limit_s=benchmark_time_limit_s(robots))
+
+
+def _min_spacing(xy: np.ndarray) -> float:
+    """Smallest centre distance between two rows of (m, 2) points (inf for fewer than 2)."""
+    if len(xy) < 2:
+        return math.inf
+    i, j = np.triu_indices(len(xy), k=1)
+    return float(np.hypot(*(xy[i] - xy[j]).T).min())
+
+
+def random_scenario(n: int, rng: np.random.Generator, *, max_tries: int = 20_000,
+                    density_per_m2: float | None = None, name: str | None = None) -> Scenario:
     """n robots with seeded random starts and goals in a square.
 
-    The square's side is max(20 m, 4 m * sqrt(n)); starts are pairwise >= 2.5 m apart,
-    goals too, and each goal is at least half the side away from its start.
+    The square's side is max(20 m, 4 m * sqrt(n)), or sqrt(n / density_per_m2) when a
+    density (robots per square metre) is given; starts are pairwise >= 2.5 m apart, goals
+    too, and each goal is at least half the side away from its start. With a density the
+    scenario has the benchmark time limit (`benchmark_time_limit_s`).
     """
     _require(n >= 1, f"random: --agents must be >= 1, got {n}")
-    side_m = max(20.0, 4.0 * math.sqrt(n))
+    if density_per_m2 is None:
+        side_m = max(20.0, 4.0 * math.sqrt(n))
+    else:
+        _require(math.isfinite(density_per_m2) and density_per_m2 > 0.0,
+                 f"random: the density must be > 0, got {density_per_m2!r}")
+        side_m = round(math.sqrt(n / density_per_m2), 2)
     starts: list[np.ndarray] = []
     goals: list[np.ndarray] = []
     tries = 0
@@ -332,8 +404,160 @@ def random_scenario(n: int, rng: np.random.Generator, *, max_tries: int = 20_000
         starts.append(s)
         goals.append(g)
     robots = [_robot(k, s, g) for k, (s, g) in enumerate(zip(starts, goals))]
-    return _scenario(f"random_{n}", f"{n} robots, random starts and goals in a "
-                     f"{side_m:g} m square", robots)
+    if density_per_m2 is None:
+        return _scenario(name or f"random_{n}", f"{n} robots, random starts and goals in a "
+                         f"{side_m:g} m square", robots)
+    return _scenario(name or f"random_{n}", f"{n} robots, random starts and goals in a "
+                     f"{side_m:g} m square ({100.0 * density_per_m2:g} robots per 100 m^2)",
+                     robots, time_limit_s=benchmark_time_limit_s(robots))
+
+
+# --------------------------------------------------------------------------------------
+# Benchmark families (orchestrator benchmark): scenarios the planners were not tuned on
+# --------------------------------------------------------------------------------------
+
+MIXED_RADII_M = (0.3, 0.5, 0.7)
+"""Disc radii of `circle_mixed`, each used by about a third of the robots."""
+MIXED_V_MAX_MPS = (0.8, 1.1, 1.4)
+"""v_max of `circle_mixed`, each used by about a third of the robots (drawn independently
+of the radii)."""
+
+
+def _mixed(values: Sequence[float], n: int, rng: np.random.Generator) -> np.ndarray:
+    """(n,) values cycled so each appears n // len or one more times, in seeded order."""
+    return rng.permutation(np.resize(np.asarray(values, dtype=float), n))
+
+
+def _circle_radius_m(n: int, spacing_m: float, minimum_m: float) -> float:
+    """The smallest radius (0.1 m steps, >= minimum_m) with neighbours spacing_m apart."""
+    radius_m = max(minimum_m, spacing_m / 2.0 / math.sin(math.pi / n))
+    return math.ceil(radius_m * 10.0) / 10.0
+
+
+def circle_mixed(n: int, rng: np.random.Generator) -> Scenario:
+    """The antipodal circle with mixed robots: radii 0.3/0.5/0.7 m, v_max 0.8/1.1/1.4 m/s.
+
+    Each value is used by about a third of the robots (n >= 3: all three appear), the
+    assignment seeded by `rng` (radii and speeds independently). Neighbouring starts keep a
+    2.5 m centre spacing plus what the largest disc adds over 0.5 m (2.9 m). Ideal time
+    and time limit follow from each robot's own v_max (the slowest robot decides).
+    """
+    _require(n >= 2, f"circle_mixed: --agents must be >= 2, got {n}")
+    spacing_m = MIN_START_SPACING_M + 2.0 * (max(MIXED_RADII_M) - ROBOT_RADIUS_M)
+    radius_m = _circle_radius_m(n, spacing_m, MIN_CIRCLE_RADIUS_M)
+    radii = _mixed(MIXED_RADII_M, n, rng)
+    speeds = _mixed(MIXED_V_MAX_MPS, n, rng)
+    robots = []
+    for k in range(n):
+        a = 2.0 * math.pi * k / n
+        x, y = radius_m * math.cos(a), radius_m * math.sin(a)
+        robots.append(_robot(k, (x, y), (-x, -y), radius_m=radii[k], v_max_mps=speeds[k]))
+    return _scenario(f"circle_mixed_{n}", f"{n} mixed robots (radius 0.3-0.7 m, v_max "
+                     f"0.8-1.4 m/s) on a circle of radius {radius_m:g} m, antipodal swap",
+                     robots, time_limit_s=benchmark_time_limit_s(robots))
+
+
+SWAP_RUN_M = 12.0
+"""Distance the two robots of a `swap_pairs` pair travel (head-on)."""
+SWAP_PAIR_SPACING_M = LANE_SPACING_M
+"""Distance between neighbouring pairs of `swap_pairs`."""
+
+
+def swap_pairs(n: int, rng: np.random.Generator | None = None) -> Scenario:
+    """n/2 pairs side by side, the two robots of a pair swapping places head-on.
+
+    Pair p: robots at (-6 m, y_p) and (+6 m, y_p), lanes 3 m apart (so neighbouring pairs
+    interact while they dodge); robot 2p starts on the left. `rng` is unused.
+    """
+    _require(n >= 2 and n % 2 == 0, f"swap_pairs: --agents must be a positive even number, "
+             f"got {n}")
+    half = SWAP_RUN_M / 2.0
+    robots = []
+    for y in _lanes(n // 2, SWAP_PAIR_SPACING_M):
+        robots.append(_robot(len(robots), (-half, y), (half, y)))
+        robots.append(_robot(len(robots), (half, y), (-half, y)))
+    return _scenario(f"swap_pairs_{n}", f"{n // 2} pairs side by side ({SWAP_PAIR_SPACING_M:g} m "
+                     f"apart), each swapping places head-on over {SWAP_RUN_M:g} m", robots,
+                     time_limit_s=benchmark_time_limit_s(robots))
+
+
+SWAP_GRID_SPACING_M = 4.0
+"""Cell size of `swap_grid`."""
+
+
+def swap_grid(n: int, rng: np.random.Generator | None = None) -> Scenario:
+    """A k x k grid (n = k^2, k even), every robot going to the mirrored cell.
+
+    Cells are 4 m apart, centred on the origin; robot (i, j) goes to cell (k-1-i, k-1-j),
+    i.e. its goal is its start mirrored through the centre (k even: nobody stays). Every
+    straight line passes through the centre. `rng` is unused.
+    """
+    k = math.isqrt(max(n, 0))
+    _require(n >= 4 and k * k == n and k % 2 == 0,
+             f"swap_grid: --agents must be the square of an even number (4, 16, 36, ...), "
+             f"got {n}")
+    lanes = _lanes(k, SWAP_GRID_SPACING_M)
+    robots = [_robot(i * k + j, (x, y), (-x, -y))
+              for i, y in enumerate(lanes) for j, x in enumerate(lanes)]
+    return _scenario(f"swap_grid_{n}", f"{k}x{k} grid ({SWAP_GRID_SPACING_M:g} m cells), every "
+                     "robot to the cell mirrored through the centre", robots,
+                     time_limit_s=benchmark_time_limit_s(robots))
+
+
+RANDOM_DENSITIES_PER_M2 = {"sparse": 0.01, "medium": 0.025, "dense": 0.05}
+"""Robots per square metre of the `random_<density>` families (1, 2.5, 5 per 100 m^2)."""
+
+
+def random_density(n: int, rng: np.random.Generator, density: str) -> Scenario:
+    """`random_scenario` in a square sized for a named density (`RANDOM_DENSITIES_PER_M2`)."""
+    _require(density in RANDOM_DENSITIES_PER_M2,
+             f"random: density must be one of {', '.join(RANDOM_DENSITIES_PER_M2)}, "
+             f"got {density!r}")
+    return random_scenario(n, rng, density_per_m2=RANDOM_DENSITIES_PER_M2[density],
+                           name=f"random_{density}_{n}")
+
+
+OBSTACLE_RADII_M = (1.0, 2.0)
+"""Range of the static obstacles' radii in `obstacles_circle`."""
+OBSTACLE_GAP_M = 2.5
+"""Smallest gap between two obstacles of `obstacles_circle` (a robot fits through)."""
+OBSTACLE_CIRCLE_MIN_RADIUS_M = 12.0
+
+
+def obstacles_circle(n: int, rng: np.random.Generator, *, max_tries: int = 10_000
+                     ) -> Scenario:
+    """The antipodal circle (radius >= 12 m) with 3-5 static disc obstacles inside.
+
+    Obstacles: seeded count, radii uniform in 1-2 m, centres uniform in the disc of half
+    the circle's radius (one of them within 2 m of the centre, where every straight path
+    meets); pairwise gaps >= 2.5 m. Starts and goals are on the circle, so the obstacles
+    never overlap them (and `validate_scenario` checks it).
+    """
+    _require(n >= 2, f"obstacles_circle: --agents must be >= 2, got {n}")
+    radius_m = _circle_radius_m(n, MIN_START_SPACING_M, OBSTACLE_CIRCLE_MIN_RADIUS_M)
+    count = int(rng.integers(3, 6))
+    obstacles: list[ObstacleSpec] = []
+    tries = 0
+    while len(obstacles) < count:
+        tries += 1
+        if tries > max_tries:  # pragma: no cover - the disc is far from full
+            raise ScenarioError(f"obstacles_circle: could not place {count} obstacles")
+        reach = 2.0 if not obstacles else radius_m / 2.0
+        rho = reach * math.sqrt(rng.uniform())
+        phi = rng.uniform(0.0, 2.0 * math.pi)
+        c = (round(rho * math.cos(phi), 2) + 0.0, round(rho * math.sin(phi), 2) + 0.0)
+        r = round(float(rng.uniform(*OBSTACLE_RADII_M)), 2)
+        if any(math.dist(c, o.center) - r - o.radius_m < OBSTACLE_GAP_M for o in obstacles):
+            continue
+        obstacles.append(ObstacleSpec(id=-(len(obstacles) + 1), center=c, radius_m=r))
+    robots = []
+    for k in range(n):
+        a = 2.0 * math.pi * k / n
+        x, y = radius_m * math.cos(a), radius_m * math.sin(a)
+        robots.append(_robot(k, (x, y), (-x, -y)))
+    return _scenario(f"obstacles_circle_{n}", f"{n} robots on a circle of radius "
+                     f"{radius_m:g} m, antipodal swap around {count} static obstacles",
+                     robots, obstacles=obstacles, time_limit_s=benchmark_time_limit_s(robots))
 
 
 FAMILIES: dict[str, tuple[int, str]] = {
@@ -343,6 +567,16 @@ FAMILIES: dict[str, tuple[int, str]] = {
     "crossing4": (16, "four perpendicular flows of N/4, opposing flows on interleaved lanes"),
     "random": (8, "N seeded random starts and goals in a square, >= 2.5 m spacing"),
     "circles": (16, "antipodal circles of 8 (radius 8 m) on a 19 m grid: the scaling family"),
+    "circle_mixed": (16, "antipodal circle, mixed radii 0.3-0.7 m and v_max 0.8-1.4 m/s"),
+    "crossing_45": (16, "two cohorts of N/2 crossing at 45 deg (shallow merge)"),
+    "crossing_90": (16, "two cohorts of N/2 crossing at 90 deg"),
+    "crossing_135": (16, "two cohorts of N/2 crossing at 135 deg (nearly head-on)"),
+    "swap_pairs": (6, "N/2 pairs side by side, 3 m apart, each swapping places head-on"),
+    "swap_grid": (16, "k x k grid (N = k^2, k even), each robot to the mirrored cell"),
+    "random_sparse": (20, "N seeded random starts and goals, 1 robot per 100 m^2"),
+    "random_medium": (20, "N seeded random starts and goals, 2.5 robots per 100 m^2"),
+    "random_dense": (20, "N seeded random starts and goals, 5 robots per 100 m^2"),
+    "obstacles_circle": (12, "antipodal circle (radius >= 12 m) around 3-5 static obstacles"),
 }
 
 
@@ -355,6 +589,18 @@ def _family(name: str, n: int, rng: np.random.Generator) -> Scenario:
         return circles(n, rng)
     if name == "crossing4":
         return crossing(n, rng, flows=4)
+    if name == "circle_mixed":
+        return circle_mixed(n, rng)
+    if name.startswith("crossing_"):
+        return crossing(n, rng, flows=2, angle_deg=float(name.removeprefix("crossing_")))
+    if name == "swap_pairs":
+        return swap_pairs(n, rng)
+    if name == "swap_grid":
+        return swap_grid(n, rng)
+    if name.startswith("random_"):
+        return random_density(n, rng, name.removeprefix("random_"))
+    if name == "obstacles_circle":
+        return obstacles_circle(n, rng)
     return random_scenario(n, rng)
 
 
@@ -427,8 +673,9 @@ def resolve(name_or_path: str, agents: int | None = None, seed: int = 0,
     """The scenario the CLI runs.
 
     Args:
-        name_or_path: `setup_a` ... `setup_g` (also `a` ... `g`), a family (`circle`,
-            `crossing`, `crossing4`, `random`) or a scenario file path.
+        name_or_path: `setup_a` ... `setup_g` (also `a` ... `g`), a family (`FAMILIES`:
+            `circle`, `crossing`, `crossing4`, `random`, the benchmark families) or a
+            scenario file path.
         agents: robot count; setups F and G scale (groups of agents/3, cohorts of
             agents/4), families take any valid count, other setups and files only
             their own size.

@@ -52,6 +52,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import dataclasses
 import json
 import math
 import os
@@ -82,17 +83,18 @@ CPU_PARTS = ("sense", "plan", "send", "loop", "threads")
 
 COLUMNS = (
     "agents", "family", "planner", "success", "arrived", "contacts", "min_gap_m",
-    "plan_ms_p50", "plan_ms_p99", "latency_ms_p50", "latency_ms_p99", "deadline_miss_rate",
+    "plan_ms_p50", "plan_ms_p99", "sim_latency_ms_p50", "sim_latency_ms_p99",
+    "sense_to_act_ms_p50", "sense_to_act_ms_p99", "deadline_miss_rate",
     "cpu_share_robots", "cpu_share_world", "cpu_pct_per_robot", "mem_robot_mib",
     "mem_world_mib", "mem_fleet_mib", "mem_total_mib", "mem_kind", "threads_per_robot",
     "alive_s", "sim_time_s", "wall_s", "world_overruns", "robots_lost", "world_status",
     "connections",
     "launcher",
-    *(f"cpu_ms_per_plan_{part}" for part in CPU_PARTS),
+    *(f"cpu_ms_per_plan_{part}" for part in CPU_PARTS), "cpu_ms_per_plan_total",
 )
 PLOTTED = (
     ("plan_ms_p50", "plan_ms_p99", "planning time [ms]"),
-    ("latency_ms_p50", "latency_ms_p99", "pose->command latency [ms]"),
+    ("sense_to_act_ms_p50", "sense_to_act_ms_p99", "sense -> act [wall ms]"),
     ("deadline_miss_rate", None, "deadline-miss rate"),
     ("cpu_share_robots", "cpu_share_world", "CPU share of the machine"),
     ("mem_robot_mib", None, "PSS per robot process [MiB]"),
@@ -244,9 +246,13 @@ def cpu_per_plan_ms(exits: dict[str, Any]) -> dict[str, float | None]:
     reported = [p for p in exits.get("processes", ())
                 if all(f"cpu_{part}_us" in p for part in CPU_PARTS)]
     plans = sum(int(p.get("plans", 0)) for p in reported)
-    return {f"cpu_ms_per_plan_{part}":
-            (sum(int(p[f"cpu_{part}_us"]) for p in reported) / plans / 1e3 if plans else None)
-            for part in CPU_PARTS}
+    out: dict[str, float | None] = {
+        f"cpu_ms_per_plan_{part}":
+        (sum(int(p[f"cpu_{part}_us"]) for p in reported) / plans / 1e3 if plans else None)
+        for part in CPU_PARTS}
+    parts = [v for v in out.values() if v is not None]
+    out["cpu_ms_per_plan_total"] = sum(parts) if parts else None
+    return out
 
 
 def scale_row(metrics: dict[str, Any], events: Sequence[dict], sampler: ResourceSampler, *,
@@ -296,8 +302,12 @@ def scale_row(metrics: dict[str, Any], events: Sequence[dict], sampler: Resource
         "min_gap_m": metrics.get("min_gap_m"),
         "plan_ms_p50": metrics.get("plan_ms_p50"),
         "plan_ms_p99": metrics.get("plan_ms_p99"),
-        "latency_ms_p50": metrics.get("latency_ms_p50"),
-        "latency_ms_p99": metrics.get("latency_ms_p99"),
+        "sim_latency_ms_p50": metrics.get("sim_latency_ms_p50"),
+        "sim_latency_ms_p99": metrics.get("sim_latency_ms_p99"),
+        "sense_to_act_ms_p50": ((metrics.get("wall_latency_ms") or {}).get("sense_to_act")
+                                or {}).get("p50"),
+        "sense_to_act_ms_p99": ((metrics.get("wall_latency_ms") or {}).get("sense_to_act")
+                                or {}).get("p99"),
         "deadline_miss_rate": metrics.get("deadline_miss_rate"),
         "cpu_share_robots": cpu_robots,
         "cpu_share_world": cpu_world,
@@ -340,6 +350,8 @@ def run_one(n: int, args: argparse.Namespace, out_root: Path) -> dict[str, Any]:
     from world.scenario_file import dump_scenario
 
     scenario = resolve(args.family, agents=n, seed=args.seed, planner=args.planner)
+    if getattr(args, "seconds", None):
+        scenario = dataclasses.replace(scenario, time_limit_s=float(args.seconds))
     out_dir = out_root / f"{args.family}_{n}"
     if (out_dir / "trajectory.csv").exists():
         raise SystemExit(f"error: {out_dir} already holds a run; choose another --out")
@@ -351,7 +363,7 @@ def run_one(n: int, args: argparse.Namespace, out_root: Path) -> dict[str, Any]:
         "setup": args.family, "scenario": scenario.name, "planner": planner, "seed": args.seed,
         "mode": "distributed", "agents": n, "time_scale": args.time_scale,
         "hosts": list(args.hosts), "launcher": args.launcher, "robot_nice": args.robot_nice,
-        "cpu_tokens": args.cpu_tokens,
+        "cpu_tokens": args.cpu_tokens, "no_plan": bool(getattr(args, "no_plan", False)),
         "argv": list(args.argv),
     })
     port = int(free_tcp_endpoint().rsplit(":", 1)[1])
@@ -372,7 +384,9 @@ def run_one(n: int, args: argparse.Namespace, out_root: Path) -> dict[str, Any]:
                                  robot_launcher=args.launcher,
                                  robot_nice=args.robot_nice, cpu_tokens=args.cpu_tokens,
                                  tls=not getattr(args, "insecure", False),
-                                 tls_ca=getattr(args, "tls_ca_dir", None))
+                                 tls_ca=getattr(args, "tls_ca_dir", None),
+                                 robot_args=["--no-plan"] if getattr(args, "no_plan", False)
+                                 else [])
     finally:
         sampler.stop()
     wall_s = time.monotonic() - spawn_mono
@@ -498,7 +512,8 @@ def format_rows(rows: Sequence[dict[str, Any]]) -> str:
     """The printed table, one row per N."""
     head = ["N", "ok", "arrived", "contacts", "plan p50/p99 ms", "latency p50/p99 ms",
             "miss %", "CPU robots/world %", "CPU/robot %",
-            "CPU ms/plan sense/plan/send/loop/threads", "PSS/robot MiB", "PSS total MiB",
+            "CPU ms/plan sense/plan/send/loop/threads = total", "sense->act p50/p99 ms",
+            "PSS/robot MiB", "PSS total MiB",
             "alive s", "lost", "sim s", "wall s"]
     body = []
     for r in rows:
@@ -508,12 +523,14 @@ def format_rows(rows: Sequence[dict[str, Any]]) -> str:
             str(r["agents"]), _fmt(r["success"]), f"{_fmt(r['arrived'])}/{r['agents']}",
             _fmt(r["contacts"]),
             f"{_fmt(r['plan_ms_p50'])}/{_fmt(r['plan_ms_p99'])}",
-            f"{_fmt(r['latency_ms_p50'], 1)}/{_fmt(r['latency_ms_p99'], 1)}",
+            f"{_fmt(r['sim_latency_ms_p50'], 1)}/{_fmt(r['sim_latency_ms_p99'], 1)}",
             _fmt(100.0 * miss if miss is not None else None),
             f"{_fmt(100 * cpu_r if cpu_r is not None else None, 1)}/"
             f"{_fmt(100 * cpu_w if cpu_w is not None else None, 1)}",
             _fmt(r["cpu_pct_per_robot"], 1),
-            "/".join(_fmt(r.get(f"cpu_ms_per_plan_{part}")) for part in CPU_PARTS),
+            "/".join(_fmt(r.get(f"cpu_ms_per_plan_{part}")) for part in CPU_PARTS)
+            + f" = {_fmt(r.get('cpu_ms_per_plan_total'))}",
+            f"{_fmt(r.get('sense_to_act_ms_p50'), 1)}/{_fmt(r.get('sense_to_act_ms_p99'), 1)}",
             _fmt(r["mem_robot_mib"], 1),
             _fmt(r["mem_total_mib"], 0), _fmt(r["alive_s"], 1), _fmt(r["robots_lost"]),
             _fmt(r["sim_time_s"], 1),

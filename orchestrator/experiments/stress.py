@@ -155,7 +155,7 @@ def run_job(job: StressJob) -> dict[str, Any]:
             "success": m.get("success"), "arrived": m.get("arrived"), "robots": m.get("robots"),
             "contacts": m.get("contacts"), "min_gap_m": m.get("min_gap_m"),
             "time_ratio_mean": m.get("time_ratio_mean"),
-            "latency_ms_p50": m.get("latency_ms_p50"),
+            "sim_latency_ms_p50": m.get("sim_latency_ms_p50"),
             "ego_error_m_mean": end_event.get("ego_error_m_mean"),
         })
     except Exception as exc:  # noqa: BLE001 - one failed run must not end the sweep

@@ -16,7 +16,7 @@ from orchestrator.cli import main
 
 METRIC_KEYS = ("robots", "arrived", "success", "contacts", "min_gap_m", "path_ratio_mean",
                "time_ratio_mean", "oscillations_per_robot", "side_flips_per_robot",
-               "plan_ms_p50", "plan_ms_p99", "latency_ms_p50", "latency_ms_p99",
+               "plan_ms_p50", "plan_ms_p99", "sim_latency_ms_p50", "sim_latency_ms_p99",
                "deadline_miss_rate", "per_robot")
 BAD = """\
 name: bad
@@ -206,7 +206,7 @@ def test_run_with_fault_flags_in_lockstep_records_the_plan(tmp_path, capsys):
     assert faults["timing"]["0"]["plan_delay_ms"] == 20.0
     start = json.loads((out / "events.jsonl").read_text().splitlines()[0])
     assert start["faults"]["links"]["jitter_ms"] == 15.0
-    assert json.loads((out / "metrics.json").read_text())["latency_ms_p50"] >= 100.0
+    assert json.loads((out / "metrics.json").read_text())["sim_latency_ms_p50"] >= 100.0
 
 
 @pytest.mark.parametrize("flags, message", [
@@ -368,3 +368,73 @@ def test_unwritable_out_and_too_many_agents_are_one_line_errors(tmp_path, capsys
                  "--out", str(tmp_path / "big")]) == 2
     err = capsys.readouterr().err.strip()
     assert "--agents: must be in [1, 4096]" in err and "\n" not in err
+
+
+def test_benchmark_quick_one_case_writes_the_table_files(tmp_path, capsys):
+    out = tmp_path / "bq"
+    rc = main(["benchmark", "--quick", "--families", "swap_pairs", "--max-cases", "1",
+               "--jobs", "1", "--out", str(out)])
+    assert rc == 0
+    printed = capsys.readouterr().out
+    for name in ("benchmark.csv", "benchmark.json", "benchmark.md", "benchmark.png"):
+        assert (out / name).stat().st_size > 0
+    rows = list(csv.DictReader((out / "benchmark.csv").read_text().splitlines()))
+    assert [(r["case"], r["planner"]) for r in rows] == [("swap_pairs_4", "eifp-mpc"),
+                                                        ("swap_pairs_4", "orca")]
+    assert all(r["runs"] == "1" for r in rows)
+    saved = json.loads((out / "benchmark.json").read_text())
+    assert saved["suite"]["seeds"] == [0] and saved["suite"]["cases"] == ["swap_pairs_4"]
+    assert [r["seed"] for r in saved["runs"]] == [0, 0]
+    for run in saved["runs"]:  # ordinary run directories, with metrics
+        metrics = json.loads((Path(run["dir"]) / "metrics.json").read_text())
+        assert metrics["robots"] == 4 and run["robot_oscillations"] == \
+            [r["oscillations"] for r in metrics["per_robot"]]
+    md = (out / "benchmark.md").read_text().splitlines()
+    assert sum(line.startswith("| swap_pairs_4 |") for line in md) == 2
+    assert sum(line.startswith("swap_pairs_4") for line in printed.splitlines()) == 2
+    # The same directory again: refused, nothing overwritten.
+    assert main(["benchmark", "--quick", "--families", "swap_pairs", "--max-cases", "1",
+                 "--out", str(out)]) == ExitCode.BAD_INPUT
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    (["--planners", "rrt"], "--planners"),
+    (["--families", "nope"], "--families"),
+    (["--seeds", "lots"], "--seeds"),
+    (["--jobs", "0"], "--jobs"),
+])
+def test_benchmark_rejects_bad_options(tmp_path, capsys, argv, message):
+    assert main(["benchmark", "--quick", "--out", str(tmp_path / "b"), *argv]) == \
+        ExitCode.BAD_INPUT
+    assert message in capsys.readouterr().err
+
+
+def test_benchmark_distributed_mode_takes_the_path_of_orchestrator_run(tmp_path, monkeypatch,
+                                                                       capsys):
+    from orchestrator.experiments import distributed
+    from orchestrator.experiments.lockstep import run_lockstep
+    from world.scenario_file import load_scenario
+
+    calls = []
+
+    def fake(scenario_path, out_dir, run_id, *, rate_hz, time_scale, on_progress, faults,
+             tls, tls_ca):
+        assert tls is True and tls_ca is None  # secure by default, as orchestrator run
+        calls.append((Path(scenario_path), run_id, time_scale))
+        run_lockstep(load_scenario(scenario_path), out_dir)
+        (Path(out_dir) / "metrics.json").unlink()  # the world does not write metrics
+        return 0
+
+    monkeypatch.setattr(distributed, "run_distributed", fake)
+    out = tmp_path / "bd"
+    rc = main(["benchmark", "--quick", "--families", "setup_a", "--planners", "orca",
+               "--mode", "distributed", "--time-scale", "3", "--out", str(out)])
+    assert rc == 0
+    ((path, run_id, scale),) = calls
+    assert path.name == "scenario.input.yaml" and run_id.startswith("setup_a-0-")
+    assert scale == 3.0
+    saved = json.loads((out / "benchmark.json").read_text())
+    assert saved["suite"]["mode"] == "distributed"
+    (run,) = saved["runs"]
+    assert run["mode"] == "distributed" and run["world_status"] == 0 and run["robots"] == 2
+    assert json.loads((Path(run["dir"]) / "run.json").read_text())["mode"] == "distributed"

@@ -45,7 +45,7 @@ def test_lockstep_run_writes_the_run_directory(tmp_path):
     assert kinds[0] == "start" and kinds[-1] == "end" and kinds.count("arrived") == 2
     assert events[0]["world_rate_hz"] == 50.0 and events[0]["control_rate_hz"] == 10.0
     metrics = json.loads((run / "metrics.json").read_text())
-    assert metrics["latency_ms_p50"] == 0.0 and metrics["deadline_miss_rate"] == 0.0
+    assert metrics["sim_latency_ms_p50"] == 0.0 and metrics["deadline_miss_rate"] == 0.0
     assert seen and seen[-1].arrived == frozenset({0, 1})
 
 
@@ -112,7 +112,7 @@ def test_faulty_loop_without_faults_succeeds_and_is_deterministic(tmp_path):
     plan = build_plan()
     a = run_lockstep(two_lanes(), tmp_path / "a", faults=plan)
     run_lockstep(two_lanes(), tmp_path / "b", faults=plan)
-    assert a.success and a.metrics.latency_ms_p50 == 0.0
+    assert a.success and a.metrics.sim_latency_ms_p50 == 0.0
     assert ((tmp_path / "a" / "trajectory.csv").read_text()
             == (tmp_path / "b" / "trajectory.csv").read_text())
 
@@ -123,7 +123,7 @@ def test_link_latency_is_the_measured_command_latency(tmp_path):
     # and its command takes another 60 ms: 160 ms per command.
     out = run_lockstep(two_lanes(), tmp_path / "run", faults=build_plan(latency_ms=60))
     assert out.success
-    assert out.metrics.latency_ms_p50 == pytest.approx(160.0)
+    assert out.metrics.sim_latency_ms_p50 == pytest.approx(160.0)
 
 
 def test_lost_commands_give_way_to_braking_after_their_hold(tmp_path):

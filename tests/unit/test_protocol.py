@@ -737,3 +737,35 @@ def test_fuzz_huge_pose_arrays(n: int, short: int) -> None:
         assert n > MAX_ROBOTS or short
         return
     assert msg.n_robots == n <= MAX_ROBOTS and not short
+
+
+# --- wall-clock stamps ----------------------------------------------------------------------
+
+
+def test_wall_stamps_round_trip_and_bad_ones_are_rejected():
+    from protocol import WallStamps
+
+    wall = WallStamps(clock_id=5, pose_clock_id=5, pose_pub_ns=10, pose_rx_ns=11,
+                      plan_start_ns=12, plan_end_ns=13, pub_ns=14)
+    cmd = protocol.CommandMsg(robot_id=1, seq=2, pose_stamp_s=0.5, v_mps=0.1, omega_radps=0.0,
+                              plan_ms=1.0, status="ok", wall=wall)
+    assert protocol.CommandMsg.decode(cmd.encode()).wall == wall
+    body = msgpack.unpackb(cmd.encode())
+    for bad in ([1, 2, 3], [-1, 0, 0, 0, 0, 0, 0], [0, 0, 0, 0, 0, 0, 2**63], "x", None):
+        body["wall"] = bad
+        with pytest.raises(protocol.ProtocolError, match="cmd.wall"):
+            protocol.CommandMsg.decode(msgpack.packb(body))
+
+
+def test_poses_carry_their_publish_stamp_and_clock():
+    snap = protocol.PosesMsg(t_s=1.0, tick=50, robot_ids=np.array([0]),
+                             robot_pose=np.zeros((1, 3)), robot_radius_m=np.array([0.5]),
+                             obstacle_ids=np.zeros(0, dtype=np.int64),
+                             obstacle_xy_m=np.zeros((0, 2)), obstacle_radius_m=np.zeros(0),
+                             pub_ns=123456789, clock_id=42)
+    back = protocol.PosesMsg.decode(snap.encode())
+    assert back.pub_ns == 123456789 and back.clock_id == 42
+    body = msgpack.unpackb(snap.encode())
+    body["clock"] = 2**40
+    with pytest.raises(protocol.ProtocolError, match="poses.clock"):
+        protocol.PosesMsg.decode(msgpack.packb(body))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -220,6 +221,23 @@ def test_straight_path_has_ratio_one_and_known_time():
     assert r.oscillations == 0 and m.contacts == 0 and m.min_gap_m is None
 
 
+def test_mixed_speeds_ideal_time_and_time_ratio_use_each_robots_own_v_max():
+    # Two robots 10 m from their goals at v_max 0.5 and 2.0 m/s; both move at 1 m/s.
+    t = np.arange(0, 121) * DT
+    xy = np.stack([np.stack([t, np.zeros_like(t)], axis=1),
+                   np.stack([t, np.full_like(t, 5.0)], axis=1)], axis=1)
+    sp = spec([(0, 0), (0, 5)], [(10, 0), (10, 5)])
+    sp = dataclasses.replace(sp, v_max_mps=np.array([0.5, 2.0]))
+    m = metrics(trajectory(t, xy), sp)
+    slow, fast = m.per_robot
+    assert slow.ideal_time_s == 20.0 and fast.ideal_time_s == 5.0
+    assert slow.time_ratio == pytest.approx(9.8 / 20.0)
+    assert fast.time_ratio == pytest.approx(9.8 / 5.0)
+    assert m.time_ratio_mean == pytest.approx((9.8 / 20.0 + 9.8 / 5.0) / 2.0)
+    assert slow.straight_m == fast.straight_m == 10.0
+    assert slow.path_ratio == pytest.approx(1.0) and fast.path_ratio == pytest.approx(1.0)
+
+
 def test_detour_path_ratio():
     # Start (0, 0) -> (5, 5) -> (10, 0): sqrt(2) detour, arrival exactly at the goal.
     t = np.arange(3.0)
@@ -297,6 +315,7 @@ def test_oscillations_counted_per_robot_until_arrival():
     m = metrics(trajectory(t, xy, h), spec([(0, 0), (0, 5)], [(10, 0), (10, 5)]))
     assert [r.oscillations for r in m.per_robot] == [2, 0]
     assert m.oscillations_per_robot == 1.0 and m.oscillations_total == 2
+    assert m.oscillations_max == 2  # the worst robot (the benchmark table's max)
     # No commands: both of robot 0's reversals have no plan to explain them. The trajectory
     # applies no speed, so they are slow.
     assert m.per_robot[0].reversal_causes["slow"] == 2
@@ -333,8 +352,8 @@ def test_command_metrics_planning_latency_flips_and_misses():
     assert m.plan_ms_p50 == pytest.approx(30.0) and m.plan_ms_max == 50.0
     assert m.plan_ms_mean == pytest.approx(30.0)
     assert m.plan_ms_p99 == pytest.approx(np.percentile([10, 20, 30, 40, 50], 99))
-    assert m.latency_ms_p50 == pytest.approx(20.0)
-    assert m.latency_ms_p99 == pytest.approx(np.percentile([20, 20, 20, 20, 40, 40], 99))
+    assert m.sim_latency_ms_p50 == pytest.approx(20.0)
+    assert m.sim_latency_ms_p99 == pytest.approx(np.percentile([20, 20, 20, 20, 40, 40], 99))
     assert [r.side_flips for r in m.per_robot] == [2, 0]
     assert m.side_flips_per_robot == 1.0
     assert m.deadline_misses == 1 and m.deadline_miss_rate == pytest.approx(1 / 4)
@@ -357,7 +376,7 @@ def test_json_has_the_documented_keys_and_no_nan():
     text = json.dumps(content, allow_nan=False)
     for key in ("robots", "arrived", "success", "contacts", "min_gap_m", "path_ratio_mean",
                 "time_ratio_mean", "oscillations_per_robot", "side_flips_per_robot",
-                "plan_ms_p50", "plan_ms_p99", "latency_ms_p50", "latency_ms_p99",
+                "plan_ms_p50", "plan_ms_p99", "sim_latency_ms_p50", "sim_latency_ms_p99",
                 "deadline_miss_rate", "per_robot", "reversal_causes_per_robot"):
         assert key in content, key
     assert isinstance(content["per_robot"], list) and content["per_robot"][0]["id"] == 0
@@ -431,3 +450,43 @@ def test_compute_metrics_explains_reversals_with_the_applied_speed_and_commands(
     stopped = Trajectory(t, np.arange(1), pose, np.zeros((t.size, 1, 2)))
     assert metrics(stopped, spec([(0, 0)], [(50, 0)]), commands).per_robot[0] \
         .reversal_causes["slow"] == 1
+
+
+# --- wall-clock latency by stage ------------------------------------------------------------
+
+
+def _stamps(robot_clock: int, world_clock: int, base: int) -> list[int]:
+    # pose published at base, received +1 ms, plan +2..+5 ms, sent +5.1, at the world +6,
+    # applied +20 ms.
+    ms = 1_000_000
+    return [robot_clock, world_clock, base, base + 1 * ms, base + 2 * ms, base + 5 * ms,
+            base + 5 * ms + 100_000, base + 6 * ms, base + 20 * ms]
+
+
+def test_wall_stages_from_stamps_on_one_host():
+    from orchestrator.analysis.metrics import wall_latency_ms
+
+    stamps = np.array([_stamps(7, 7, 10**9 + k * 10**8) for k in range(10)])
+    w = wall_latency_ms(stamps)
+    assert w["pose_to_robot"]["p50"] == pytest.approx(1.0)
+    assert w["plan"]["p99"] == pytest.approx(3.0)
+    assert w["send"]["max"] == pytest.approx(0.1)
+    assert w["cmd_to_world"]["p50"] == pytest.approx(0.9)
+    assert w["sense_to_act"]["p50"] == pytest.approx(6.0)
+    assert w["end_to_end"]["max"] == pytest.approx(20.0) and w["end_to_end"]["n"] == 10
+
+
+def test_stages_across_two_clocks_are_left_out_but_world_stages_stay():
+    from orchestrator.analysis.metrics import wall_latency_ms
+
+    w = wall_latency_ms(np.array([_stamps(3, 9, 10**9)]))
+    assert "pose_to_robot" not in w and "cmd_to_world" not in w
+    assert w["sense_to_act"]["p50"] == pytest.approx(6.0)  # both ends on the world's clock
+    assert w["plan"]["p50"] == pytest.approx(3.0)          # both ends on the robot's clock
+
+
+def test_unstamped_commands_measure_nothing():
+    from orchestrator.analysis.metrics import wall_latency_ms
+
+    assert wall_latency_ms(np.zeros((4, 9), dtype=np.int64)) == {}
+    assert wall_latency_ms(np.zeros((0, 9), dtype=np.int64)) == {}

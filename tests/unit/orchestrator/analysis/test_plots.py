@@ -7,7 +7,12 @@ import numpy as np
 from agent.core.config import PlannerConfig
 from agent.core.scenario import ObstacleSpec, RobotSpec, Scenario
 from orchestrator.analysis.metrics import Commands, Trajectory
-from orchestrator.analysis.plots import animate, plot_report_bars, plot_trajectories
+from orchestrator.analysis.plots import (
+    animate,
+    plot_benchmark,
+    plot_report_bars,
+    plot_trajectories,
+)
 from orchestrator.analysis.rundir import RunData
 
 
@@ -48,3 +53,19 @@ def test_report_bars(tmp_path):
                                                                "osc")], tmp_path / "r")
     assert len(written) == 3
     assert all(p.stat().st_size > 0 for p in written)
+
+
+def test_benchmark_png_with_a_failing_planner_and_missing_values(tmp_path):
+    def row(case, planner, success, osc, top, ratio):
+        return {"case": case, "planner": planner, "success_rate": success,
+                "osc_per_robot_median": osc, "osc_per_robot_max": top,
+                "time_ratio_mean": ratio}
+
+    rows = [row("circle_8", "eifp-mpc", 1.0, 2.0, 5.0, 1.1),
+            row("circle_8", "orca", 0.0, 0.0, 0.0, None),  # nobody arrived
+            row("swap_pairs_4", "eifp-mpc", 0.6, 1.0, 3.0, 1.3)]  # orca not run here
+    path = plot_benchmark(rows, tmp_path / "benchmark.png", title="t")
+    from PIL import Image
+
+    with Image.open(path) as im:
+        assert im.format == "PNG" and im.size[0] >= 700

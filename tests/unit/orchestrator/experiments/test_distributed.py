@@ -106,3 +106,15 @@ def test_bad_inputs_fail_before_anything_is_spawned(tmp_path: Path) -> None:
     with pytest.raises(ScenarioError):
         run_distributed(tmp_path / "missing.yaml", tmp_path / "out", "ok-run")
     assert not (tmp_path / "out").exists()
+
+
+def test_robot_args_reach_every_robot_through_the_fleet(tmp_path: Path) -> None:
+    from agent.fleet import build_parser, robot_argv
+    from agent.node import parse_args
+
+    cmd = fleet_command("r1", [0, 1], "tcp/127.0.0.1:9", tmp_path, robot_args=["--no-plan"])
+    fleet_args = build_parser().parse_args(cmd[3:])
+    assert fleet_args.robot_arg == ["--no-plan"]
+    argv = robot_argv("r1", 1, "tcp/127.0.0.1:9", "30.0", fleet_args.robot_arg)
+    assert parse_args(argv).plan is False
+    assert parse_args(robot_argv("r1", 1, "tcp/127.0.0.1:9", "30.0")).plan is True

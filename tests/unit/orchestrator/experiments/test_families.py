@@ -237,3 +237,165 @@ def test_resolve_names_paths_aliases_and_planner_override(tmp_path):
         resolve(str(tmp_path / "nope.yaml"))
     for name, (default_n, _what) in families.FAMILIES.items():
         assert len(resolve(name).robots) == default_n
+
+
+# --------------------------------------------------------------------------------------
+# Benchmark families
+# --------------------------------------------------------------------------------------
+
+def disc_gaps(xy: np.ndarray, radius: np.ndarray) -> float:
+    """Smallest gap between two discs (centre distance minus both radii)."""
+    i, j = np.triu_indices(len(xy), k=1)
+    return float((np.hypot(*(xy[i] - xy[j]).T) - radius[i] - radius[j]).min())
+
+
+def radii(s: Scenario) -> np.ndarray:
+    return np.array([r.radius_m for r in s.robots])
+
+
+BENCH_CASES = [("circle_mixed", 8), ("circle_mixed", 32), ("crossing_45", 16),
+               ("crossing_90", 16), ("crossing_135", 16), ("swap_pairs", 6),
+               ("swap_pairs", 12), ("swap_grid", 4), ("swap_grid", 16),
+               ("random_sparse", 20), ("random_medium", 20), ("random_dense", 20),
+               ("obstacles_circle", 12), ("obstacles_circle", 24)]
+
+
+@pytest.mark.parametrize(("family", "n"), BENCH_CASES)
+def test_benchmark_families_have_their_size_spacing_and_a_generous_limit(family, n):
+    s = resolve(family, agents=n, seed=3)
+    assert len(s.robots) == n and s.name.endswith(f"_{n}")
+    assert [r.id for r in s.robots] == list(range(n))
+    # Starts (and goals) keep at least the 2.5 m spacing of 0.5 m discs: a 1.5 m gap.
+    assert disc_gaps(starts(s), radii(s)) >= 1.5 - 1e-6
+    assert disc_gaps(goals(s), radii(s)) >= 1.5 - 1e-6
+    assert np.all(straight(s) > 1.0)  # every robot has somewhere to go
+    ideal = families.ideal_time_s(s.robots)
+    assert s.time_limit_s >= 3.0 * ideal + 30.0 - 1e-9
+    assert s.time_limit_s <= 3.0 * ideal + 40.0  # rounded up to 10 s, no more
+    for r in s.robots:  # headings point at the goals
+        want = math.atan2(r.goal[1] - r.start[1], r.goal[0] - r.start[0])
+        assert abs(math.remainder(r.start[2] - want, 2 * math.pi)) < 1e-5
+
+
+@pytest.mark.parametrize(("family", "n"), BENCH_CASES)
+def test_benchmark_families_are_deterministic_per_seed(family, n):
+    assert resolve(family, agents=n, seed=7) == resolve(family, agents=n, seed=7)
+
+
+def test_seeded_benchmark_families_change_with_the_seed():
+    for family, n in (("circle_mixed", 16), ("random_dense", 20), ("obstacles_circle", 12)):
+        assert resolve(family, agents=n, seed=0) != resolve(family, agents=n, seed=1)
+
+
+def test_circle_mixed_has_every_radius_and_speed_and_the_slowest_sets_the_limit():
+    s = resolve("circle_mixed", agents=16, seed=0)
+    speeds = np.array([r.limits.v_max_mps for r in s.robots])
+    assert set(radii(s)) == set(families.MIXED_RADII_M)
+    assert set(speeds) == set(families.MIXED_V_MAX_MPS)
+    # Antipodal: every goal is the negated start.
+    np.testing.assert_allclose(goals(s), -starts(s), atol=1e-3)
+    np.testing.assert_allclose(families.ideal_time_s(s.robots),
+                               np.max(straight(s) / speeds))
+    # The slowest robots (0.8 m/s) decide: the ideal time is the diameter over 0.8 m/s.
+    assert families.ideal_time_s(s.robots) == pytest.approx(straight(s).max() / 0.8)
+
+
+@pytest.mark.parametrize("angle", [45.0, 90.0, 135.0])
+def test_crossing_cohorts_meet_at_the_angle_and_lanes_cross_the_origin(angle):
+    s = crossing(16, angle_deg=angle)
+    d = goals(s) - starts(s)
+    heading = np.degrees(np.arctan2(d[:, 1], d[:, 0]))
+    np.testing.assert_allclose(heading[:8], 0.0, atol=1e-3)
+    np.testing.assert_allclose(heading[8:], angle, atol=1e-3)
+    # Each lane's midpoint is on the line through the origin normal to its direction.
+    mid = (goals(s) + starts(s)) / 2.0
+    unit = d / np.hypot(*d.T)[:, None]
+    np.testing.assert_allclose(np.einsum("ij,ij->i", mid, unit), 0.0, atol=1e-3)
+    assert s.name == f"crossing_{angle:g}_16"
+
+
+def test_crossing_at_90_deg_is_the_perpendicular_crossing():
+    a, b = crossing(16), crossing(16, angle_deg=90)
+    assert [r.start for r in a.robots] == [r.start for r in b.robots]
+    assert [r.goal for r in a.robots] == [r.goal for r in b.robots]
+
+
+def test_crossing_rejects_bad_angles():
+    for angle in (0.0, 180.0, -45.0, math.nan):
+        with pytest.raises(ScenarioError, match="angle"):
+            crossing(8, angle_deg=angle)
+    with pytest.raises(ScenarioError, match="flows=2"):
+        crossing(8, flows=4, angle_deg=45)
+
+
+def test_swap_pairs_partners_swap_places():
+    s = resolve("swap_pairs", agents=8)
+    st_, gl = starts(s), goals(s)
+    for p in range(4):
+        a, b = 2 * p, 2 * p + 1
+        np.testing.assert_allclose(gl[a], st_[b])
+        np.testing.assert_allclose(gl[b], st_[a])
+        assert st_[a][1] == st_[b][1]  # head-on along one lane
+    lanes = sorted({y for _, y in st_})
+    np.testing.assert_allclose(np.diff(lanes), families.SWAP_PAIR_SPACING_M)
+    np.testing.assert_allclose(straight(s), families.SWAP_RUN_M)
+
+
+def test_swap_grid_goes_to_the_mirrored_cell():
+    s = resolve("swap_grid", agents=16)
+    k, cell = 4, families.SWAP_GRID_SPACING_M
+    st_ = starts(s)
+    for i in range(k):
+        for j in range(k):
+            r = s.robots[i * k + j]
+            mirror = s.robots[(k - 1 - i) * k + (k - 1 - j)]
+            assert r.goal == pytest.approx(mirror.start[:2])
+    xs = np.unique(np.round(st_[:, 0], 6))
+    assert xs.size == k and np.allclose(np.diff(xs), cell)
+
+
+@pytest.mark.parametrize("n", [0, 2, 9, 12])
+def test_swap_grid_needs_an_even_square(n):
+    with pytest.raises(ScenarioError, match="square of an even number"):
+        resolve("swap_grid", agents=n) if n else families.swap_grid(n)
+
+
+def test_swap_pairs_needs_an_even_count():
+    with pytest.raises(ScenarioError, match="even"):
+        resolve("swap_pairs", agents=5)
+
+
+@pytest.mark.parametrize("density", ["sparse", "medium", "dense"])
+def test_random_densities_set_the_square(density):
+    s = resolve(f"random_{density}", agents=20, seed=0)
+    side = math.sqrt(20 / families.RANDOM_DENSITIES_PER_M2[density])
+    both = np.vstack([starts(s), goals(s)])
+    assert np.all(np.abs(both) <= side / 2.0 + 0.01)
+    assert np.all(straight(s) >= side / 2.0 - 0.02)
+    assert s.name == f"random_{density}_20"
+
+
+def test_random_densities_are_ordered():
+    sides = [math.sqrt(1.0 / families.RANDOM_DENSITIES_PER_M2[d])
+             for d in ("sparse", "medium", "dense")]
+    assert sides[0] > sides[1] > sides[2]
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_obstacles_circle_obstacles_are_inside_and_clear_of_starts_and_goals(seed, tmp_path):
+    s = resolve("obstacles_circle", agents=12, seed=seed)
+    assert 3 <= len(s.obstacles) <= 5
+    c = np.array([o.center for o in s.obstacles])
+    r = np.array([o.radius_m for o in s.obstacles])
+    assert [o.id for o in s.obstacles] == [-(k + 1) for k in range(len(s.obstacles))]
+    assert np.all((r >= 1.0) & (r <= 2.0))
+    assert np.all(np.array([o.velocity for o in s.obstacles]) == 0.0)  # static
+    assert np.hypot(*c[0]) <= 2.0 + 1e-9  # one in the middle, where the paths meet
+    for xy in (starts(s), goals(s)):
+        gap = np.hypot(xy[:, None, 0] - c[None, :, 0], xy[:, None, 1] - c[None, :, 1])
+        assert np.all(gap - r[None, :] - 0.5 >= 2.0)
+    if len(c) > 1:
+        assert disc_gaps(c, r) >= families.OBSTACLE_GAP_M - 1e-9
+    np.testing.assert_allclose(goals(s), -starts(s), atol=1e-3)
+    dump_scenario(s, tmp_path / "s.yaml")  # the obstacles survive the file format
+    assert load_scenario(tmp_path / "s.yaml") == s

@@ -33,7 +33,7 @@ from orchestrator.experiments.scale import (
 def fake_row(n: int, **extra: object) -> dict:
     sampler = ResourceSampler()
     row = scale_row({"success": True, "arrived": n, "contacts": 0, "plan_ms_p50": 1.0,
-                     "plan_ms_p99": 5.0, "latency_ms_p50": 0.0, "latency_ms_p99": 20.0,
+                     "plan_ms_p99": 5.0, "sim_latency_ms_p50": 0.0, "sim_latency_ms_p99": 20.0,
                      "deadline_miss_rate": 0.01, "sim_time_s": 10.0}, [], sampler,
                     n=n, family="circles", planner="eifp-mpc", spawn_wall=0.0, spawn_mono=0.0,
                     wall_s=12.0, time_scale=1.0, world_status=0)
@@ -100,11 +100,12 @@ def test_cpu_per_plan_sums_the_robots_that_reported_and_divides_by_their_plans()
     assert got["cpu_ms_per_plan_sense"] == pytest.approx(0.9 / 3)  # (300 + 600) us / 3 plans
     assert got["cpu_ms_per_plan_plan"] == pytest.approx(2.7 / 3)
     assert got["cpu_ms_per_plan_threads"] == pytest.approx(0.63 / 3)
-    assert set(got) == {f"cpu_ms_per_plan_{p}" for p in CPU_PARTS}
+    assert set(got) == {f"cpu_ms_per_plan_{p}" for p in CPU_PARTS} | {"cpu_ms_per_plan_total"}
+    assert got["cpu_ms_per_plan_total"] == pytest.approx(1.5 * 3 / 3)  # every part, summed
     assert all(v is None for v in cpu_per_plan_ms({"processes": exits["processes"][2:]}).values())
     assert all(v is None for v in cpu_per_plan_ms({}).values())
     row = {**{c: None for c in COLUMNS}, "agents": 4, **got}
-    assert "0.30/0.90/0.06/0.03/0.21" in format_rows([row])
+    assert "0.30/0.90/0.06/0.03/0.21 = 1.50" in format_rows([row])
 
 
 def test_alive_is_unknown_when_a_robot_never_joined() -> None:

@@ -1,0 +1,428 @@
+"""The benchmark suite (`orchestrator benchmark`): planners side by side on scenarios the
+default planner was never tuned on.
+
+The suite is a frozen list of cases (a family and a robot count, or a paper setup), run
+for every chosen planner and seed. Seeds come in two disjoint named sets:
+`EVALUATION_SEEDS`, which the suite reports on by default, and `TUNING_SEEDS`, which is
+what anyone tuning a planner against the suite should use (`--seeds tuning`), so the
+reported figures never come from the seeds a parameter was chosen on. A seed draws the
+seeded families (`circle_mixed`, `random_*`, `obstacles_circle`) and, for every case, a
+start jitter of up to `START_JITTER_M` (the deterministic families and the setups would
+otherwise repeat one run exactly; lockstep runs are deterministic).
+
+Each run is an ordinary run directory (`orchestrator report` reads it), lockstep by
+default or distributed (`experiments.distributed.run_scenario_distributed`, the path of
+`orchestrator run`). The table has one row per case and planner, aggregated over seeds
+from the runs' `metrics.json` (`summarize`).
+"""
+
+from __future__ import annotations
+
+import csv
+import datetime as dt
+import math
+import time
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from agent.core.scenario import Scenario
+from orchestrator.analysis.rundir import safe_name, write_json
+from orchestrator.experiments.families import SETUPS, ideal_time_s, resolve
+
+TUNING_SEEDS: tuple[int, ...] = (100, 101)
+"""Seeds to tune planners on (`--seeds tuning`); never reported by default."""
+EVALUATION_SEEDS: tuple[int, ...] = (0, 1, 2, 3, 4)
+"""Seeds the suite reports on (the default)."""
+QUICK_SEEDS: tuple[int, ...] = (0,)
+"""Seeds of `--quick` when `--seeds` is not given (the first evaluation seed)."""
+START_JITTER_M = 0.2
+"""Every run's starts are moved by up to this much, drawn from the seed."""
+DEFAULT_PLANNERS: tuple[str, ...] = ("eifp-mpc", "orca")
+MODES = ("lockstep", "distributed")
+
+
+@dataclass(frozen=True)
+class Case:
+    """One scenario of the suite.
+
+    Args:
+        family: the family it belongs to (`--families` selects by it; "setups" for A-G).
+        scenario: what `families.resolve` takes (a family or setup name).
+        agents: robot count (None: the setup's own size).
+    """
+
+    family: str
+    scenario: str
+    agents: int | None = None
+
+    @property
+    def label(self) -> str:
+        """The row name: `circle_24`, `crossing_90_16`, `setup_a`."""
+        return self.scenario if self.agents is None else f"{self.scenario}_{self.agents}"
+
+
+def _cases(family: str, sizes: Iterable[int]) -> tuple[Case, ...]:
+    return tuple(Case(family, family, n) for n in sizes)
+
+
+SUITE: tuple[Case, ...] = (
+    *_cases("circle", (8, 16, 24, 32, 48)),
+    *_cases("circle_mixed", (16, 32)),
+    *_cases("crossing_45", (16,)),
+    *_cases("crossing_90", (16,)),
+    *_cases("crossing_135", (16,)),
+    *_cases("swap_pairs", (6, 12)),
+    *_cases("swap_grid", (4, 16)),
+    *_cases("random_sparse", (20,)),
+    *_cases("random_medium", (20,)),
+    *_cases("random_dense", (20,)),
+    *_cases("obstacles_circle", (12, 24)),
+    *(Case("setups", name) for name in SETUPS),
+)
+"""The full suite, in table order."""
+
+QUICK_SUITE: tuple[Case, ...] = (
+    Case("setups", "setup_a"),
+    *_cases("circle", (8,)),
+    *_cases("circle_mixed", (8,)),
+    *_cases("crossing_90", (8,)),
+    *_cases("swap_pairs", (4,)),
+    *_cases("swap_grid", (4,)),
+    *_cases("random_dense", (8,)),
+    *_cases("obstacles_circle", (8,)),
+)
+"""`--quick`: small cases, for CI and a first look."""
+
+FAMILY_ALIASES: dict[str, tuple[str, ...]] = {
+    "crossing": ("crossing_45", "crossing_90", "crossing_135"),
+    "random": ("random_sparse", "random_medium", "random_dense"),
+    "swap": ("swap_pairs", "swap_grid"),
+}
+"""`--families` names that stand for several families."""
+
+
+def family_names(cases: Sequence[Case] = SUITE) -> tuple[str, ...]:
+    """The families of `cases`, in order."""
+    return tuple(dict.fromkeys(c.family for c in cases))
+
+
+def select_cases(cases: Sequence[Case], families: str | Sequence[str]) -> tuple[Case, ...]:
+    """The cases whose family (or setup name, or label) is named; "all" keeps every case.
+
+    Raises:
+        ValueError: a name that selects no case of `cases`.
+    """
+    names = [families] if isinstance(families, str) else list(families)
+    if names == ["all"]:
+        return tuple(cases)
+    wanted: set[str] = set()
+    for name in names:
+        expanded = FAMILY_ALIASES.get(name, (name,))
+        if not any(c.family in expanded or c.scenario in expanded or c.label in expanded
+                   for c in cases):
+            known = ", ".join((*family_names(cases), *FAMILY_ALIASES))
+            raise ValueError(f"--families: {name!r} selects no case; expected 'all' or "
+                             f"some of {known}")
+        wanted.update(expanded)
+    return tuple(c for c in cases if wanted & {c.family, c.scenario, c.label})
+
+
+def parse_seeds(text: str | None, *, quick: bool = False) -> tuple[int, ...]:
+    """`evaluation`, `tuning`, or N (the evaluation seeds 0..N-1); None: the default
+    (`EVALUATION_SEEDS`, or `QUICK_SEEDS` with --quick).
+
+    Raises:
+        ValueError: anything else, or N reaching into the tuning seeds.
+    """
+    if text is None:
+        return QUICK_SEEDS if quick else EVALUATION_SEEDS
+    key = text.strip().lower()
+    if key == "evaluation":
+        return EVALUATION_SEEDS
+    if key == "tuning":
+        return TUNING_SEEDS
+    try:
+        n = int(key)
+    except ValueError:
+        raise ValueError(f"--seeds: expected 'evaluation', 'tuning' or a count, got "
+                         f"{text!r}") from None
+    if not 1 <= n <= min(TUNING_SEEDS):
+        raise ValueError(f"--seeds: a count must be 1..{min(TUNING_SEEDS)} (seeds 0..N-1, "
+                         f"below the tuning seeds), got {n}")
+    return tuple(range(n))
+
+
+# --------------------------------------------------------------------------------------
+# Runs
+# --------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Job:
+    """One run of the suite: a case, a planner and a seed, into `out_dir`."""
+
+    case: Case
+    planner: str
+    seed: int
+    mode: str
+    out_dir: Path
+    time_scale: float = 1.0
+
+    @property
+    def name(self) -> str:
+        return f"{safe_name(self.case.label)}-{self.planner}-s{self.seed}"
+
+    def scenario(self) -> Scenario:
+        return resolve(self.case.scenario, agents=self.case.agents, seed=self.seed,
+                       start_jitter_m=START_JITTER_M, planner=self.planner)
+
+
+def plan_jobs(cases: Sequence[Case], planners: Sequence[str], seeds: Sequence[int], *,
+              mode: str, out: Path, time_scale: float = 1.0) -> list[Job]:
+    """Every (case, planner, seed), run directories `out/runs/<case>-<planner>-s<seed>`."""
+    return [Job(case, planner, seed, mode, Path(out) / "runs" /
+                f"{safe_name(case.label)}-{planner}-s{seed}", time_scale)
+            for case in cases for planner in planners for seed in seeds]
+
+
+def job_cost(job: Job) -> float:
+    """A rough cost for ordering (robots x time limit): the largest runs start first."""
+    s = job.scenario()
+    return len(s.robots) * s.time_limit_s
+
+
+RECORD_METRICS = ("robots", "arrived", "success", "contacts", "min_gap_m",
+                  "oscillations_per_robot", "oscillations_max", "path_ratio_mean",
+                  "time_ratio_mean", "plan_ms_p50", "plan_ms_p99", "sim_time_s",
+                  "time_limit_s")
+"""The `metrics.json` keys a run record keeps (plus the per-robot oscillation counts)."""
+
+
+def run_record(job: Job, metrics: dict[str, Any] | None, *, wall_s: float,
+               ideal_s: float | None = None, world_status: int | None = None,
+               error: str | None = None) -> dict[str, Any]:
+    """One run's row of `benchmark.json` (`runs`): what `summarize` aggregates."""
+    m = metrics or {}
+    record: dict[str, Any] = {
+        "family": job.case.family, "case": job.case.label, "planner": job.planner,
+        "seed": job.seed, "mode": job.mode, "dir": str(job.out_dir),
+        **{k: m.get(k) for k in RECORD_METRICS},
+        "robot_oscillations": [r.get("oscillations") for r in m.get("per_robot") or []],
+        "ideal_time_s": ideal_s, "wall_s": round(wall_s, 3),
+        "world_status": world_status, "error": error,
+    }
+    if metrics is None and error is None:
+        record["error"] = f"no metrics (world exit status {world_status})"
+    return record
+
+
+def run_job(job: Job) -> dict[str, Any]:
+    """Run one job into its run directory and return its record (errors are recorded)."""
+    t0 = time.perf_counter()
+    try:
+        scenario = job.scenario()
+        out_dir = Path(job.out_dir)
+        out_dir.mkdir(parents=True, exist_ok=True)
+        write_json(out_dir / "run.json", {
+            "setup": job.case.label, "scenario": scenario.name, "planner": job.planner,
+            "seed": job.seed, "mode": job.mode, "agents": len(scenario.robots),
+            "start_jitter_m": START_JITTER_M, "benchmark_family": job.case.family,
+            "time_scale": job.time_scale if job.mode == "distributed" else None,
+            "started": dt.datetime.now().isoformat(timespec="seconds"),
+        })
+        status = None
+        if job.mode == "lockstep":
+            from orchestrator.experiments.lockstep import run_lockstep
+
+            metrics = run_lockstep(scenario, out_dir).metrics
+        else:
+            from orchestrator.experiments.distributed import run_scenario_distributed
+
+            metrics, status = run_scenario_distributed(scenario, out_dir, job.seed,
+                                                       time_scale=job.time_scale)
+        content = metrics.to_json_dict() if metrics is not None else None
+        return run_record(job, content, wall_s=time.perf_counter() - t0,
+                          ideal_s=ideal_time_s(scenario.robots), world_status=status)
+    except Exception as exc:  # noqa: BLE001 - one broken run must not end the suite
+        return run_record(job, None, wall_s=time.perf_counter() - t0,
+                          error=f"{type(exc).__name__}: {exc}")
+
+
+def run_jobs(jobs: Sequence[Job], *, workers: int = 1,
+             on_done: Callable[[int, dict[str, Any]], None] | None = None
+             ) -> list[dict[str, Any]]:
+    """Run the jobs, `workers` at a time (a process pool for > 1); records in job order.
+
+    The largest jobs (`job_cost`) start first so the pool does not end on one long run.
+    `on_done(count so far, record)` is called as each run finishes.
+    """
+    order = sorted(range(len(jobs)), key=lambda k: -job_cost(jobs[k]))
+    records: list[dict[str, Any] | None] = [None] * len(jobs)
+    if workers <= 1:
+        for done, k in enumerate(order, 1):
+            records[k] = run_job(jobs[k])
+            if on_done is not None:
+                on_done(done, records[k])
+    else:
+        import concurrent.futures
+        import multiprocessing
+
+        # spawn: the workers start clean (no inherited threads or Zenoh state).
+        ctx = multiprocessing.get_context("spawn")
+        with concurrent.futures.ProcessPoolExecutor(max_workers=workers,
+                                                    mp_context=ctx) as pool:
+            futures = {pool.submit(run_job, jobs[k]): k for k in order}
+            for done, fut in enumerate(concurrent.futures.as_completed(futures), 1):
+                k = futures[fut]
+                records[k] = fut.result()
+                if on_done is not None:
+                    on_done(done, records[k])
+    return [r for r in records if r is not None]
+
+
+# --------------------------------------------------------------------------------------
+# The table
+# --------------------------------------------------------------------------------------
+
+COLUMNS: tuple[tuple[str, str], ...] = (
+    ("case", "family"), ("planner", "planner"), ("runs", "runs"),
+    ("success_rate", "success"), ("arrived_rate", "arrived"), ("contacts", "contacts"),
+    ("min_gap_m", "min gap m"), ("osc_per_robot_median", "osc/robot p50"),
+    ("osc_per_robot_max", "osc/robot max"), ("path_ratio_mean", "path ratio"),
+    ("time_ratio_mean", "time ratio"), ("plan_ms_p50", "plan ms p50"),
+    ("plan_ms_p99", "plan ms p99"),
+)
+"""(row key, column header) of the table, in order."""
+
+TABLE_NOTES = (
+    "success: share of runs in which every robot arrived with no contact; arrived: share "
+    "of robots that arrived; contacts: contact episodes summed over the runs; min gap: the "
+    "smallest gap over the runs (negative: overlap); osc/robot p50 and max: median and "
+    "largest reversal count of one robot, over every robot of every run; path ratio and "
+    "time ratio: means over the runs of the per-run means over the robots that arrived "
+    "(time ratio: time to goal over straight distance / own v_max); plan ms p50: median of "
+    "the runs' p50, p99: largest of the runs' p99.")
+
+
+def _values(records: Iterable[dict[str, Any]], key: str) -> np.ndarray:
+    vals = [r.get(key) for r in records]
+    out = np.array([float(v) for v in vals if isinstance(v, int | float)
+                    and not isinstance(v, bool) and math.isfinite(v)], dtype=float)
+    return out
+
+
+def _stat(values: np.ndarray, fn: Callable[[np.ndarray], Any]) -> float | None:
+    return float(fn(values)) if values.size else None
+
+
+def summarize(records: Sequence[dict[str, Any]],
+              case_order: Sequence[str] | None = None,
+              planner_order: Sequence[str] | None = None) -> list[dict[str, Any]]:
+    """One row per (case, planner) over its seeds (`COLUMNS`, `TABLE_NOTES`).
+
+    A run that failed to produce metrics counts as a run without success (and adds to
+    `errors`). Rows follow `case_order` then `planner_order` (else first appearance).
+    """
+    groups: dict[tuple[str, str], list[dict[str, Any]]] = {}
+    for r in records:
+        groups.setdefault((r["case"], r["planner"]), []).append(r)
+    cases = list(case_order or dict.fromkeys(r["case"] for r in records))
+    planners = list(planner_order or dict.fromkeys(r["planner"] for r in records))
+    rows = []
+    for case in cases:
+        for planner in planners:
+            runs = groups.get((case, planner))
+            if not runs:
+                continue
+            ok = [r for r in runs if r.get("error") is None]
+            robot_osc = np.array([o for r in ok for o in (r.get("robot_oscillations") or [])
+                                  if isinstance(o, int | float)], dtype=float)
+            if robot_osc.size == 0:  # records without per-robot counts: the run figures
+                robot_osc = np.concatenate([_values(ok, "oscillations_per_robot"),
+                                            _values(ok, "oscillations_max")])
+            robots = _values(ok, "robots").sum()
+            rows.append({
+                "family": runs[0]["family"], "case": case, "planner": planner,
+                "runs": len(runs),
+                "success_rate": sum(1 for r in ok if r.get("success") is True) / len(runs),
+                "arrived_rate": (float(_values(ok, "arrived").sum() / robots)
+                                 if robots else None),
+                "contacts": int(_values(ok, "contacts").sum()),
+                "min_gap_m": _stat(_values(ok, "min_gap_m"), np.min),
+                "osc_per_robot_median": _stat(robot_osc, np.median),
+                "osc_per_robot_max": _stat(robot_osc, np.max),
+                "path_ratio_mean": _stat(_values(ok, "path_ratio_mean"), np.mean),
+                "time_ratio_mean": _stat(_values(ok, "time_ratio_mean"), np.mean),
+                "plan_ms_p50": _stat(_values(ok, "plan_ms_p50"), np.median),
+                "plan_ms_p99": _stat(_values(ok, "plan_ms_p99"), np.max),
+                "errors": len(runs) - len(ok),
+                "seeds": [r["seed"] for r in runs],
+            })
+    return rows
+
+
+def _cell(key: str, value: Any) -> str:
+    if value is None:
+        return "-"
+    if key in ("success_rate", "arrived_rate"):
+        return f"{100.0 * value:.0f} %"
+    if isinstance(value, float):
+        if key in ("osc_per_robot_median", "osc_per_robot_max"):
+            return f"{value:g}"
+        if key.startswith("plan_ms"):
+            return f"{value:.2f}"
+        return f"{value:.2f}"
+    return str(value)
+
+
+def table_cells(rows: Sequence[dict[str, Any]]) -> tuple[list[str], list[list[str]]]:
+    """(headers, cells) of the table, formatted."""
+    return ([h for _, h in COLUMNS],
+            [[_cell(k, r.get(k)) for k, _ in COLUMNS] for r in rows])
+
+
+def format_text(rows: Sequence[dict[str, Any]]) -> str:
+    """The table as padded plain text (stdout)."""
+    from orchestrator.analysis.report import format_table
+
+    header, cells = table_cells(rows)
+    return format_table(header, cells)
+
+
+def format_markdown(rows: Sequence[dict[str, Any]], *, caption: str = "") -> str:
+    """The table as GitHub markdown (with the notes below it), for a README verbatim."""
+    header, cells = table_cells(rows)
+    right = [k not in ("case", "planner") for k, _ in COLUMNS]
+    lines = ["| " + " | ".join(header) + " |",
+             "|" + "|".join("---:" if r else "---" for r in right) + "|"]
+    lines += ["| " + " | ".join(c) + " |" for c in cells]
+    text = "\n".join(lines) + "\n\n" + TABLE_NOTES + "\n"
+    return (caption + "\n\n" + text) if caption else text
+
+
+def write_outputs(out: Path, rows: Sequence[dict[str, Any]],
+                  records: Sequence[dict[str, Any]], suite: dict[str, Any]) -> list[Path]:
+    """benchmark.csv, benchmark.json, benchmark.md and benchmark.png under `out`."""
+    from orchestrator.analysis.plots import plot_benchmark
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    csv_path = out / "benchmark.csv"
+    keys = [k for k, _ in COLUMNS] + ["family", "errors"]
+    with open(csv_path, "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=keys, extrasaction="ignore")
+        writer.writeheader()
+        writer.writerows(rows)
+    json_path = write_json(out / "benchmark.json",
+                           {"suite": suite, "notes": TABLE_NOTES, "rows": list(rows),
+                            "runs": list(records)})
+    seeds = ", ".join(str(s) for s in suite.get("seeds", ()))
+    caption = (f"`orchestrator benchmark` ({suite.get('mode')}, seeds {seeds} "
+               f"[{suite.get('seed_set')}], start jitter {START_JITTER_M:g} m)")
+    md_path = out / "benchmark.md"
+    md_path.write_text(format_markdown(rows, caption=caption))
+    png_path = plot_benchmark(rows, out / "benchmark.png", title=caption.replace("`", ""))
+    return [csv_path, json_path, md_path, png_path]

@@ -1,0 +1,180 @@
+"""The benchmark suite: cases, named seed sets, selection, and the table's aggregation."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from orchestrator.experiments import benchmark as bm
+from orchestrator.experiments.families import FAMILIES, SETUPS
+
+
+def test_tuning_and_evaluation_seeds_are_disjoint_and_enough():
+    assert not set(bm.TUNING_SEEDS) & set(bm.EVALUATION_SEEDS)
+    assert len(bm.EVALUATION_SEEDS) >= 5 and len(bm.TUNING_SEEDS) >= 1
+    assert set(bm.QUICK_SEEDS) <= set(bm.EVALUATION_SEEDS)
+    # A count never reaches into the tuning seeds.
+    assert not set(bm.parse_seeds(str(min(bm.TUNING_SEEDS)))) & set(bm.TUNING_SEEDS)
+
+
+def test_parse_seeds():
+    assert bm.parse_seeds(None) == bm.EVALUATION_SEEDS
+    assert bm.parse_seeds(None, quick=True) == bm.QUICK_SEEDS
+    assert bm.parse_seeds("evaluation", quick=True) == bm.EVALUATION_SEEDS
+    assert bm.parse_seeds("Tuning") == bm.TUNING_SEEDS
+    assert bm.parse_seeds("3") == (0, 1, 2)
+    for bad in ("0", "-1", "101", "some", ""):
+        with pytest.raises(ValueError, match="--seeds"):
+            bm.parse_seeds(bad)
+
+
+def test_the_suite_covers_every_benchmark_family_and_the_setups():
+    families = set(bm.family_names())
+    assert families == {"circle", "circle_mixed", "crossing_45", "crossing_90", "crossing_135",
+                        "swap_pairs", "swap_grid", "random_sparse", "random_medium",
+                        "random_dense", "obstacles_circle", "setups"}
+    assert {c.scenario for c in bm.SUITE if c.family == "setups"} == set(SETUPS)
+    assert [c.agents for c in bm.SUITE if c.family == "circle"] == [8, 16, 24, 32, 48]
+    labels = [c.label for c in bm.SUITE]
+    assert len(labels) == len(set(labels))
+    assert all(c.scenario in FAMILIES or c.scenario in SETUPS for c in bm.SUITE)
+    assert "circle_mixed_32" in labels and "crossing_90_16" in labels
+    assert "swap_grid_16" in labels and "random_dense_20" in labels
+
+
+def test_every_case_resolves_with_the_jitter():
+    for case in (*bm.SUITE, *bm.QUICK_SUITE):
+        for seed in (bm.EVALUATION_SEEDS[-1], bm.TUNING_SEEDS[0]):
+            job = bm.Job(case, "orca", seed, "lockstep", Path("x"))
+            s = job.scenario()
+            assert case.agents is None or len(s.robots) == case.agents
+            assert {r.planner for r in s.robots} == {"orca"}
+
+
+def test_quick_suite_is_small():
+    assert len(bm.QUICK_SUITE) <= 10
+    assert all((c.agents or 0) <= 8 for c in bm.QUICK_SUITE)
+    assert {c.family for c in bm.QUICK_SUITE} <= set(bm.family_names())
+
+
+def test_select_cases_by_family_alias_setup_and_label():
+    assert bm.select_cases(bm.SUITE, "all") == bm.SUITE
+    crossing = bm.select_cases(bm.SUITE, ["crossing"])
+    assert [c.label for c in crossing] == ["crossing_45_16", "crossing_90_16",
+                                           "crossing_135_16"]
+    assert [c.label for c in bm.select_cases(bm.SUITE, ["circle"])] == \
+        ["circle_8", "circle_16", "circle_24", "circle_32", "circle_48"]
+    picked = bm.select_cases(bm.SUITE, ["setup_b", "circle_24"])
+    assert [c.label for c in picked] == ["circle_24", "setup_b"]  # suite order
+    assert len(bm.select_cases(bm.SUITE, ["setups"])) == 7
+    with pytest.raises(ValueError, match="selects no case"):
+        bm.select_cases(bm.SUITE, ["circlez"])
+
+
+def test_plan_jobs_gives_every_run_its_own_directory(tmp_path):
+    jobs = bm.plan_jobs(bm.QUICK_SUITE, ["eifp-mpc", "orca"], (0, 1), mode="lockstep",
+                        out=tmp_path)
+    assert len(jobs) == len(bm.QUICK_SUITE) * 4
+    assert len({j.out_dir for j in jobs}) == len(jobs)
+    assert all(j.out_dir.parent == tmp_path / "runs" for j in jobs)
+    assert jobs[0].out_dir.name == "setup_a-eifp-mpc-s0"
+
+
+def fake(case, planner, seed, *, success=True, osc=(0, 1), arrived=None, contacts=0,
+         gap=0.3, path=1.1, time_ratio=1.2, p50=0.5, p99=5.0, error=None, family="fam"):
+    n = len(osc)
+    return {"family": family, "case": case, "planner": planner, "seed": seed,
+            "robots": n, "arrived": n if arrived is None else arrived, "success": success,
+            "contacts": contacts, "min_gap_m": gap,
+            "oscillations_per_robot": sum(osc) / n, "oscillations_max": max(osc),
+            "robot_oscillations": list(osc), "path_ratio_mean": path,
+            "time_ratio_mean": time_ratio, "plan_ms_p50": p50, "plan_ms_p99": p99,
+            "error": error}
+
+
+def test_summarize_pools_the_robots_oscillations_over_the_seeds():
+    records = [
+        fake("c", "a", 0, osc=(0, 1, 2, 9)),
+        fake("c", "a", 1, osc=(1, 1, 3, 4), success=False, arrived=3, contacts=2, gap=-0.1,
+             time_ratio=None, p50=0.7, p99=9.0),
+        fake("c", "b", 0, osc=(0, 0)),
+        fake("d", "a", 0, osc=(5, 5), family="other"),
+    ]
+    rows = bm.summarize(records, case_order=["c", "d"], planner_order=["a", "b"])
+    assert [(r["case"], r["planner"]) for r in rows] == [("c", "a"), ("c", "b"), ("d", "a")]
+    r = rows[0]
+    assert r["runs"] == 2 and r["success_rate"] == 0.5
+    assert r["osc_per_robot_median"] == 1.5  # of 0,1,2,9,1,1,3,4
+    assert r["osc_per_robot_max"] == 9
+    assert r["arrived_rate"] == pytest.approx(7 / 8)
+    assert r["contacts"] == 2 and r["min_gap_m"] == -0.1
+    assert r["time_ratio_mean"] == pytest.approx(1.2)  # the run without a value is left out
+    assert r["path_ratio_mean"] == pytest.approx(1.1)
+    assert r["plan_ms_p50"] == pytest.approx(0.6) and r["plan_ms_p99"] == 9.0
+    assert r["errors"] == 0 and r["seeds"] == [0, 1] and r["family"] == "fam"
+    assert rows[1]["osc_per_robot_median"] == 0 and rows[1]["success_rate"] == 1.0
+    assert rows[2]["family"] == "other"
+
+
+def test_summarize_counts_a_broken_run_as_a_failure():
+    records = [fake("c", "a", 0, osc=(2, 4)),
+               bm.run_record(bm.Job(bm.Case("fam", "c"), "a", 1, "lockstep", Path("x")),
+                             None, wall_s=1.0, error="RuntimeError: boom")]
+    (row,) = bm.summarize(records)
+    assert row["runs"] == 2 and row["errors"] == 1 and row["success_rate"] == 0.5
+    assert row["osc_per_robot_median"] == 3.0 and row["osc_per_robot_max"] == 4
+
+
+def test_summarize_falls_back_to_the_run_figures_without_per_robot_counts():
+    rec = fake("c", "a", 0, osc=(1, 3))
+    rec["robot_oscillations"] = []
+    (row,) = bm.summarize([rec])
+    assert row["osc_per_robot_max"] == 3
+
+
+def test_run_record_keeps_the_per_robot_oscillations():
+    job = bm.Job(bm.Case("circle", "circle", 8), "orca", 2, "lockstep", Path("out/r"))
+    metrics = {"robots": 2, "arrived": 2, "success": True, "oscillations_max": 3,
+               "per_robot": [{"oscillations": 3}, {"oscillations": 0}]}
+    rec = bm.run_record(job, metrics, wall_s=1.23456, ideal_s=30.0)
+    assert rec["case"] == "circle_8" and rec["family"] == "circle" and rec["seed"] == 2
+    assert rec["robot_oscillations"] == [3, 0] and rec["oscillations_max"] == 3
+    assert rec["error"] is None and rec["wall_s"] == 1.235
+    assert bm.run_record(job, None, wall_s=0.0, world_status=139)["error"].endswith("139)")
+
+
+def test_tables_have_one_line_per_row_and_the_columns():
+    rows = bm.summarize([fake("c", "a", 0), fake("c", "b", 0, success=False, time_ratio=None)])
+    text = bm.format_text(rows).splitlines()
+    assert len(text) == 2 + len(rows)
+    assert "osc/robot p50" in text[0] and "plan ms p99" in text[0]
+    md = bm.format_markdown(rows, caption="cap").splitlines()
+    assert md[0] == "cap" and md[2].startswith("| family | planner | runs | success")
+    assert md[3].startswith("|---|---|---:|")
+    assert md[4].startswith("| c | a | 1 | 100 % |")
+    assert md[5].startswith("| c | b | 1 | 0 % |") and " - |" in md[5]
+    assert all(line.count("|") == len(bm.COLUMNS) + 1 for line in md[2:6])
+
+
+def test_write_outputs(tmp_path, monkeypatch):
+    from orchestrator.analysis import plots
+
+    def plot(rows, path, title=""):  # the figure itself: test_plots
+        Path(path).write_bytes(b"png")
+        return Path(path)
+
+    monkeypatch.setattr(plots, "plot_benchmark", plot)
+    rows = bm.summarize([fake("c", "a", 0), fake("c", "b", 0)])
+    paths = bm.write_outputs(tmp_path, rows, [fake("c", "a", 0)],
+                             {"mode": "lockstep", "seeds": [0], "seed_set": "quick"})
+    assert [p.name for p in paths] == ["benchmark.csv", "benchmark.json", "benchmark.md",
+                                       "benchmark.png"]
+    assert all(p.stat().st_size > 0 for p in paths)
+    header = (tmp_path / "benchmark.csv").read_text().splitlines()[0].split(",")
+    assert header[:3] == ["case", "planner", "runs"]
+    assert len((tmp_path / "benchmark.csv").read_text().splitlines()) == 1 + len(rows)
+    saved = json.loads((tmp_path / "benchmark.json").read_text())
+    assert saved["rows"] == rows and saved["suite"]["seed_set"] == "quick"
+    assert "| c | b |" in (tmp_path / "benchmark.md").read_text()
