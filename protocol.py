@@ -12,11 +12,14 @@ Key expressions (all prefixed by the run id, so two runs on one machine never cr
 - ``eifp/<run>/cmd/<id>``          robot <id> -> world, `CommandMsg`.
 - ``eifp/<run>/config/<id>``       queryable served by the world, replies `RunConfigMsg`.
 - ``eifp/<run>/control``           world -> all, `ControlMsg` (run started / ended).
+- ``eifp/<run>/debug/<id>``        robot <id> -> world (and viewers), `PlanDebugMsg`: the
+                                   planner's internals, for viewing only; no robot
+                                   subscribes to it.
 - ``eifp/<run>/alive/world``       liveliness token of the world process.
 - ``eifp/<run>/alive/robot/<id>``  liveliness token of robot process <id>.
 
 Messages are msgpack maps with string keys. Every map carries ``"schema"`` (`SCHEMA_VERSION`)
-and ``"type"`` (``"poses"``, ``"cmd"``, ``"config"``, ``"control"``), so a message
+and ``"type"`` (``"poses"``, ``"cmd"``, ``"config"``, ``"control"``, ``"debug"``), so a message
 published on the wrong key is rejected too. Keys are checked strictly: a missing or an
 extra key is an error. Numeric arrays of `PosesMsg` travel as msgpack ``bin`` holding
 little-endian ``float64`` (``<f8``) or ``int32`` (``<i4``) values, one column per field.
@@ -41,7 +44,7 @@ import numpy as np
 
 from agent.core.config import PLANNER_NAMES, PlannerConfig
 from agent.core.scenario import RobotSpec
-from agent.core.types import PlanStatus, PoseSnapshot, Side
+from agent.core.types import PlanDebug, PlanResult, PlanStatus, PoseSnapshot, Side
 from world.sim.schedule import LINK_LEASE_MS as LINK_LEASE_MS  # re-exported: the schedule
 from world.sim.schedule import MAX_POSE_SLOTS as MAX_POSE_SLOTS  # is part of the wire
 from world.sim.schedule import plan_pose_slot as plan_pose_slot  # contract
@@ -71,6 +74,10 @@ MAX_REASON_CHARS = 256
 MAX_SEQ = 2**63 - 1
 MAX_RUN_ID_CHARS = 64
 MAX_CLOCK_ID = 2**31 - 1
+MAX_DEBUG_THREATS = 256
+"""Most threat ids a `PlanDebugMsg` carries."""
+MAX_DEBUG_POINTS = 512
+"""Most points in each polyline of a `PlanDebugMsg` (via-points, reference, prediction)."""
 """Upper bound on `pose_slot_count` (a world ticking 1000 times per control period)."""
 
 _RUN_ID_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")
@@ -165,6 +172,15 @@ class RunKeys:
         """Key expression of the world's configuration queryable."""
         return f"{self.prefix}/config/*"
 
+    def debug(self, robot_id: int) -> str:
+        """Robot -> viewers: one robot's planner internals (`PlanDebugMsg`)."""
+        return f"{self.prefix}/debug/{_check_robot_id(robot_id)}"
+
+    @property
+    def debug_all(self) -> str:
+        """Wildcard over every robot's debug stream (the world and live viewers)."""
+        return f"{self.prefix}/debug/*"
+
     @property
     def alive_world(self) -> str:
         """Liveliness token of the world."""
@@ -192,6 +208,10 @@ class RunKeys:
     def robot_id_of_cmd(self, key: object) -> int:
         """Robot id in a ``cmd/<id>`` key (str or zenoh.KeyExpr)."""
         return self._id_after(key, "cmd")
+
+    def robot_id_of_debug(self, key: object) -> int:
+        """Robot id in a ``debug/<id>`` key."""
+        return self._id_after(key, "debug")
 
     def robot_id_of_config(self, key: object) -> int:
         """Robot id in a ``config/<id>`` key."""
@@ -269,7 +289,7 @@ def session_settings(
 WORLD_CN = "world"
 """Certificate common name (CN) of the world process; the ACL tells identities apart by CN."""
 ORCHESTRATOR_CN = "orchestrator"
-"""CN of the orchestrator's watch session (compose): liveliness and ``control`` only."""
+"""CN of the orchestrator's watch session (compose): read-only, like `OBSERVER_CN`."""
 OBSERVER_CN = "observer"
 """CN of a read-only tool (recorder, visualiser): may subscribe to everything, publish nothing."""
 MAX_SEQ_JUMP = 64
@@ -341,7 +361,8 @@ def access_control(run_id: str, robot_ids: Iterable[int]) -> dict[str, Any]:
       (a declared Publisher or Querier only sends once it has matched one); they cannot
       put, query or declare tokens anywhere else.
     - ``observer``: subscribe to and receive everything under ``eifp/<run>/``; nothing else.
-    - ``orchestrator``: subscribe to ``control``, watch ``alive/**``.
+    - ``orchestrator``: the same read-only rights as the observer (its live view, compose
+      ``await --live``, republishes the run); nothing else.
     """
     p = f"{KEY_ROOT}/{validate_run_id(run_id)}"
     ids = sorted({_check_robot_id(i) for i in robot_ids})
@@ -359,8 +380,6 @@ def access_control(run_id: str, robot_ids: Iterable[int]) -> dict[str, Any]:
         _acl_rule("robot-routes-qbl", ["declare_queryable"], ["egress"], [f"{p}/config/*"]),
         _acl_rule("obs-sub", ["declare_subscriber"], ["ingress"], [f"{p}/**"]),
         _acl_rule("obs-recv", ["put", "delete"], ["egress"], [f"{p}/**"]),
-        _acl_rule("orch-sub", ["declare_subscriber"], ["ingress"], [f"{p}/control"]),
-        _acl_rule("orch-recv", ["put"], ["egress"], [f"{p}/control"]),
     ]
     subjects: list[dict[str, Any]] = []
     policies: list[dict[str, Any]] = []
@@ -387,7 +406,7 @@ def access_control(run_id: str, robot_ids: Iterable[int]) -> dict[str, Any]:
         {"id": "p-observer", "subjects": ["s-observer"],
          "rules": ["obs-sub", "obs-recv", "alive-watch", "alive-see"]},
         {"id": "p-orchestrator", "subjects": ["s-orchestrator"],
-         "rules": ["orch-sub", "orch-recv", "alive-watch", "alive-see"]},
+         "rules": ["obs-sub", "obs-recv", "alive-watch", "alive-see"]},
     ]
     return {"enabled": True, "default_permission": "deny", "rules": rules,
             "subjects": subjects, "policies": policies}
@@ -946,6 +965,161 @@ class CommandMsg:
         if expected_robot_id is not None and msg.robot_id != expected_robot_id:
             raise ProtocolError(
                 f"cmd.robot: id {msg.robot_id} sent on the key of robot {expected_robot_id}"
+            )
+        return msg
+
+
+def _points(value: object, where: str, max_n: int) -> np.ndarray:
+    """A packed polyline: ``bin`` of 2 k little-endian float64, returned read-only (k, 2)."""
+    flat = _column(value, where, _F8, None, 2 * max_n)
+    if flat.shape[0] % 2:
+        raise ProtocolError(f"{where}: odd number of coordinates")
+    _check_values(flat, where, -MAX_COORD_M, MAX_COORD_M)
+    return flat.reshape(-1, 2)
+
+
+def _pack_points(points: np.ndarray) -> bytes:
+    return np.ascontiguousarray(points, dtype=_F8).reshape(-1).tobytes()
+
+
+@dataclass(frozen=True, eq=False)
+class PlanDebugMsg:
+    """Robot -> viewers: one plan's internals (`agent.core.types.PlanDebug`), for viewing.
+
+    Sent once per plan on ``debug/<id>`` with congestion control DROP: nothing waits for it
+    and nothing decides on it. The world records it in ``run.mcap``.
+
+    Wire body: ``robot`` (int), ``seq`` (the seq of the command it belongs to), ``t`` (sim
+    time of the plan), ``v``, ``omega`` (the command), ``status`` (str), ``ego`` (bin, 3
+    <f8: x, y, heading), ``threats`` (list of ids), ``via``, ``ref``, ``pred`` (bin of
+    <f8 x, y pairs: via-points, reference path samples, MPC prediction).
+
+    Args:
+        robot_id: sender (must match the key's id; checked by `decode(expected_robot_id=)`).
+        seq: the sequence number of the command this plan produced.
+        t_s: sim time at which the robot planned.
+        v_mps, omega_radps: the command.
+        status: a `agent.core.types.PlanStatus` value.
+        debug: the internals; arrays read-only, at most `MAX_DEBUG_POINTS` points each
+            and `MAX_DEBUG_THREATS` threats.
+    """
+
+    robot_id: int
+    seq: int
+    t_s: float
+    v_mps: float
+    omega_radps: float
+    status: str
+    debug: PlanDebug
+
+    TYPE: typing.ClassVar[str] = "debug"
+
+    def __post_init__(self) -> None:
+        set_ = object.__setattr__
+        set_(self, "robot_id", _int(self.robot_id, "debug.robot", 0, MAX_ROBOT_ID))
+        set_(self, "seq", _int(self.seq, "debug.seq", 0, MAX_SEQ))
+        set_(self, "t_s", _float(self.t_s, "debug.t", 0.0))
+        set_(self, "v_mps", _float(self.v_mps, "debug.v", -MAX_SPEED, MAX_SPEED))
+        set_(self, "omega_radps", _float(self.omega_radps, "debug.omega", -MAX_SPEED, MAX_SPEED))
+        status = _str(self.status, "debug.status", 32)
+        if status not in _STATUS_VALUES:
+            raise ProtocolError(f"debug.status: unknown status {status!r}")
+        set_(self, "status", str(status))
+        d = self.debug
+        if not isinstance(d, PlanDebug):
+            raise ProtocolError("debug: expected a PlanDebug")
+        if len(d.threat_ids) > MAX_DEBUG_THREATS:
+            raise ProtocolError(f"debug.threats: more than {MAX_DEBUG_THREATS}")
+        for tid in d.threat_ids:
+            _int(tid, "debug.threats[]", MIN_OBSTACLE_ID, MAX_ROBOT_ID)
+        _check_values(d.ego[:2], "debug.ego.xy", -MAX_COORD_M, MAX_COORD_M)
+        _check_values(d.ego[2:], "debug.ego.theta", -1e3, 1e3)
+        for name, where in (("via_points_m", "debug.via"), ("reference_m", "debug.ref"),
+                            ("predicted_m", "debug.pred")):
+            points = getattr(d, name)
+            if points.shape[0] > MAX_DEBUG_POINTS:
+                raise ProtocolError(f"{where}: {points.shape[0]} points exceed "
+                                    f"{MAX_DEBUG_POINTS}")
+            _check_values(points, where, -MAX_COORD_M, MAX_COORD_M)
+
+    @classmethod
+    def from_result(cls, robot_id: int, seq: int, t_s: float,
+                    result: PlanResult) -> PlanDebugMsg | None:
+        """The message of one plan, or None if the plan has no `PlanDebug` (a brake).
+
+        Polylines longer than `MAX_DEBUG_POINTS` are cut to their first points.
+        """
+        d = result.debug
+        if d is None:
+            return None
+        if (len(d.threat_ids) > MAX_DEBUG_THREATS
+                or max(len(d.via_points_m), len(d.reference_m), len(d.predicted_m))
+                > MAX_DEBUG_POINTS):
+            d = PlanDebug(ego=d.ego, threat_ids=d.threat_ids[:MAX_DEBUG_THREATS],
+                          via_points_m=d.via_points_m[:MAX_DEBUG_POINTS],
+                          reference_m=d.reference_m[:MAX_DEBUG_POINTS],
+                          predicted_m=d.predicted_m[:MAX_DEBUG_POINTS])
+        return cls(robot_id=robot_id, seq=seq, t_s=t_s, v_mps=result.v_mps,
+                   omega_radps=result.omega_radps, status=str(result.status.value), debug=d)
+
+    def encode(self) -> bytes:
+        """Serialise to msgpack."""
+        d = self.debug
+        return _pack(self.TYPE, {
+            "robot": self.robot_id,
+            "seq": self.seq,
+            "t": self.t_s,
+            "v": self.v_mps,
+            "omega": self.omega_radps,
+            "status": self.status,
+            "ego": _pack_points(d.ego),
+            "threats": list(d.threat_ids),
+            "via": _pack_points(d.via_points_m),
+            "ref": _pack_points(d.reference_m),
+            "pred": _pack_points(d.predicted_m),
+        })
+
+    @classmethod
+    def decode(cls, data: object, *, known_ids: Collection[int] | None = None,
+               expected_robot_id: int | None = None) -> PlanDebugMsg:
+        """Parse and validate.
+
+        Args:
+            known_ids: if given, the robot id and every threat id must be one of them.
+            expected_robot_id: if given (the id in the key), the message must carry it.
+        """
+        body = _open_envelope(data, cls.TYPE, (
+            "robot", "seq", "t", "v", "omega", "status", "ego", "threats", "via", "ref", "pred",
+        ))
+        ego = _column(body["ego"], "debug.ego", _F8, 3, 3)
+        threats = body["threats"]
+        if not isinstance(threats, list) or len(threats) > MAX_DEBUG_THREATS:
+            raise ProtocolError(f"debug.threats: expected a list of at most "
+                                f"{MAX_DEBUG_THREATS} ids")
+        threat_ids = tuple(_int(i, "debug.threats[]", MIN_OBSTACLE_ID, MAX_ROBOT_ID)
+                           for i in threats)
+        _check_values(ego, "debug.ego", -MAX_COORD_M, MAX_COORD_M)
+        try:
+            debug = PlanDebug(ego=ego, threat_ids=threat_ids,
+                              via_points_m=_points(body["via"], "debug.via", MAX_DEBUG_POINTS),
+                              reference_m=_points(body["ref"], "debug.ref", MAX_DEBUG_POINTS),
+                              predicted_m=_points(body["pred"], "debug.pred", MAX_DEBUG_POINTS))
+        except ValueError as exc:
+            if isinstance(exc, ProtocolError):
+                raise
+            raise ProtocolError(f"debug: {exc}") from exc
+        msg = cls(robot_id=body["robot"], seq=body["seq"], t_s=body["t"], v_mps=body["v"],
+                  omega_radps=body["omega"], status=body["status"], debug=debug)
+        if known_ids is not None:
+            known = _known_set(known_ids)
+            if msg.robot_id not in known:
+                raise ProtocolError(f"debug.robot: unknown robot id {msg.robot_id}")
+            strangers = set(threat_ids) - known
+            if strangers:
+                raise ProtocolError(f"debug.threats: unknown ids {sorted(strangers)[:8]}")
+        if expected_robot_id is not None and msg.robot_id != expected_robot_id:
+            raise ProtocolError(
+                f"debug.robot: id {msg.robot_id} sent on the key of robot {expected_robot_id}"
             )
         return msg
 

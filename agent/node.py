@@ -7,7 +7,8 @@ explicit endpoint). It knows nothing but what arrives on the wire (see `protocol
    the world's queryable (retrying with the same deadline), build the controller.
 2. Declare the pose subscriber (a `RingChannel` of 2: the robot always acts on the newest
    pose, never a backlog), the control subscriber, the world-liveliness subscriber, the
-   command publisher (DROP, express) and, last, its own liveliness token.
+   command publisher (DROP, express), the debug publisher (its plans' internals for
+   viewers, `PlanDebugMsg`, DROP, express) and, last, its own liveliness token.
 3. Loop: drain control and liveliness, drain the pose ring (the newest valid snapshot goes
    to `RobotController.observe`, which drops stale or out-of-order ones), and plan at the
    control rate in SIM time: when the newest pose's stamp reaches the next scheduled plan
@@ -91,6 +92,7 @@ from agent.process import (
 from protocol import (
     CommandMsg,
     ControlMsg,
+    PlanDebugMsg,
     PosesMsg,
     ProtocolError,
     RunConfigMsg,
@@ -497,6 +499,11 @@ class RobotNode:
         self.cmd_pub = session.declare_publisher(
             self.keys.cmd(self.robot_id), congestion_control=zenoh.CongestionControl.DROP,
             express=True)
+        # The planner's internals, for viewers only (the world records them in run.mcap):
+        # DROP and express like the commands, so they never hold the robot up.
+        self.debug_pub = session.declare_publisher(
+            self.keys.debug(self.robot_id), congestion_control=zenoh.CongestionControl.DROP,
+            express=True)
         # Declared last: once the world sees it, every subscription above is in place.
         self.token = session.liveliness().declare_token(self.keys.alive_robot(self.robot_id))
 
@@ -686,6 +693,9 @@ class RobotNode:
                             plan_start_ns=plan_start_ns, plan_end_ns=plan_end_ns,
                             pub_ns=time.monotonic_ns()),
         ).encode())
+        debug = PlanDebugMsg.from_result(self.robot_id, self.seq, now_s, result)
+        if debug is not None:
+            self.debug_pub.put(debug.encode())
         self.cpu_s["send"] += time.thread_time() - cpu1
         self.seq += 1
         self.counts["plans"] += 1
@@ -783,6 +793,7 @@ class RobotNode:
         finally:
             # Stop commanding before anything else.
             self.cmd_pub.undeclare()
+            self.debug_pub.undeclare()
 
     def cpu_summary(self) -> dict[str, int]:
         """CPU time the loop took since it started, by part, in whole microseconds.

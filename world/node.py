@@ -15,14 +15,16 @@ Lifecycle:
    queries and commands (all read from handler channels, never in callbacks), applies the
    newest command per robot (zero-order hold, `WorldSim.set_command`), steps the world,
    publishes one `PosesMsg` (DROP, express) on the tick's pose slot
-   (``poses/<tick mod K>``, `protocol.pose_slot_count`) and records the tick.
+   (``poses/<tick mod K>``, `protocol.pose_slot_count`) and records the tick. The robots'
+   plan internals (``debug/<id>``, `PlanDebugMsg`, through a ring) are validated and
+   recorded into ``run.mcap`` (`RunRecorder.record_plan`).
 4. The run ends when every robot has arrived (``all_arrived``), at the scenario's time limit
    (``time_limit``) or on SIGTERM/SIGINT (``signal``): publish an ``end`` `ControlMsg`, write
    the ``end`` event, give robots a moment (``--linger-s``) to leave, close everything.
 
-Faults: a malformed command is rejected (`ProtocolError`), counted and logged as a
-``rejected`` event (the first `MAX_REJECT_EVENTS`); the ``end`` event always has the exact
-total (``rejected``) and tallies per key (``rejected_by_key``) and per reason
+Faults: a malformed command or plan-debug message is rejected (`ProtocolError`), counted
+and logged as a ``rejected`` event (the first `MAX_REJECT_EVENTS`); the ``end`` event always
+has the exact total (``rejected``) and tallies per key (``rejected_by_key``) and per reason
 (``rejected_by_reason``: the field or kind of error, e.g. ``cmd.v``). Valid commands pass
 through their robot's command link (`world.sim.link.FaultyLink`, ``--latency-ms`` ...: injected
 delay, loss, duplication, reordering, in sim time); a command whose ``seq`` does not
@@ -33,7 +35,8 @@ and set offline (it brakes and stays as an obstacle); a returning token logs
 
 Events (``events.jsonl``, sim time ``t``; ``wall`` is Unix time where detection latency
 matters): world_ready, robot_joined, robot_lost, robot_rejoined, robot_left, unknown_robot,
-start, arrived, contact, cmd_timeout, rejected, startup_timeout, end.
+start, arrived, contact, cmd_timeout, rejected, startup_timeout, end (with ``tick_ms``: the
+loop's tick wall times, p50 / p99 / mean / max, and the ``overruns`` counter).
 
 Exit status (`agent.process.ExitCode.of_run`): OK every robot arrived with no contact,
 CONTACT, ROBOT_LOST, INTERRUPTED or INCOMPLETE otherwise; BAD_INPUT for bad arguments or a
@@ -72,6 +75,7 @@ from protocol import (
     WORLD_CN,
     CommandMsg,
     ControlMsg,
+    PlanDebugMsg,
     PosesMsg,
     ProtocolError,
     RunConfigMsg,
@@ -236,7 +240,10 @@ class WorldNode:
         self.rx_seq: dict[int, int] = {}  # newest seq passed into each robot's command link
         self.ended = False
         self.counts = {"commands": 0, "rejected": 0, "stale": 0, "queries": 0,
-                       "bad_queries": 0, "overruns": 0, "seq_jumps": 0, "future_cmds": 0}
+                       "bad_queries": 0, "overruns": 0, "plans": 0, "seq_jumps": 0,
+                       "future_cmds": 0}
+        self.tick_s: list[float] = []
+        """Wall time of every tick of the loop (`tick`: drain, step, publish, record)."""
         self.rejected_by_key: dict[str, int] = {}
         self.rejected_by_reason: dict[str, int] = {}
         self.cmd_links: dict[int, FaultyLink[tuple[int, CommandMsg]]] = {
@@ -252,6 +259,10 @@ class WorldNode:
         self.cmd_queue: deque[tuple[int, zenoh.Sample]] = deque(maxlen=max(1024, 32 * n))
         self.cmd_sub = session.declare_subscriber(self.keys.cmd_all, self._on_command)
         self.clock_id = monotonic_clock_id()
+        # Plans' internals for run.mcap: a ring (a flood drops the oldest, never blocks).
+        self.known_ids = self.robot_ids | {o.id for o in scenario.obstacles}
+        self.debug_sub = session.declare_subscriber(
+            self.keys.debug_all, zenoh.handlers.RingChannel(max(256, 8 * n)))
         self.alive_sub = session.liveliness().declare_subscriber(
             self.keys.alive_robot_all, history=True)
         # One publisher per pose slot: tick t goes out on poses/<t mod K>, so a robot that
@@ -342,7 +353,7 @@ class WorldNode:
         if self.counts["rejected"] <= MAX_REJECT_EVENTS:
             self._event("rejected", key=key[:200], reason=reason[:200])
         if self.counts["rejected"] in (1, 10, 100) or self.counts["rejected"] % 1000 == 0:
-            log.warning("rejected command #%d on %.200s: %.200s", self.counts["rejected"], key,
+            log.warning("rejected message #%d on %.200s: %.200s", self.counts["rejected"], key,
                         reason)
 
     def apply_commands(self) -> None:
@@ -379,6 +390,21 @@ class WorldNode:
         for rid, link in self.cmd_links.items():
             for rx_ns, msg in link.receive(self.sim.t_s):
                 self._hold(rid, msg, rx_ns)
+
+    def record_plans(self) -> None:
+        """Validate each robot's plan internals and record them (run.mcap only)."""
+        while (sample := self.debug_sub.try_recv()) is not None:
+            key = str(sample.key_expr)
+            try:
+                rid = self.keys.robot_id_of_debug(key)
+                msg = PlanDebugMsg.decode(sample.payload.to_bytes(), known_ids=self.known_ids,
+                                          expected_robot_id=rid)
+            except ProtocolError as exc:
+                self._reject(str(exc), key)
+                continue
+            self.counts["plans"] += 1
+            self.recorder.record_plan(msg.t_s, rid, msg.debug, v_mps=msg.v_mps,
+                                      omega_radps=msg.omega_radps, status=msg.status)
 
     def _on_command(self, sample: zenoh.Sample) -> None:
         """Zenoh's thread: stamp the arrival and enqueue (the deque drops the oldest)."""
@@ -434,6 +460,7 @@ class WorldNode:
         self.poll_liveliness()
         self.serve_queries()
         self.apply_commands()
+        self.record_plans()
         events = self.sim.step(self.dt_s)
         self.publish_poses()
         self.recorder.record_tick(self.sim.t_s, self.sim.robot_ids, self.sim.pose,
@@ -465,7 +492,9 @@ class WorldNode:
             next_wall += period_wall
             if self.stop:
                 return "signal"
+            t0 = time.perf_counter()
             self.tick()
+            self.tick_s.append(time.perf_counter() - t0)
             if self.sim.all_arrived():
                 return "all_arrived"
             if self.sim.t_s >= self.scenario.time_limit_s - 1e-9:
@@ -487,6 +516,7 @@ class WorldNode:
             rejected_by_key=self.rejected_by_key, rejected_by_reason=self.rejected_by_reason,
             cmd_link={k: sum(getattr(link.counts, k) for link in self.cmd_links.values())
                       for k in ("dropped", "duplicated", "reordered")},
+            tick_ms=_tick_summary(self.tick_s),
         )
         log.info("end: %s at t=%.2f s, %d/%d arrived, %d contacts, %d rejected, %d stale",
                  reason, self.sim.t_s, len(arrived), len(self.robot_ids),
@@ -519,6 +549,17 @@ class WorldNode:
                     time_scale=self.options.time_scale, wall=time.time())
         log.info("start")
         return self.finish(self.run_loop())
+
+
+def _tick_summary(tick_s: list[float]) -> dict[str, float] | None:
+    """Median, 99th percentile, mean and largest tick wall time [ms], or None."""
+    if not tick_s:
+        return None
+    ordered = sorted(tick_s)
+    n = len(ordered)
+    return {"p50": round(ordered[n // 2] * 1e3, 4),
+            "p99": round(ordered[min(n - 1, math.ceil(0.99 * n) - 1)] * 1e3, 4),
+            "mean": round(sum(ordered) / n * 1e3, 4), "max": round(ordered[-1] * 1e3, 4)}
 
 
 def _tally(counts: dict[str, int], name: str) -> None:

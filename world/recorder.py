@@ -10,6 +10,9 @@ Files (SI units):
   (`TIMING_COLUMNS`, integer ns of `time.monotonic_ns`; distributed runs only: a lockstep
   run has no wall clock to speak of).
 - `events.jsonl`: one JSON object per line with at least `kind` and `t`.
+- `run.mcap`: the same run for Foxglove (`world.mcap_log`): the scene every other tick,
+  every applied command and every plan's internals (`record_plan`). A view of the run: the
+  CSV and JSONL files stay the source of every metric.
 """
 
 from __future__ import annotations
@@ -17,11 +20,15 @@ from __future__ import annotations
 import json
 from collections.abc import Sequence
 from pathlib import Path
-from typing import IO, Any
+from typing import IO, TYPE_CHECKING, Any
 
 import numpy as np
 
 from agent.core.scenario import Scenario
+from agent.core.types import PlanDebug
+
+if TYPE_CHECKING:
+    from world.mcap_log import LiveView
 
 TRAJECTORY_HEADER = "t,robot,x,y,theta,v,omega\n"
 COMMANDS_HEADER = "t_applied,robot,seq,pose_stamp,v,omega,plan_ms,status,side,resolved\n"
@@ -34,14 +41,30 @@ TIMING_HEADER = "robot,seq," + ",".join(TIMING_COLUMNS) + "\n"
 
 
 class RunRecorder:
-    """Writes one run directory; line-buffered enough that a killed run leaves usable files."""
+    """Writes one run directory; line-buffered enough that a killed run leaves usable files.
 
-    def __init__(self, out_dir: Path, scenario: Scenario) -> None:
+    Args:
+        out_dir: the run directory (created).
+        scenario: the resolved scenario (written as scenario.yaml).
+        mcap: also write ``run.mcap``.
+        live: a live Foxglove server that gets every message ``run.mcap`` gets (needs
+            `mcap`).
+    """
+
+    def __init__(self, out_dir: Path, scenario: Scenario, *, mcap: bool = True,
+                 live: LiveView | None = None) -> None:
         from world.scenario_file import dump_scenario
 
         self.out_dir = Path(out_dir)
         self.out_dir.mkdir(parents=True, exist_ok=True)
         dump_scenario(scenario, self.out_dir / "scenario.yaml")
+        self.mcap = None
+        if mcap:
+            from world.mcap_log import McapLog
+
+            self.mcap = McapLog(
+                self.out_dir / "run.mcap", scenario, live=live,
+                attachments={"scenario.yaml": (self.out_dir / "scenario.yaml").read_bytes()})
         self._traj: IO[str] = open(self.out_dir / "trajectory.csv", "w", buffering=1 << 16)
         self._traj.write(TRAJECTORY_HEADER)
         self._cmds: IO[str] = open(self.out_dir / "commands.csv", "w", buffering=1 << 16)
@@ -61,6 +84,8 @@ class RunRecorder:
             for rid, p, u in zip(robot_ids.tolist(), pose.tolist(), applied.tolist())
         ]
         self._traj.writelines(rows)
+        if self.mcap is not None:
+            self.mcap.tick(t_s, robot_ids, pose)
 
     def record_command(self, t_applied_s: float, robot_id: int, seq: int, pose_stamp_s: float,
                        v: float, omega: float, plan_ms: float, status: str, side: int = 0,
@@ -71,6 +96,15 @@ class RunRecorder:
             f"{t_applied_s:.4f},{int(robot_id)},{int(seq)},{pose_stamp_s:.4f},{v:.5f},"
             f"{omega:.5f},{plan_ms:.4f},{status},{int(side)},{res}\n"
         )
+        if self.mcap is not None:
+            self.mcap.command(t_applied_s, robot_id, seq, v, omega, status, side, resolved)
+
+    def record_plan(self, t_s: float, robot_id: int, debug: PlanDebug, *, v_mps: float = 0.0,
+                    omega_radps: float = 0.0, status: str = "ok") -> None:
+        """One plan's internals (threats, via-points, reference, MPC prediction) at the sim
+        time it was made; only ``run.mcap`` holds them."""
+        if self.mcap is not None:
+            self.mcap.plan(t_s, robot_id, debug, v_mps, omega_radps, status)
 
     def record_timing(self, robot_id: int, seq: int, stamps: Sequence[int]) -> None:
         """The wall stamps of one applied command, in `TIMING_COLUMNS` order."""
@@ -97,6 +131,8 @@ class RunRecorder:
         self._closed = True
         for f in (self._traj, self._cmds, self._timing, self._events):
             f.close()
+        if self.mcap is not None:
+            self.mcap.close()
 
     def __enter__(self) -> RunRecorder:
         return self

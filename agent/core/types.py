@@ -309,6 +309,36 @@ class StageTimes:
 
 
 @dataclass(frozen=True)
+class PlanDebug:
+    """A planner's internals for one cycle, for viewing only (never read by a decision).
+
+    Filled from arrays the planner computed anyway; empty arrays where a planner has no such
+    stage (ORCA has no via-points, ifp and eifp no MPC prediction).
+
+    Args:
+        ego: (3,) x [m], y [m], heading [rad] the robot planned from (its own estimate,
+            forward-predicted by the pose age).
+        threat_ids: ids of the threats of Eq. (5), ranked as the planner ranked them.
+        via_points_m: (K, 2) the via-points between the robot and its goal.
+        reference_m: (M, 2) samples of the reference path the tracker follows.
+        predicted_m: (N, 2) the MPC's predicted positions over its horizon (eIFP-MPC).
+    """
+
+    ego: np.ndarray
+    threat_ids: tuple[int, ...] = ()
+    via_points_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    reference_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    predicted_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "ego", _as_array("ego", self.ego, (3,)))
+        object.__setattr__(self, "threat_ids", tuple(int(i) for i in self.threat_ids))
+        for name in ("via_points_m", "reference_m", "predicted_m"):
+            value = np.asarray(getattr(self, name), dtype=float).reshape(-1, 2)
+            object.__setattr__(self, name, _as_array(name, value, (None, 2)))
+
+
+@dataclass(frozen=True)
 class PlanResult:
     """What a planner decided in one cycle.
 
@@ -322,6 +352,8 @@ class PlanResult:
         threats: the threats of Eq. (5), ranked by TCPA.
         times: per-stage timings.
         solver_iterations: OSQP iterations (eIFP-MPC), else 0.
+        debug: the planner's internals for viewing (`PlanDebug`), or None; not part of
+            `decision`.
     """
 
     v_mps: float
@@ -334,6 +366,7 @@ class PlanResult:
     threats: tuple[Threat, ...] = ()
     times: StageTimes = field(default_factory=StageTimes)
     solver_iterations: int = 0
+    debug: PlanDebug | None = None
 
     def decision(self) -> tuple:
         """Everything but the timings, for determinism checks."""

@@ -150,7 +150,7 @@ class MpcResult:
     def predicted_states(self) -> np.ndarray:
         """(N + 1, 3) Eq. (1) rollout of the planned inputs from the state.
 
-        Computed on first use: the robot's cycle only needs the command (saves a rollout).
+        Computed on first use (`PlanDebug.predicted_m` uses it: one vectorised rollout).
         """
         return rollout(self.initial_state, self.planned_inputs, self.dt_s)
 

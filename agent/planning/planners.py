@@ -37,7 +37,7 @@ from typing import Protocol
 import numpy as np
 
 from agent.core.config import PLANNER_NAMES, PlannerConfig
-from agent.core.types import Observation, PlanResult, PlanStatus, Side, StageTimes
+from agent.core.types import Observation, PlanDebug, PlanResult, PlanStatus, Side, StageTimes
 from agent.planning.safety import (
     braking_speed_limit,
     heading_sweep_rad,
@@ -111,7 +111,9 @@ def arrived_result(observation: Observation) -> PlanResult | None:
     if not at_goal(ego.x_m, ego.y_m, observation.goal_m, observation.goal_tolerance_m):
         return None
     here = np.array([[ego.x_m, ego.y_m], observation.goal_m])
-    return PlanResult(v_mps=0.0, omega_radps=0.0, status=PlanStatus.ARRIVED, waypoints_m=here)
+    return PlanResult(v_mps=0.0, omega_radps=0.0, status=PlanStatus.ARRIVED, waypoints_m=here,
+                      debug=PlanDebug(ego=np.array([ego.x_m, ego.y_m, ego.heading_rad]),
+                                      reference_m=here))
 
 
 class ViaPointPlanner:
@@ -204,12 +206,14 @@ class ViaPointPlanner:
         last = np.array([ego.v_mps, ego.omega_radps])
         iterations = 0
         status = via.status
+        predicted = None
         if self.name == "eifp-mpc":
             preds, clearance = self._predictions(observation, ref.t_s)
             res = self._mpc(observation).solve(
                 np.array([ego.x_m, ego.y_m, ego.heading_rad]), last, ref, preds, clearance
             )
             v, omega, iterations = res.v_mps, res.omega_radps, res.iterations
+            predicted = res
             if res.status != PlanStatus.OK:
                 status = res.status
             if mpc_cfg.braking_guard and len(observation.others):
@@ -229,11 +233,21 @@ class ViaPointPlanner:
             control_ms=(t3 - t2) * 1e3,
             total_ms=(t3 - t0) * 1e3,
         )
+        # For viewing only, after the timings: arrays the cycle computed anyway (the MPC's
+        # prediction is one vectorised rollout of its planned inputs, about 10 us).
+        debug = PlanDebug(
+            ego=np.array([ego.x_m, ego.y_m, ego.heading_rad]),
+            threat_ids=tuple(t.other_id for t in via.threats),
+            via_points_m=via.waypoints_m[1:-1],
+            reference_m=np.column_stack((ref.x_m, ref.y_m)),
+            predicted_m=(predicted.predicted_states[:, :2] if predicted is not None
+                         else np.zeros((0, 2))),
+        )
         return PlanResult(
             v_mps=float(v), omega_radps=float(omega), status=status,
             waypoints_m=via.waypoints_m, via_point_m=via.via_point_m, side=via.side,
             resolved_id=via.resolved_id, threats=via.threats, times=times,
-            solver_iterations=int(iterations),
+            solver_iterations=int(iterations), debug=debug,
         )
 
     def _braking_guard(self, observation: Observation, v_mps: float, omega_radps: float) -> float:
@@ -354,10 +368,13 @@ class OrcaPlanner:
             last_command=np.array([ego.v_mps, ego.omega_radps]),
         )
         elapsed_ms = (self._timer() - t0) * 1e3
+        waypoints = np.array([position, observation.goal_m])
         return PlanResult(
             v_mps=float(cmd.v_mps), omega_radps=float(cmd.omega_radps), status=PlanStatus.OK,
-            waypoints_m=np.array([position, observation.goal_m]), side=Side.NONE,
+            waypoints_m=waypoints, side=Side.NONE,
             times=StageTimes(control_ms=elapsed_ms, total_ms=elapsed_ms),
+            debug=PlanDebug(ego=np.array([ego.x_m, ego.y_m, ego.heading_rad]),
+                            reference_m=waypoints),
         )
 
 

@@ -4,6 +4,7 @@ Table I beside ours, and text tables (the CLI's `report` and `sweep` print these
 
 from __future__ import annotations
 
+import csv
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
@@ -229,3 +230,22 @@ def reversal_table(causes: Mapping[tuple[str, str], Mapping[str, float]]) -> str
     rows = [[setup, planner, _cell(sum(by.values())), *(_cell(by[c]) for c in REVERSAL_CAUSES)]
             for (setup, planner), by in causes.items()]
     return format_table(header, rows)
+
+
+def write_stats_csv(path: Path, stats: Mapping[tuple[str, str],
+                                                Mapping[str, tuple[float, float, int]]],
+                    metrics: Sequence[tuple[str, str]] = ALL_METRICS) -> Path:
+    """`aggregate`'s statistics as CSV: setup, planner, runs, then mean and std per metric
+    (empty where undefined)."""
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["setup", "planner", "runs"]
+                   + [f"{m}_{x}" for m, _ in metrics for x in ("mean", "std")])
+        for (setup, planner), s in stats.items():
+            w.writerow([setup, planner, s["runs"][2]]
+                       + [_finite_or_none(s[m][i]) for m, _ in metrics for i in (0, 1)])
+    return Path(path)
+
+
+def _finite_or_none(x: float) -> float | None:
+    return x if math.isfinite(x) else None

@@ -58,6 +58,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--quick", action="store_true",
                    help="a handful of small cases (CI; about a minute for two planners)")
     p.add_argument("--out", help="output directory (default runs/benchmark-<time>)")
+    p.add_argument("--readme", type=Path, default=None, metavar="FILE",
+                   help="also write the table into FILE between <!-- results:begin --> and "
+                        "<!-- results:end --> (the README's Results section)")
     p.add_argument("--max-cases", type=int, default=None, help=argparse.SUPPRESS)
     p.set_defaults(func=run)
 
@@ -123,6 +126,15 @@ def run(args: argparse.Namespace) -> int:
              "jobs": args.jobs, "start_jitter_m": bm.START_JITTER_M,
              "wall_s": round(wall_s, 1), "argv": list(getattr(args, "argv", []))}
     paths = bm.write_outputs(out, rows, records, suite)
+    if args.readme is not None:
+        try:
+            text = args.readme.read_text(encoding="utf-8")
+            args.readme.write_text(bm.replace_results(
+                text, (out / "benchmark.md").read_text(encoding="utf-8"),
+                "orchestrator " + " ".join(getattr(args, "argv", []))), encoding="utf-8")
+        except (OSError, ValueError) as exc:
+            raise BadInput(f"--readme: {args.readme}: {exc}") from None
+        paths.append(args.readme)
     print(bm.format_text(rows))
     print()
     print(bm.TABLE_NOTES)

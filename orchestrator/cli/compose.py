@@ -48,6 +48,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="wall deadline for the world to come up")
     p.add_argument("--time-scale", type=positive, default=1.0,
                    help="the world's sim seconds per wall second (sizes the wait)")
+    p.add_argument("--live", action="store_true",
+                   help="serve the run live to Foxglove (WebSocket) while it runs")
+    p.add_argument("--live-port", type=int, default=8765, help="port of the live view")
+    p.add_argument("--live-host", default="127.0.0.1",
+                   help="address the live view binds (0.0.0.0 in a container whose port is "
+                        "published)")
     p.add_argument("--tls", type=Path, default=None, metavar="DIR",
                    help="mutual TLS with DIR/ca.pem, DIR/orchestrator.pem, DIR/orchestrator.key")
     c = sub.add_parser("certs", help="the run's CA and certificates, one directory per service")
@@ -73,5 +79,6 @@ def run(args: argparse.Namespace) -> int:
     if args.step == "scenario":
         prepare_scenario(options)
         return ExitCode.OK
+    live = (args.live_host, args.live_port) if args.live else None
     return await_and_report(options, args.connect, args.startup_timeout_s, args.time_scale,
-                            args.tls)
+                            args.tls, live=live)

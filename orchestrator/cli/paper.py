@@ -4,7 +4,6 @@ paper's figures, as a table and a plot."""
 from __future__ import annotations
 
 import argparse
-import csv
 import math
 import sys
 import time
@@ -20,6 +19,7 @@ from orchestrator.analysis.report import (
     collect,
     format_table,
     paper_table,
+    write_stats_csv,
 )
 from orchestrator.analysis.rundir import write_json
 from orchestrator.cli.common import BadInput, make_dir, split_list
@@ -93,13 +93,7 @@ def run(args: argparse.Namespace) -> int:
     print("\nexpected shape (100 % success; oscillations eIFP-MPC <= eIFP <= IFP):")
     print(shape)
     (out / "table.txt").write_text(table + "\n\n" + shape + "\n", encoding="utf-8")
-    with open(out / "table.csv", "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["setup", "planner", "runs"]
-                   + [f"{m}_{x}" for m, _ in ALL_METRICS for x in ("mean", "std")])
-        for (setup, planner), s in stats.items():
-            w.writerow([setup, planner, s["runs"][2]]
-                       + [_finite(s[m][i]) for m, _ in ALL_METRICS for i in (0, 1)])
+    write_stats_csv(out / "table.csv", stats)
     bar_stats = {k: {m: (v[0], v[1]) for m, v in s.items()} for k, s in stats.items()}
     plots = plot_report_bars(bar_stats, PAPER_METRICS, out, prefix="paper")
     write_json(out / "paper.json", {

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import csv
 import math
 from pathlib import Path
 
@@ -37,6 +36,7 @@ def run(args: argparse.Namespace) -> int:
         reversal_causes,
         reversal_table,
         summary_table,
+        write_stats_csv,
     )
     from orchestrator.analysis.rundir import write_json
 
@@ -78,13 +78,7 @@ def run(args: argparse.Namespace) -> int:
                        for m, v in s.items()},
                     "reversal_causes_per_robot": causes.get(k)} for k, s in stats.items()],
     })
-    with open(out / "report.csv", "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["setup", "planner", "runs"]
-                   + [f"{m}_{x}" for m, _ in ALL_METRICS for x in ("mean", "std")])
-        for (setup, planner), s in stats.items():
-            w.writerow([setup, planner, s["runs"][2]]
-                       + [_finite(s[m][i]) for m, _ in ALL_METRICS for i in (0, 1)])
+    write_stats_csv(out / "report.csv", stats)
     print(f"\nplots: {', '.join(str(p) for p in written)}")
     print(f"tables: {out / 'report.csv'}, {out / 'report.json'}")
     return ExitCode.OK

@@ -49,9 +49,18 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--start-jitter-m", type=float, default=0.0,
                    help="move each start by up to this much (uniform in a disc)")
     p.add_argument("--time-scale", type=float, default=None,
-                   help="sim seconds per wall second (distributed mode; default 1)")
+                   help="sim seconds per wall second (distributed mode, and lockstep with "
+                        "--live; default 1)")
     p.add_argument("--out", help="run directory (default runs/<setup>-<planner>-<seed>-<time>)")
     p.add_argument("--gif", action="store_true", help="also write trajectory.gif")
+    p.add_argument("--mp4", action="store_true",
+                   help="also write trajectory.mp4 (needs the 'video' extra: imageio-ffmpeg)")
+    p.add_argument("--live", action="store_true",
+                   help="serve the run live to Foxglove (WebSocket) while it runs")
+    p.add_argument("--live-port", type=int, default=8765,
+                   help="port of the live view (default 8765; 0: any free port)")
+    p.add_argument("--live-host", default="127.0.0.1",
+                   help="address the live view binds (default 127.0.0.1: this machine only)")
     p.add_argument("--quiet", action="store_true", help="no progress line and no summary")
     add_tls_args(p)
     add_fault_args(p)
@@ -73,6 +82,11 @@ def run(args: argparse.Namespace) -> int:
     scenario = resolve(args.setup, agents=args.agents, seed=args.seed,
                        start_jitter_m=args.start_jitter_m, planner=args.planner,
                        profile=args.profile)
+    if args.mp4:
+        from orchestrator.analysis.plots import mp4_available
+
+        if (why := mp4_available()) is not None:
+            raise BadInput(f"--mp4: {why}")
     faults = fault_plan(args, scenario)
     planner = planner_label(scenario)
     out_dir = Path(args.out) if args.out else default_out_dir(scenario, planner, args.seed)
@@ -89,6 +103,7 @@ def run(args: argparse.Namespace) -> int:
         "started": dt.datetime.now().isoformat(timespec="seconds"),
         "argv": list(args.argv),
     })
+    live = _start_live(args, scenario)
     progress = ProgressLine(label, quiet=args.quiet)
     wall0 = time.monotonic()
     interrupted = False
@@ -97,15 +112,20 @@ def run(args: argparse.Namespace) -> int:
         if args.mode == "lockstep":
             from orchestrator.experiments.lockstep import run_lockstep
 
-            metrics = run_lockstep(scenario, out_dir, on_progress=progress,
-                                   faults=faults).metrics
+            metrics = run_lockstep(scenario, out_dir, on_progress=progress, faults=faults,
+                                   live=live,
+                                   time_scale=(args.time_scale or 1.0) if live else None
+                                   ).metrics
         else:
-            metrics, world_status = _run_distributed(scenario, out_dir, args, progress, faults)
+            metrics, world_status = _run_distributed(scenario, out_dir, args, progress, faults,
+                                                     live)
     except KeyboardInterrupt:
         interrupted = True
         metrics = _partial_metrics(out_dir)
     finally:
         progress.done()
+        if live is not None:
+            live.stop()
     wall_s = time.monotonic() - wall0
     end = end_event(out_dir)
     crashed = metrics is None or (world_status is not None and world_status not in RUN_ENDINGS)
@@ -128,7 +148,7 @@ def run(args: argparse.Namespace) -> int:
               f"see {out_dir}/world.log", file=sys.stderr)
         print(out_dir)
         return code
-    write_run_plots(out_dir, gif=args.gif)
+    write_run_plots(out_dir, gif=args.gif, mp4=args.mp4)
     if not args.quiet:
         print(run_summary(read_json(out_dir / "metrics.json") or content, label))
         print(f"\nstatus {status}, wall time {wall_s:.1f} s")
@@ -151,12 +171,28 @@ def _partial_metrics(out_dir: Path) -> Any:
     return metrics
 
 
+def _start_live(args: argparse.Namespace, scenario: Scenario) -> Any:
+    """The live Foxglove server of ``--live`` (printing its address), or None."""
+    if not args.live:
+        return None
+    if not 0 <= args.live_port <= 65535:
+        raise BadInput(f"--live-port: {args.live_port} is not a TCP port")
+    from orchestrator.experiments.live import start_live_view
+
+    try:
+        return start_live_view(args.live_host, args.live_port, scenario)
+    except Exception as exc:  # foxglove raises its own error types (port in use, bad host)
+        raise BadInput(f"--live: cannot serve on {args.live_host}:{args.live_port}: "
+                       f"{exc}") from exc
+
+
 def _run_distributed(scenario: Scenario, out_dir: Path, args: argparse.Namespace,
-                     progress: ProgressLine, faults: Any = None) -> tuple[Any, int]:
+                     progress: ProgressLine, faults: Any = None,
+                     live: Any = None) -> tuple[Any, int]:
     """Run the real processes; (metrics or None, the world's exit status)."""
     from orchestrator.experiments.distributed import run_scenario_distributed
 
     return run_scenario_distributed(scenario, out_dir, args.seed,
                                     time_scale=args.time_scale or 1.0,
-                                    on_progress=progress, faults=faults,
+                                    on_progress=progress, faults=faults, live=live,
                                     tls=not args.insecure, tls_ca=tls_ca(args))

@@ -317,13 +317,34 @@ def write_report(options: SetupOptions, scenario: Scenario, time_scale: float,
 
 
 def await_and_report(options: SetupOptions, connect: str, startup_timeout_s: float,
-                     time_scale: float, tls_dir: Path | None = None) -> int:
-    """The orchestrator container: watch the run, then write the report; the exit status."""
+                     time_scale: float, tls_dir: Path | None = None,
+                     live: tuple[str, int] | None = None) -> int:
+    """The orchestrator container: watch the run, then write the report; the exit status.
+
+    With `live` (host, port), a live Foxglove view of the run is served meanwhile
+    (`orchestrator.experiments.live`: a passive Zenoh client of the world's router)."""
     scenario = options.resolve()
     started = dt.datetime.now().isoformat(timespec="seconds")
-    with stop_on_signals() as stop:
-        outcome = watch_run(options, scenario, connect, startup_timeout_s, time_scale, stop,
-                            tls_dir)
+    view = bridge = None
+    if live is not None:
+        from orchestrator.experiments.live import LiveBridge, start_live_view
+
+        view = start_live_view(live[0], live[1], scenario)
+        tls = None
+        if tls_dir is not None:
+            from protocol import ORCHESTRATOR_CN, TlsFiles
+
+            tls = TlsFiles.in_dir(tls_dir, ORCHESTRATOR_CN)
+        bridge = LiveBridge(options.run_id, connect, scenario, view, tls=tls).start()
+    try:
+        with stop_on_signals() as stop:
+            outcome = watch_run(options, scenario, connect, startup_timeout_s, time_scale, stop,
+                                tls_dir)
+    finally:
+        if bridge is not None:
+            bridge.stop()
+        if view is not None:
+            view.stop()
     if outcome == "signal":
         log.warning("stopped by signal %s before the run ended", stop.signum)
         return ExitCode.INTERRUPTED

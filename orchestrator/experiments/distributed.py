@@ -1,7 +1,9 @@
 """Launch one distributed run: a world process and one robot process per robot, on loopback.
 
-The launcher never opens a Zenoh session (a session does not survive `fork`, and children
-are started with `subprocess` anyway). Every child gets its own process group so that a
+The launcher opens no Zenoh session of its own (a session does not survive `fork`, and
+children are started with `subprocess` anyway); the one exception is the live view's
+passive client (``live``: `orchestrator.experiments.live.LiveBridge`), opened on a thread
+after the world is spawned, which only subscribes. Every child gets its own process group so that a
 terminal's Ctrl-C reaches only the launcher, which then tears the children down in order:
 the world first (SIGTERM, so it records the end of the run), then the robots (SIGTERM,
 then SIGKILL after a deadline). Teardown runs in ``finally``: no orphans on exceptions,
@@ -40,14 +42,17 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import FrameType
-from typing import IO
+from typing import IO, TYPE_CHECKING
 
 from agent.core.scenario import Scenario
 from agent.process import PARENT_PID_ENV
 from orchestrator.analysis.metrics import RunMetrics
-from protocol import tls_endpoint, validate_run_id
+from protocol import OBSERVER_CN, TlsFiles, tls_endpoint, validate_run_id
 from world.scenario_file import load_scenario
 from world.sim.faults import FaultPlan, ProcessFault
+
+if TYPE_CHECKING:
+    from world.mcap_log import LiveView
 
 WORLD_TERM_GRACE_S = 10.0
 """Wall time the world gets after SIGTERM to record the end and close, before SIGKILL."""
@@ -389,6 +394,7 @@ def run_distributed(
     tls: bool = True,
     tls_ca: Path | None = None,
     robot_args: Sequence[str] = (),
+    live: LiveView | None = None,
 ) -> int:
     """Run one scenario as real processes; return the world's exit status.
 
@@ -418,6 +424,8 @@ def run_distributed(
         tls_ca: sign the run's certificates with this CA (``ca.pem``, ``ca.key``) instead of
             a fresh one whose key is never written.
         robot_args: further ``python -m agent`` arguments for every robot (``--no-plan``).
+        live: a live Foxglove server; a passive Zenoh client in this process
+            (`orchestrator.experiments.live.LiveBridge`) republishes the run to it.
 
     Returns:
         The world's exit status (`agent.process.ExitCode`); a world killed by signal N
@@ -463,9 +471,19 @@ def run_distributed(
     world: subprocess.Popen | None = None
     robots: list[subprocess.Popen] = []
     scheduler: ProcessFaultScheduler | None = None
+    bridge = None
     try:
         t0 = time.monotonic()
         world = spawn_logged(world_cmd, out_dir / "world.log")
+        if live is not None:
+            from orchestrator.experiments.live import LiveBridge
+
+            # Read-only: the observer's certificate (the access control lets it subscribe).
+            bridge = LiveBridge(
+                run_id, endpoint if endpoint_host(endpoint) not in ("0.0.0.0", "::")
+                else joined[0], scenario, live,
+                tls=TlsFiles.in_dir(tls_dir, OBSERVER_CN) if tls_dir is not None else None,
+            ).start()
 
         def spawn_robot(rid: int, restart: int = 0) -> subprocess.Popen:
             name = f"robot_{rid}.log" if not restart else f"robot_{rid}.restart{restart}.log"
@@ -520,6 +538,8 @@ def run_distributed(
             previous_int = signal.signal(signal.SIGINT, signal.SIG_IGN)
             signal.signal(signal.SIGTERM, signal.SIG_IGN)
         try:
+            if bridge is not None:
+                bridge.stop()
             if world is not None:
                 stop_processes([world], 0.0, WORLD_TERM_GRACE_S)
             if scheduler is not None:
@@ -545,7 +565,8 @@ def _record_transport(out_dir: Path, info: dict) -> None:
 def run_scenario_distributed(scenario: Scenario, out_dir: Path, seed: int, *,
                              time_scale: float = 1.0,
                              on_progress: Callable[[DistributedProgress], None] | None = None,
-                             faults: FaultPlan | None = None, tls: bool = True,
+                             faults: FaultPlan | None = None,
+                             live: LiveView | None = None, tls: bool = True,
                              tls_ca: Path | None = None
                              ) -> tuple[RunMetrics | None, int]:
     """One resolved scenario as real processes, with its metrics: `orchestrator run`'s path.
@@ -575,7 +596,7 @@ def run_scenario_distributed(scenario: Scenario, out_dir: Path, seed: int, *,
     run_id = f"{safe_name(scenario.name)[:24]}-{seed}-{secrets.token_hex(4)}"
     status = run_distributed(scenario_path, out_dir, run_id, rate_hz=50.0,
                              time_scale=time_scale, on_progress=on_progress, faults=faults,
-                             tls=tls, tls_ca=tls_ca)
+                             live=live, tls=tls, tls_ca=tls_ca)
     if not (out_dir / "trajectory.csv").exists():
         return None, status
     try:

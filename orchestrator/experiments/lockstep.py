@@ -1,7 +1,7 @@
 """A lockstep run into a run directory: `world.sim.lockstep` recorded by `world.recorder`.
 
 The run directory holds the same files as a distributed run's (trajectory.csv,
-commands.csv, events.jsonl, scenario.yaml) plus metrics.json.
+commands.csv, events.jsonl, scenario.yaml, run.mcap) plus metrics.json.
 """
 
 from __future__ import annotations
@@ -10,6 +10,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from agent.core.scenario import Scenario
 from orchestrator.analysis.metrics import RunMetrics
@@ -18,6 +19,9 @@ from world.recorder import RunRecorder
 from world.sim.faults import FaultPlan
 from world.sim.lockstep import SimProgress
 from world.sim.lockstep import run_lockstep as run_loop
+
+if TYPE_CHECKING:
+    from world.mcap_log import LiveView
 
 
 @dataclass(frozen=True)
@@ -56,10 +60,42 @@ class LockstepOutcome:
     metrics: RunMetrics
 
 
+class PacedSink:
+    """A run sink that holds each tick back until its sim time is due in wall time at
+    `time_scale` sim seconds per wall second (for watching a lockstep run live)."""
+
+    def __init__(self, sink: RunRecorder, time_scale: float) -> None:
+        if not time_scale > 0.0:
+            raise ValueError(f"time_scale must be > 0, got {time_scale!r}")
+        self.sink = sink
+        self.time_scale = float(time_scale)
+        self._wall0: float | None = None
+
+    def record_tick(self, t_s: float, robot_ids: Any, pose: Any, applied: Any) -> None:
+        now = time.monotonic()
+        if self._wall0 is None:
+            self._wall0 = now - t_s / self.time_scale
+        delay = self._wall0 + t_s / self.time_scale - now
+        if delay > 0.0:
+            time.sleep(delay)
+        self.sink.record_tick(t_s, robot_ids, pose, applied)
+
+    def record_command(self, *args: Any, **kwargs: Any) -> None:
+        self.sink.record_command(*args, **kwargs)
+
+    def record_plan(self, *args: Any, **kwargs: Any) -> None:
+        self.sink.record_plan(*args, **kwargs)
+
+    def event(self, kind: str, t_s: float, **fields: Any) -> None:
+        self.sink.event(kind, t_s, **fields)
+
+
 def run_lockstep(scenario: Scenario, out_dir: Path, *, world_rate_hz: float = 50.0,
                  control_rate_hz: float = 10.0,
                  on_progress: Callable[[LockstepProgress], None] | None = None,
-                 faults: FaultPlan | None = None) -> LockstepOutcome:
+                 faults: FaultPlan | None = None,
+                 live: LiveView | None = None,
+                 time_scale: float | None = None) -> LockstepOutcome:
     """Run `scenario` in lockstep; write the run directory and `metrics.json`.
 
     Args:
@@ -69,6 +105,9 @@ def run_lockstep(scenario: Scenario, out_dir: Path, *, world_rate_hz: float = 50
         control_rate_hz: planning cycles per sim second; must divide world_rate_hz.
         on_progress: called about every sim second with a `LockstepProgress`.
         faults: injected faults (`world.sim.faults.FaultPlan`); None: none.
+        live: a live Foxglove server that gets every message run.mcap gets.
+        time_scale: pace the run at this many sim seconds per wall second (`PacedSink`);
+            None: as fast as it computes.
     """
     out_dir = Path(out_dir)
     wall0 = time.perf_counter()
@@ -79,8 +118,9 @@ def run_lockstep(scenario: Scenario, out_dir: Path, *, world_rate_hz: float = 50
                                          sim_t_s=p.sim_t_s, n_robots=p.n_robots,
                                          arrived=p.arrived, contacts=p.contacts, lost=p.lost))
 
-    with RunRecorder(out_dir, scenario) as rec:
-        result = run_loop(scenario, rec, world_rate_hz=world_rate_hz,
+    with RunRecorder(out_dir, scenario, live=live) as rec:
+        sink = rec if time_scale is None else PacedSink(rec, time_scale)
+        result = run_loop(scenario, sink, world_rate_hz=world_rate_hz,
                           control_rate_hz=control_rate_hz, faults=faults, on_progress=progress)
     wall_s = time.perf_counter() - wall0
     metrics = metrics_from_run_dir(out_dir, control_period_s=1.0 / control_rate_hz,

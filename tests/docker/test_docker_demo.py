@@ -255,7 +255,7 @@ def robot_services(n: int) -> list[str]:
 
 def assert_run_files(run_dir: Path) -> None:
     for name in ("scenario.yaml", "trajectory.csv", "commands.csv", "events.jsonl",
-                 "metrics.json", "report.txt", "run.json", "trajectory.png"):
+                 "metrics.json", "report.txt", "run.json", "trajectory.png", "run.mcap"):
         path = run_dir / name
         assert path.is_file() and path.stat().st_size > 0, f"{path} missing or empty"
 

@@ -17,13 +17,16 @@ from hypothesis import strategies as st
 import protocol
 from agent.core.config import MpcConfig, PlannerConfig, RobotLimits
 from agent.core.scenario import RobotSpec
-from agent.core.types import PlanStatus, PoseSnapshot, Side
+from agent.core.types import PlanDebug, PlanResult, PlanStatus, PoseSnapshot, Side
 from protocol import (
+    MAX_DEBUG_POINTS,
+    MAX_DEBUG_THREATS,
     MAX_MESSAGE_BYTES,
     MAX_ROBOTS,
     SCHEMA_VERSION,
     CommandMsg,
     ControlMsg,
+    PlanDebugMsg,
     PosesMsg,
     ProtocolError,
     RunConfigMsg,
@@ -72,6 +75,18 @@ def make_config() -> RunConfigMsg:
                         cmd_timeout_s=0.5, known_ids=(0, 1, 2, -1))
 
 
+def make_debug(**overrides: object) -> PlanDebugMsg:
+    rng = np.random.default_rng(11)
+    debug = PlanDebug(ego=np.array([1.0, -2.0, 0.3]), threat_ids=(0, 1, -1),
+                      via_points_m=rng.uniform(-5, 5, (1, 2)),
+                      reference_m=rng.uniform(-5, 5, (21, 2)),
+                      predicted_m=rng.uniform(-5, 5, (21, 2)))
+    fields = dict(robot_id=2, seq=17, t_s=3.2, v_mps=0.9, omega_radps=-0.4, status="ok",
+                  debug=debug)
+    fields.update(overrides)
+    return PlanDebugMsg(**fields)
+
+
 def raw(msg: object) -> dict:
     """The msgpack map of an encoded message, for hand mutation."""
     return msgpack.unpackb(msg.encode())
@@ -81,7 +96,8 @@ def pack(obj: object) -> bytes:
     return msgpack.packb(obj, use_bin_type=True)
 
 
-DECODERS = (PosesMsg.decode, CommandMsg.decode, RunConfigMsg.decode, ControlMsg.decode)
+DECODERS = (PosesMsg.decode, CommandMsg.decode, RunConfigMsg.decode, ControlMsg.decode,
+            PlanDebugMsg.decode)
 
 
 # --- Round trips ---------------------------------------------------------------------------
@@ -199,7 +215,7 @@ def test_control_round_trip() -> None:
 
 def test_every_message_carries_schema_and_type() -> None:
     for msg, kind in ((make_poses(), "poses"), (make_command(), "cmd"), (make_config(), "config"),
-                      (ControlMsg("start", 0.0), "control")):
+                      (ControlMsg("start", 0.0), "control"), (make_debug(), "debug")):
         body = raw(msg)
         assert body["schema"] == SCHEMA_VERSION and body["type"] == kind
 
@@ -216,7 +232,7 @@ def test_rejects_random_bytes(decode) -> None:
 
 
 @pytest.mark.parametrize("msg", [make_poses(), make_command(), make_config(),
-                                 ControlMsg("end", 1.0, "time_limit")])
+                                 ControlMsg("end", 1.0, "time_limit"), make_debug()])
 def test_rejects_every_truncation(msg) -> None:
     data = msg.encode()
     for cut in range(len(data)):
@@ -255,7 +271,7 @@ def test_command_rejects_wrong_type_or_range(key, value) -> None:
 
 
 @pytest.mark.parametrize("msg", [make_poses(), make_command(), make_config(),
-                                 ControlMsg("start", 0.0)])
+                                 ControlMsg("start", 0.0), make_debug()])
 def test_rejects_each_missing_key(msg) -> None:
     body = raw(msg)
     for key in body:
@@ -266,7 +282,7 @@ def test_rejects_each_missing_key(msg) -> None:
 
 
 @pytest.mark.parametrize("msg", [make_poses(), make_command(), make_config(),
-                                 ControlMsg("start", 0.0)])
+                                 ControlMsg("start", 0.0), make_debug()])
 def test_rejects_extra_key(msg) -> None:
     body = raw(msg)
     body["extra"] = 1
@@ -515,6 +531,16 @@ def test_key_expressions_are_prefixed_by_run() -> None:
     assert a.config_all == "eifp/run-a/config/*" and a.cmd_all == "eifp/run-a/cmd/*"
 
 
+def test_debug_keys() -> None:
+    k = RunKeys("r1")
+    assert k.debug(3) == "eifp/r1/debug/3" and k.debug_all == "eifp/r1/debug/*"
+    assert k.robot_id_of_debug("eifp/r1/debug/3") == 3
+    for bad in ("eifp/r1/debug/x", "eifp/r1/debug/-1", "eifp/r1/cmd/3", "eifp/r2/debug/3",
+                "eifp/r1/debug/03", "eifp/r1/debug/3/4"):
+        with pytest.raises(ProtocolError):
+            k.robot_id_of_debug(bad)
+
+
 def test_pose_slot_keys() -> None:
     k = RunKeys("r1")
     assert k.poses_slot(0) == "eifp/r1/poses/0" and k.poses_slot(4) == "eifp/r1/poses/4"
@@ -623,6 +649,7 @@ VALID_BODIES = {
     "cmd": (CommandMsg.decode, raw(make_command())),
     "config": (RunConfigMsg.decode, raw(make_config())),
     "control": (ControlMsg.decode, raw(ControlMsg("end", 2.0, "signal"))),
+    "debug": (PlanDebugMsg.decode, raw(make_debug())),
 }
 
 
@@ -769,3 +796,89 @@ def test_poses_carry_their_publish_stamp_and_clock():
     body["clock"] = 2**40
     with pytest.raises(protocol.ProtocolError, match="poses.clock"):
         protocol.PosesMsg.decode(msgpack.packb(body))
+
+
+# --- PlanDebugMsg (robot -> viewers) ---------------------------------------------------------
+
+
+def test_debug_round_trip() -> None:
+    msg = make_debug()
+    got = PlanDebugMsg.decode(msg.encode(), known_ids={0, 1, 2, -1}, expected_robot_id=2)
+    assert (got.robot_id, got.seq, got.t_s, got.v_mps, got.omega_radps, got.status) == (
+        2, 17, 3.2, 0.9, -0.4, "ok")
+    assert got.debug.threat_ids == (0, 1, -1)
+    for name in ("ego", "via_points_m", "reference_m", "predicted_m"):
+        assert np.array_equal(getattr(got.debug, name), getattr(msg.debug, name)), name
+    assert not got.debug.reference_m.flags.writeable  # views of the received bytes
+
+
+def test_debug_empty_polylines_round_trip() -> None:
+    msg = make_debug(debug=PlanDebug(ego=np.zeros(3)))
+    got = PlanDebugMsg.decode(msg.encode())
+    assert got.debug.threat_ids == () and got.debug.reference_m.shape == (0, 2)
+
+
+def test_debug_from_result_and_brake() -> None:
+    debug = make_debug().debug
+    res = PlanResult(v_mps=0.5, omega_radps=0.1, status=PlanStatus.NO_FEASIBLE,
+                     waypoints_m=np.zeros((2, 2)), debug=debug)
+    msg = PlanDebugMsg.from_result(4, 9, 1.5, res)
+    assert msg is not None and (msg.robot_id, msg.seq, msg.status) == (4, 9, "no_feasible")
+    brake = PlanResult(v_mps=0.0, omega_radps=0.0, status=PlanStatus.STALE,
+                       waypoints_m=np.zeros((2, 2)))
+    assert PlanDebugMsg.from_result(4, 9, 1.5, brake) is None
+
+
+def test_debug_from_result_cuts_long_polylines() -> None:
+    long = np.zeros((MAX_DEBUG_POINTS + 5, 2))
+    res = PlanResult(v_mps=0.5, omega_radps=0.1, status=PlanStatus.OK,
+                     waypoints_m=np.zeros((2, 2)),
+                     debug=PlanDebug(ego=np.zeros(3), threat_ids=tuple(range(300)),
+                                     reference_m=long))
+    msg = PlanDebugMsg.from_result(4, 9, 1.5, res)
+    assert msg.debug.reference_m.shape == (MAX_DEBUG_POINTS, 2)
+    assert len(msg.debug.threat_ids) == MAX_DEBUG_THREATS
+    assert len(msg.encode()) < 64 * 1024
+
+
+@pytest.mark.parametrize("key, value", [
+    ("robot", -1), ("robot", "2"), ("seq", -1), ("seq", 1.5), ("t", -0.1), ("t", math.nan),
+    ("v", 1e9), ("omega", math.inf), ("status", "bogus"), ("status", 3),
+    ("threats", [0.5]), ("threats", "0"), ("threats", [True]), ("threats", [2**40]),
+    ("threats", list(range(MAX_DEBUG_THREATS + 1))),
+    ("ego", b"\x00" * 16), ("ego", [1.0, 2.0, 3.0]), ("ego", np.array([0, 0, np.nan]).tobytes()),
+    ("via", b"\x00" * 12), ("via", b"\x00" * 8), ("ref", [[0.0, 0.0]]),
+    ("ref", np.array([0.0, np.inf]).tobytes()), ("pred", np.array([0.0, 1e7]).tobytes()),
+    ("pred", np.zeros(2 * MAX_DEBUG_POINTS + 2).tobytes()),
+])
+def test_debug_rejects_wrong_type_or_range(key, value) -> None:
+    body = raw(make_debug())
+    body[key] = value
+    with pytest.raises(ProtocolError):
+        PlanDebugMsg.decode(pack(body))
+
+
+def test_debug_rejects_wrong_sender_and_strangers() -> None:
+    data = make_debug().encode()
+    with pytest.raises(ProtocolError, match="key of robot"):
+        PlanDebugMsg.decode(data, expected_robot_id=3)
+    with pytest.raises(ProtocolError, match="unknown robot"):
+        PlanDebugMsg.decode(data, known_ids={0, 1, -1})
+    with pytest.raises(ProtocolError, match="threats"):
+        PlanDebugMsg.decode(data, known_ids={0, 2, -1})
+
+
+def test_debug_rejects_a_command_on_its_key() -> None:
+    with pytest.raises(ProtocolError, match="type"):
+        PlanDebugMsg.decode(make_command().encode())
+    with pytest.raises(ProtocolError, match="type"):
+        CommandMsg.decode(make_debug().encode())
+
+
+def test_debug_constructor_validates() -> None:
+    with pytest.raises(ProtocolError):
+        make_debug(status="nope")
+    with pytest.raises(ProtocolError):
+        make_debug(debug="not a PlanDebug")
+    with pytest.raises(ProtocolError):
+        make_debug(debug=PlanDebug(ego=np.zeros(3), reference_m=np.full((2, 2), 2e6)))

@@ -140,15 +140,15 @@ def test_a_robot_queries_and_declares_only_its_own_keys() -> None:
     assert allowed(acl, "robot-3", "declare_queryable", "egress", "eifp/r1/config/*")
 
 
-def test_the_observer_only_subscribes_and_the_orchestrator_watches() -> None:
+def test_the_observer_and_the_orchestrator_only_read() -> None:
     acl = access_control("r1", [0])
-    assert allowed(acl, "observer", "declare_subscriber", "ingress", "eifp/r1/**")
-    assert allowed(acl, "observer", "put", "egress", "eifp/r1/cmd/0")
-    for message in ("put", "query", "liveliness_token", "declare_queryable"):
-        assert not allowed(acl, "observer", message, "ingress", "eifp/r1/cmd/0")
-    assert allowed(acl, "orchestrator", "declare_liveliness_subscriber", "ingress",
-                   "eifp/r1/alive/**")
-    assert not allowed(acl, "orchestrator", "declare_subscriber", "ingress", "eifp/r1/cmd/0")
+    for cn in ("observer", "orchestrator"):
+        assert allowed(acl, cn, "declare_subscriber", "ingress", "eifp/r1/**")
+        assert allowed(acl, cn, "put", "egress", "eifp/r1/cmd/0")
+        assert allowed(acl, cn, "declare_liveliness_subscriber", "ingress", "eifp/r1/alive/**")
+        for message in ("put", "query", "liveliness_token", "declare_queryable"):
+            for key in ("eifp/r1/cmd/0", "eifp/r1/control", "eifp/r1/debug/0"):
+                assert not allowed(acl, cn, message, "ingress", key), (cn, message, key)
 
 
 def test_the_acl_names_only_this_run() -> None:

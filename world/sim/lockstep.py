@@ -58,6 +58,9 @@ class RunSink(Protocol):
 
     def event(self, kind: str, t_s: float, **fields: Any) -> None: ...
 
+    # Optional: a sink with `record_plan(t_s, robot_id, debug, *, v_mps, omega_radps,
+    # status)` also gets every plan's `PlanDebug` (`world.recorder.RunRecorder` has it).
+
 
 @dataclass(frozen=True)
 class SimProgress:
@@ -171,6 +174,7 @@ def run_lockstep(scenario: Scenario, sink: RunSink, *, world_rate_hz: float = 50
     lease_s = LINK_LEASE_MS * 1e-3
     world = WorldSim(scenario, cmd_timeout_s=CMD_TIMEOUT_S)
     last_seq: dict[int, int] = {}
+    record_plan = getattr(sink, "record_plan", None)
     max_ticks = math.ceil(scenario.time_limit_s * world_rate_hz - 1e-9)
     progress_ticks = max(1, round(PROGRESS_EVERY_S * world_rate_hz))
     ego_err_sum, ego_err_max, plans, stale_cmds = 0.0, 0.0, 0, 0
@@ -244,6 +248,9 @@ def run_lockstep(scenario: Scenario, sink: RunSink, *, world_rate_hz: float = 50
             if r.state != "up" or not r.plans_on(tick):
                 continue
             res = r.ctrl.plan(t)
+            if record_plan is not None and res.debug is not None:
+                record_plan(t, r.spec.id, res.debug, v_mps=res.v_mps,
+                            omega_radps=res.omega_radps, status=str(res.status.value))
             obs = r.ctrl.last_observation
             if obs is not None:
                 err = math.hypot(obs.ego.x_m - world.pose[k, 0], obs.ego.y_m - world.pose[k, 1])
