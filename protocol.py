@@ -232,6 +232,8 @@ def session_settings(
     listen: Iterable[str] = (),
     connect: Iterable[str] = (),
     connect_timeout_ms: int = -1,
+    tls: TlsFiles | None = None,
+    acl: Mapping[str, Any] | None = None,
 ) -> dict[str, str]:
     """Zenoh configuration every process of a run uses, as ``key -> JSON5 value``.
 
@@ -244,6 +246,10 @@ def session_settings(
         listen: endpoints to listen on, e.g. ``tcp/127.0.0.1:7447``.
         connect: endpoints to connect to.
         connect_timeout_ms: how long `zenoh.open` waits for a connect endpoint (-1: forever).
+        tls: this process's certificate, key and the run's CA (`tls_settings`); endpoints
+            must then be ``tls/...``. None: plain TCP, no authentication.
+        acl: the router's ``access_control`` block (`access_control`); router with `tls`
+            only, since the rules name certificate CNs.
     """
     import json
 
@@ -264,7 +270,200 @@ def session_settings(
     if connect:
         settings["connect/endpoints"] = json.dumps(connect)
         settings["connect/timeout_ms"] = str(int(connect_timeout_ms))
+    if tls is not None:
+        plain = [e for e in (*listen, *connect) if not e.startswith("tls/")]
+        if plain:
+            raise ValueError(f"with TLS every endpoint must be tls/...: {plain}")
+        settings.update(tls_settings(mode, tls))
+    if acl is not None:
+        if mode != "router" or tls is None:
+            raise ValueError("access control is for the router, with TLS (rules name CNs)")
+        settings["access_control"] = json.dumps(dict(acl))
     return settings
+
+
+# ---------------------------------------------------------------------------------------------
+# Security: TLS files, the router's access control, and the bounds every receiver enforces
+# ---------------------------------------------------------------------------------------------
+
+WORLD_CN = "world"
+"""Certificate common name (CN) of the world process; the ACL tells identities apart by CN."""
+ORCHESTRATOR_CN = "orchestrator"
+"""CN of the orchestrator's watch session (compose): read-only, like `OBSERVER_CN`."""
+OBSERVER_CN = "observer"
+"""CN of a read-only tool (recorder, visualiser): may subscribe to everything, publish nothing."""
+MAX_SEQ_JUMP = 64
+"""Largest step a command's ``seq`` may take above the last one the world accepted from that
+robot (6.4 s of lost commands at 10 Hz); a robot's first command has ``seq <= MAX_SEQ_JUMP``.
+A forged ``seq = 2**63 - 1`` would otherwise make every genuine command stale."""
+MAX_POSE_AHEAD_S = 1.0
+"""A pose stamped more than this [sim s] (times the time scale, if > 1) ahead of the
+receiving robot's clock is rejected: a forged far-future pose would otherwise move the clock
+and make every genuine pose look out of date."""
+MAX_CMD_AHEAD_S = 1.0
+"""A command whose ``pose_stamp`` is more than this [sim s] ahead of the world's time is
+rejected (no genuine plan is made from a pose of the future)."""
+TICK_TIME_TOLERANCE_S = 1e-3
+"""A pose's ``t`` must equal ``tick / world_rate`` within this [s] (the world ticks at a fixed
+rate from 0)."""
+
+
+def robot_cn(robot_id: int) -> str:
+    """Certificate common name of robot `robot_id` (``robot-<id>``)."""
+    return f"robot-{_check_robot_id(robot_id)}"
+
+
+@dataclass(frozen=True)
+class TlsFiles:
+    """One process's TLS material: the run's CA certificate, its own certificate and key.
+
+    Paths as strings (PEM files). A process with these presents its certificate (mutual
+    TLS) and trusts only peers signed by `ca`.
+    """
+
+    ca: str
+    cert: str
+    key: str
+
+    @classmethod
+    def in_dir(cls, directory: object, cn: str) -> TlsFiles:
+        """The files of `cn` in a TLS directory: ``ca.pem``, ``<cn>.pem``, ``<cn>.key``."""
+        d = str(directory).rstrip("/") or "/"
+        return cls(ca=f"{d}/ca.pem", cert=f"{d}/{cn}.pem", key=f"{d}/{cn}.key")
+
+
+def tls_endpoint(endpoint: str) -> str:
+    """`endpoint` with its protocol replaced by ``tls`` (``tcp/h:p`` -> ``tls/h:p``)."""
+    proto, sep, rest = endpoint.partition("/")
+    if not sep or proto not in ("tcp", "tls"):
+        raise ValueError(f"endpoint {endpoint!r} is not tcp/HOST:PORT or tls/HOST:PORT")
+    return f"tls/{rest}"
+
+
+def _acl_rule(rid: str, messages: list[str], flows: list[str], keys: list[str]
+              ) -> dict[str, Any]:
+    return {"id": rid, "permission": "allow", "flows": flows, "messages": messages,
+            "key_exprs": keys}
+
+
+def access_control(run_id: str, robot_ids: Iterable[int]) -> dict[str, Any]:
+    """The ``access_control`` block of the world's router for one run (default deny).
+
+    Rules are evaluated by the router against the remote end of each client link, by the CN
+    of the client's certificate: ``ingress`` is what a client sends, ``egress`` what the
+    router sends to it. The world is the router's own session, not a subject: nobody but the
+    world can publish poses or control, or answer configuration queries, because no client
+    is allowed to.
+
+    - ``robot-<i>``: put ``cmd/<i>`` and ``debug/<i>``; query ``config/<i>`` (and receive
+      the reply); declare the token ``alive/robot/<i>``; subscribe to ``poses/**`` and
+      ``control``; watch ``alive/**``. Robots see subscriber and queryable declarations
+      (a declared Publisher or Querier only sends once it has matched one); they cannot
+      put, query or declare tokens anywhere else.
+    - ``observer``: subscribe to and receive everything under ``eifp/<run>/``; nothing else.
+    - ``orchestrator``: the same read-only rights as the observer (its live view, compose
+      ``await --live``, republishes the run); nothing else.
+    """
+    p = f"{KEY_ROOT}/{validate_run_id(run_id)}"
+    ids = sorted({_check_robot_id(i) for i in robot_ids})
+    rules = [
+        _acl_rule("robot-sub", ["declare_subscriber"], ["ingress"],
+                  [f"{p}/poses/**", f"{p}/control"]),
+        _acl_rule("robot-recv", ["put"], ["egress"], [f"{p}/poses/**", f"{p}/control"]),
+        _acl_rule("alive-watch", ["declare_liveliness_subscriber", "liveliness_query"],
+                  ["ingress"], [f"{p}/alive/**"]),
+        _acl_rule("alive-see", ["liveliness_token"], ["egress"], [f"{p}/alive/**"]),
+        # Declarations toward robots: the world's subscriber on cmd/* (and whoever listens
+        # to debug keys) and its queryable on config/*. Without them a robot's declared
+        # Publisher / Querier never matches and drops every message, silently.
+        _acl_rule("robot-routes-sub", ["declare_subscriber"], ["egress"], [f"{p}/**"]),
+        _acl_rule("robot-routes-qbl", ["declare_queryable"], ["egress"], [f"{p}/config/*"]),
+        _acl_rule("obs-sub", ["declare_subscriber"], ["ingress"], [f"{p}/**"]),
+        _acl_rule("obs-recv", ["put", "delete"], ["egress"], [f"{p}/**"]),
+    ]
+    subjects: list[dict[str, Any]] = []
+    policies: list[dict[str, Any]] = []
+    for i in ids:
+        rules += [
+            _acl_rule(f"cmd-{i}", ["put"], ["ingress"], [f"{p}/cmd/{i}", f"{p}/debug/{i}"]),
+            _acl_rule(f"config-{i}", ["query"], ["ingress"], [f"{p}/config/{i}"]),
+            _acl_rule(f"config-{i}-reply", ["reply"], ["egress"], [f"{p}/config/{i}"]),
+            _acl_rule(f"alive-{i}", ["liveliness_token"], ["ingress"],
+                      [f"{p}/alive/robot/{i}"]),
+        ]
+        subjects.append({"id": f"s-robot-{i}", "cert_common_names": [robot_cn(i)]})
+        policies.append({"id": f"p-robot-{i}", "subjects": [f"s-robot-{i}"],
+                         "rules": [f"cmd-{i}", f"config-{i}", f"config-{i}-reply",
+                                   f"alive-{i}"]})
+    if ids:
+        subjects.append({"id": "s-robots", "cert_common_names": [robot_cn(i) for i in ids]})
+        policies.append({"id": "p-robots", "subjects": ["s-robots"],
+                         "rules": ["robot-sub", "robot-recv", "alive-watch", "alive-see",
+                                   "robot-routes-sub", "robot-routes-qbl"]})
+    subjects += [{"id": "s-observer", "cert_common_names": [OBSERVER_CN]},
+                 {"id": "s-orchestrator", "cert_common_names": [ORCHESTRATOR_CN]}]
+    policies += [
+        {"id": "p-observer", "subjects": ["s-observer"],
+         "rules": ["obs-sub", "obs-recv", "alive-watch", "alive-see"]},
+        {"id": "p-orchestrator", "subjects": ["s-orchestrator"],
+         "rules": ["obs-sub", "obs-recv", "alive-watch", "alive-see"]},
+    ]
+    return {"enabled": True, "default_permission": "deny", "rules": rules,
+            "subjects": subjects, "policies": policies}
+
+
+def tls_settings(mode: Literal["router", "client"], tls: TlsFiles) -> dict[str, str]:
+    """The TLS part of a session's settings (`session_settings` adds it).
+
+    Both sides require mutual TLS: the router lists only ``tls`` as a link protocol (no
+    unauthenticated door), a client presents its certificate (``enable_mtls`` on the client
+    too, else it sends none) and checks the world's name against its certificate's SANs.
+    """
+    import json
+
+    prefix = "transport/link/tls"
+    out = {f"{prefix}/root_ca_certificate": json.dumps(str(tls.ca)),
+           f"{prefix}/enable_mtls": "true"}
+    if mode == "router":
+        out[f"{prefix}/listen_certificate"] = json.dumps(str(tls.cert))
+        out[f"{prefix}/listen_private_key"] = json.dumps(str(tls.key))
+        out["transport/link/protocols"] = json.dumps(["tls"])
+    else:
+        out[f"{prefix}/connect_certificate"] = json.dumps(str(tls.cert))
+        out[f"{prefix}/connect_private_key"] = json.dumps(str(tls.key))
+        out[f"{prefix}/verify_name_on_connect"] = "true"
+    return out
+
+
+def check_seq(seq: int, last_seq: int | None) -> str | None:
+    """Why a command's `seq` is refused given the last accepted one (None: it is not).
+
+    ``stale``: not above `last_seq`; ``seq_jump``: more than `MAX_SEQ_JUMP` above it (or,
+    for a robot's first command, above `MAX_SEQ_JUMP`).
+    """
+    last = -1 if last_seq is None else last_seq
+    if seq <= last:
+        return "stale"
+    if seq - last > MAX_SEQ_JUMP + (1 if last_seq is None else 0):
+        return "seq_jump"
+    return None
+
+
+def check_pose_time(tick: int, t_s: float, *, world_rate_hz: float, time_limit_s: float,
+                    clock_s: float | None, time_scale: float = 1.0) -> str | None:
+    """Why a (validated) pose's `tick` / `t_s` is refused by a robot (None: it is not).
+
+    ``tick_time``: `t_s` is not ``tick / world_rate_hz``; ``beyond_limit``: later than the
+    run's time limit (plus `MAX_POSE_AHEAD_S`); ``ahead``: more than `MAX_POSE_AHEAD_S`
+    (times `time_scale` when > 1) ahead of the robot's clock `clock_s` (None: no clock yet).
+    """
+    if abs(tick / world_rate_hz - t_s) > TICK_TIME_TOLERANCE_S + 1e-9 * t_s:
+        return "tick_time"
+    if t_s > time_limit_s + MAX_POSE_AHEAD_S:
+        return "beyond_limit"
+    if clock_s is not None and t_s > clock_s + MAX_POSE_AHEAD_S * max(1.0, time_scale):
+        return "ahead"
+    return None
 
 
 # ---------------------------------------------------------------------------------------------

@@ -101,14 +101,17 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--nice", type=int, default=0,
                         help="robot processes add this to their niceness (>= 0; e.g. 5 keeps "
                              "a world on the same machine ahead of them)")
+    parser.add_argument("--tls", default=None, metavar="DIR",
+                        help="passed to every robot: mutual TLS with the certificates in DIR")
     return parser
 
 
 def robot_argv(run_id: str, robot_id: int, endpoint: str, startup_timeout_s: str,
-               extra: Sequence[str] = ()) -> list[str]:
+               extra: Sequence[str] = (), tls_dir: str | None = None) -> list[str]:
     """The ``python -m agent`` arguments of one robot."""
     return ["--run", run_id, "--id", str(robot_id), "--connect", endpoint,
-            "--startup-timeout-s", startup_timeout_s, *extra]
+            "--startup-timeout-s", startup_timeout_s,
+            *(("--tls", tls_dir) if tls_dir else ()), *extra]
 
 
 def warm_up_planners() -> None:
@@ -246,7 +249,7 @@ def run_fleet(args: argparse.Namespace) -> int:
             if pending:
                 break
             argv = robot_argv(args.run, rid, overrides.get(rid, args.connect),
-                              args.startup_timeout_s, args.robot_arg)
+                              args.startup_timeout_s, args.robot_arg, args.tls)
             # Signals wait until the child has its own handlers (never run _forward there).
             signal.pthread_sigmask(signal.SIG_BLOCK, FORWARDED)
             pid = os.fork()

@@ -71,6 +71,7 @@ import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
@@ -81,6 +82,7 @@ from agent.process import (
     ExitCode,
     SessionError,
     StopFlag,
+    check_tls_files,
     close_session,
     die_with_launcher,
     monotonic_clock_id,
@@ -95,9 +97,12 @@ from protocol import (
     ProtocolError,
     RunConfigMsg,
     RunKeys,
+    TlsFiles,
     WallStamps,
+    check_pose_time,
     plan_pose_slot,
     pose_slot_count,
+    robot_cn,
     session_settings,
 )
 from world.sim.link import LINK_POSES, FaultyLink, LinkFaults, link_rng
@@ -159,6 +164,11 @@ class AgentOptions:
         control_phase_s: offset of the planning slots [sim s].
         plan_delay_ms: added planning delay [sim ms] before each command is published.
         compensate_latency: forward-predict by the poses' age before planning.
+        tls_dir: directory with ``ca.pem``, ``robot-<id>.pem``, ``robot-<id>.key``: mutual
+            TLS (the endpoint is then ``tls/...``). None: plain TCP.
+        world_zid: the world's Zenoh id; poses, control and configuration replies from any
+            other session are refused. None: the router this robot is connected to (the
+            world is the run's router).
         plan: False: command a stop every cycle without planning (``--no-plan``: measures
             the process's own cost per cycle, `orchestrator bench --process`).
     """
@@ -175,6 +185,8 @@ class AgentOptions:
     plan_delay_ms: float = 0.0
     compensate_latency: bool = True
     plan: bool = True
+    tls_dir: Path | None = None
+    world_zid: str | None = None
 
 
 def _robot_id(text: str) -> int:
@@ -204,6 +216,10 @@ def parse_args(argv: list[str] | None = None) -> AgentOptions:
                         help="added planning delay [sim ms] (a CPU-starved robot)")
     faults.add_argument("--no-latency-compensation", action="store_true",
                         help="plan on the poses as stamped (no forward prediction by age)")
+    parser.add_argument("--tls", type=Path, default=None, metavar="DIR",
+                        help="mutual TLS with DIR/ca.pem, DIR/robot-<id>.pem, DIR/robot-<id>.key")
+    parser.add_argument("--world-zid", default=None, metavar="HEX",
+                        help="the world's Zenoh id (default: the router connected to)")
     parser.add_argument("--no-plan", action="store_true",
                         help="sense and command a stop every cycle without planning (to "
                              "measure the process's own cost)")
@@ -216,7 +232,7 @@ def parse_args(argv: list[str] | None = None) -> AgentOptions:
                         fault_seed=args.fault_seed, control_phase_s=args.control_phase_s,
                         plan_delay_ms=args.plan_delay_ms,
                         compensate_latency=not args.no_latency_compensation,
-                        plan=not args.no_plan)
+                        plan=not args.no_plan, tls_dir=args.tls, world_zid=args.world_zid)
 
 
 class _Exit(Exception):
@@ -229,9 +245,21 @@ class _Exit(Exception):
 
 
 def connect(options: AgentOptions, stop: StopFlag, deadline: float) -> zenoh.Session:
-    """Connect as a client, retrying until `deadline` (monotonic); raises `_Exit`."""
-    settings = session_settings(mode="client", connect=[options.connect],
-                                connect_timeout_ms=CONNECT_ATTEMPT_MS)
+    """Connect as a client, retrying until `deadline` (monotonic); raises `_Exit`.
+
+    Each attempt waits `CONNECT_ATTEMPT_MS` at most: a refused certificate then ends in
+    TRANSPORT at the deadline instead of an `open` that retries forever."""
+    tls = None
+    if options.tls_dir is not None:
+        tls = TlsFiles.in_dir(options.tls_dir, robot_cn(options.robot_id))
+        problem = check_tls_files(tls)
+        if problem:
+            raise _Exit(f"--tls {options.tls_dir}: {problem}", ExitCode.BAD_INPUT)
+    try:
+        settings = session_settings(mode="client", connect=[options.connect],
+                                    connect_timeout_ms=CONNECT_ATTEMPT_MS, tls=tls)
+    except ValueError as exc:
+        raise _Exit(str(exc), ExitCode.BAD_INPUT) from exc
     try:
         session = open_session(settings, deadline=deadline, stop=stop)
     except SessionError as exc:
@@ -241,16 +269,49 @@ def connect(options: AgentOptions, stop: StopFlag, deadline: float) -> zenoh.Ses
     return session
 
 
+def world_zid_of(session: zenoh.Session, options: AgentOptions) -> str | None:
+    """The world's Zenoh id: `AgentOptions.world_zid`, else the one router this client is
+    connected to (None if there is not exactly one: then nothing is checked)."""
+    if options.world_zid:
+        return options.world_zid
+    routers = [str(z) for z in session.info.routers_zid()]
+    if len(routers) != 1:
+        log.warning("robot %d: connected to %d routers: the source of the world's messages "
+                    "is not checked", options.robot_id, len(routers))
+        return None
+    return routers[0]
+
+
+def from_world(source: zenoh.EntityGlobalId | None, world_zid: str | None) -> bool:
+    """True if a sample's source (`Sample.source_info.source_id`, `Reply.replier_id`) is the
+    world's session (always, when the world's id is unknown)."""
+    if world_zid is None:
+        return True
+    return source is not None and str(source.zid) == world_zid
+
+
 def fetch_config(session: zenoh.Session, keys: RunKeys, robot_id: int, stop: StopFlag,
-                 deadline: float) -> RunConfigMsg:
-    """Query the world for this robot's configuration until `deadline`; raises `_Exit`."""
+                 deadline: float, world_zid: str | None = None,
+                 counts: dict[str, int] | None = None) -> RunConfigMsg:
+    """Query the world for this robot's configuration until `deadline`; raises `_Exit`.
+
+    Every reply is read (no consolidation: a forged reply must not hide the world's); one
+    from a session other than `world_zid` is refused and counted in
+    ``counts["refused_config"]``."""
     problem = "no reply"
     while not stop:
         remaining = deadline - time.monotonic()
         if remaining <= 0.0:
             raise _Exit(f"no configuration for robot {robot_id}: {problem}", ExitCode.BAD_INPUT)
-        replies = session.get(keys.config(robot_id), timeout=min(QUERY_TIMEOUT_S, remaining))
+        replies = session.get(keys.config(robot_id), timeout=min(QUERY_TIMEOUT_S, remaining),
+                              consolidation=zenoh.ConsolidationMode.NONE)
         for reply in replies:
+            if not from_world(reply.replier_id, world_zid):
+                if counts is not None:
+                    counts["refused_config"] = counts.get("refused_config", 0) + 1
+                log.warning("robot %d: refused a configuration reply from %s (not the world)",
+                            robot_id, reply.replier_id)
+                continue
             if reply.ok is None:
                 problem = f"world replied an error: {reply.err.payload.to_string()}"
                 continue
@@ -370,7 +431,8 @@ class RobotNode:
     """
 
     def __init__(self, session: zenoh.Session, options: AgentOptions, config: RunConfigMsg,
-                 stop: StopFlag, cpu_tokens: CpuTokens | None = None) -> None:
+                 stop: StopFlag, cpu_tokens: CpuTokens | None = None,
+                 world_zid: str | None = None, refused_config: int = 0) -> None:
         self.keys = RunKeys(options.run_id)
         self.options = options
         self.cpu_tokens = cpu_tokens
@@ -390,7 +452,10 @@ class RobotNode:
         self.known_ids = frozenset(config.known_ids)
         self.counts = {"rejected": 0, "stale": 0, "skipped": 0, "plans": 0, "overruns": 0,
                        "plan_errors": 0, "stale_plans": 0, "link_dropped": 0, "suspended": 0,
-                       "token_timeouts": 0}
+                       "token_timeouts": 0, "refused_poses": 0, "refused_control": 0,
+                       "refused_config": refused_config}
+        self.world_zid = world_zid
+        self.refused_in_callback = 0  # poses the callback refused (`_on_pose`)
         self.seq = 0
         # CPU time of the loop by part (thread CPU clock of this, the main, thread) and the
         # process's CPU clock at the loop's start: see `cpu_summary`.
@@ -444,7 +509,15 @@ class RobotNode:
 
     def _on_pose(self, sample: zenoh.Sample) -> None:
         """Zenoh callback: keep the sample and its arrival time (the ring drops the oldest),
-        wake the loop."""
+        wake the loop.
+
+        A sample that is not from the world's session never enters the ring (counted in
+        ``refused_poses``): a flood of forged poses must not push the world's out of it."""
+        if self.world_zid is not None:
+            info = sample.source_info
+            if info is None or str(info.source_id.zid) != self.world_zid:
+                self.refused_in_callback += 1
+                return
         self.pose_ring.append((time.monotonic(), sample))
         self.pose_arrived.set()
 
@@ -454,9 +527,24 @@ class RobotNode:
         if n <= 10 or n % 100 == 0:
             log.warning("robot %d: rejected %s #%d: %s", self.robot_id, what, n, exc)
 
+    def _refuse(self, what: str, counter: str, why: str) -> None:
+        """Count a well-formed message refused as not the world's (forged), log the first few."""
+        self.counts[counter] += 1
+        n = self.counts[counter]
+        if n <= 10 or n % 100 == 0:
+            log.warning("robot %d: refused %s #%d: %s", self.robot_id, what, n, why)
+
     def poll_control(self) -> None:
-        """Start/end announcements; raises `_Exit` on the end."""
+        """Start/end announcements; raises `_Exit` on the end.
+
+        Only the world's session may end the run: a control message whose source is not
+        the world (`from_world`) is refused and counted (``refused_control``)."""
         while (sample := self.control_sub.try_recv()) is not None:
+            source = sample.source_info.source_id if sample.source_info else None
+            if not from_world(source, self.world_zid):
+                self._refuse("control message", "refused_control",
+                             f"from {source.zid if source else 'an unnamed source'}")
+                continue
             try:
                 msg = ControlMsg.decode(sample.payload.to_bytes())
             except ProtocolError as exc:
@@ -521,10 +609,25 @@ class RobotNode:
         newest: PosesMsg | None = None
         arrived = 0.0
         for rx_wall, sample in reversed(samples):
+            source = sample.source_info.source_id if sample.source_info else None
+            if not from_world(source, self.world_zid):
+                self._refuse("pose message", "refused_poses",
+                             f"from {source.zid if source else 'an unnamed source'}")
+                continue
             try:
                 msg = PosesMsg.decode(sample.payload.to_bytes(), known_ids=self.known_ids)
             except ProtocolError as exc:
                 self._reject("pose message", exc)
+                continue
+            # The clock moves only on a pose that passed every check: a forged far-future
+            # pose would otherwise make every genuine one look out of date.
+            why = check_pose_time(msg.tick, msg.t_s, world_rate_hz=self.config.world_rate_hz,
+                                  time_limit_s=self.config.time_limit_s,
+                                  clock_s=self.sim_now() if self.clock_tick >= 0 else None,
+                                  time_scale=self.config.time_scale)
+            if why is not None:
+                self._refuse("pose message", "refused_poses",
+                             f"{why}: tick {msg.tick}, t {msg.t_s:.3f} s")
                 continue
             if newest is None:
                 newest, arrived = msg, rx_wall
@@ -714,7 +817,11 @@ class RobotNode:
 
     def summary(self) -> str:
         """Counters and `cpu_summary` as key=value pairs (integers)."""
-        fields = {**self.counts, "seq": self.seq, **self.cpu_summary()}
+        counts = dict(self.counts)
+        refused = getattr(self, "refused_in_callback", 0)
+        if refused:
+            counts["refused_poses"] = counts.get("refused_poses", 0) + refused
+        fields = {**counts, "seq": self.seq, **self.cpu_summary()}
         return " ".join(f"{k}={v}" for k, v in fields.items())
 
 
@@ -742,8 +849,12 @@ def _run_agent(options: AgentOptions, stop: StopFlag, on_ready: Callable[[], Non
              options.connect)
     try:
         session = connect(options, stop, deadline)
-        config = fetch_config(session, keys, options.robot_id, stop, deadline)
-        node = RobotNode(session, options, config, stop, cpu_tokens)
+        world_zid = world_zid_of(session, options)
+        refused: dict[str, int] = {}
+        config = fetch_config(session, keys, options.robot_id, stop, deadline, world_zid,
+                              refused)
+        node = RobotNode(session, options, config, stop, cpu_tokens, world_zid,
+                         refused.get("refused_config", 0))
         if on_ready is not None:
             on_ready()
         reason, code = node.run(deadline)

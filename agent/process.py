@@ -150,6 +150,18 @@ def open_session(settings: Mapping[str, Any], *, deadline: float | None = None,
     return None
 
 
+def check_tls_files(files: Any) -> str | None:
+    """Why the `protocol.TlsFiles` `files` cannot be used (one missing or unreadable), or None.
+
+    Checked before opening: zenoh would otherwise retry a client's connection forever, or
+    fail with an unrelated hint."""
+    for what, path in (("CA certificate", files.ca), ("certificate", files.cert),
+                       ("private key", files.key)):
+        if not os.access(path, os.R_OK):
+            return f"{what} {path} is missing or unreadable"
+    return None
+
+
 def close_session(session: zenoh.Session, timeout_s: float = CLOSE_TIMEOUT_S) -> bool:
     """Close `session`, waiting at most `timeout_s`; False if the close is still stuck.
 

@@ -1,9 +1,13 @@
 #!/bin/sh
 # Entry point of the eifp-swarm image: the first argument is the container's role.
 #
+#   certs         the run's CA and certificates (`orchestrator compose certs`): one
+#                 directory per service under TLS_ROOT (each a volume of that service
+#                 alone); runs once, as root, before every other service
 #   world         resolve the setup into <RUNS_DIR>/<RUN_ID>/scenario.input.yaml, then run
-#                 `python -m world`: a Zenoh router listening on LISTEN, recording the run
-#                 into <RUNS_DIR>/<RUN_ID>; it starts once every robot is alive
+#                 `python -m world`: a Zenoh router listening on LISTEN (mutual TLS, the
+#                 run's access control), recording the run into <RUNS_DIR>/<RUN_ID>; it
+#                 starts once every robot is alive
 #   robot         `python -m agent` for robot ROBOT_ID, a client of the router at CONNECT
 #   orchestrator  `orchestrator compose await`: waits for every robot, follows the run,
 #                 writes metrics.json, trajectory.png and report.txt into the run directory
@@ -13,9 +17,10 @@
 #
 # Environment (defaults in brackets): RUN_ID [demo], SETUP [setup_d], ROBOTS (robot services
 # in the compose file; the setup must have as many robots) [not checked], AGENTS, PLANNER,
-# SEED [0], ROBOT_ID (robot), CONNECT [tcp/world:7447], LISTEN [tcp/0.0.0.0:7447],
-# RUNS_DIR [/runs], TIME_SCALE [1], STARTUP_TIMEOUT_S [300]. Extra arguments go to the
-# role's command.
+# SEED [0], ROBOT_ID (robot), CONNECT [tls/world:7447], LISTEN [tls/0.0.0.0:7447],
+# RUNS_DIR [/runs], TIME_SCALE [1], STARTUP_TIMEOUT_S [300], TLS_DIR (this service's
+# certificate, key and the run's CA) [/tls], TLS_ROOT (certs) [/tls]. Extra arguments go
+# to the role's command.
 set -eu
 
 role=${1:-help}
@@ -24,8 +29,9 @@ role=${1:-help}
 RUN_ID=${RUN_ID:-demo}
 SETUP=${SETUP:-setup_d}
 RUNS_DIR=${RUNS_DIR:-/runs}
-CONNECT=${CONNECT:-tcp/world:7447}
-LISTEN=${LISTEN:-tcp/0.0.0.0:7447}
+CONNECT=${CONNECT:-tls/world:7447}
+LISTEN=${LISTEN:-tls/0.0.0.0:7447}
+TLS_DIR=${TLS_DIR:-/tls}
 TIME_SCALE=${TIME_SCALE:-1}
 STARTUP_TIMEOUT_S=${STARTUP_TIMEOUT_S:-300}
 
@@ -38,7 +44,28 @@ setup_args() {
   return 0
 }
 
+# Wait (up to STARTUP_TIMEOUT_S) for this service's certificate: the certs service writes it.
+await_certs() {
+  waited=0
+  while [ ! -r "$TLS_DIR/ca.pem" ] || [ ! -r "$TLS_DIR/$1.key" ]; do
+    if [ "$waited" -ge "$STARTUP_TIMEOUT_S" ]; then
+      echo "eifp-entrypoint: no certificate $TLS_DIR/$1.pem after $STARTUP_TIMEOUT_S s" >&2
+      exit 6
+    fi
+    sleep 1
+    waited=$((waited + 1))
+  done
+}
+
 case "$role" in
+  certs)
+    if [ -z "${ROBOTS:-}" ]; then
+      echo "eifp-entrypoint: the certs role needs ROBOTS in the environment" >&2
+      exit 2
+    fi
+    exec orchestrator compose certs --run "$RUN_ID" --robots "$ROBOTS" \
+      --out "${TLS_ROOT:-/tls}" "$@"
+    ;;
   world)
     # One argument per line (no value here contains a newline).
     IFS='
@@ -46,25 +73,29 @@ case "$role" in
     # shellcheck disable=SC2046
     orchestrator compose scenario $(setup_args)
     unset IFS
+    await_certs world
     exec python -m world --run "$RUN_ID" \
       --scenario "$RUNS_DIR/$RUN_ID/scenario.input.yaml" --out "$RUNS_DIR/$RUN_ID" \
-      --listen "$LISTEN" --time-scale "$TIME_SCALE" --wait-robots-s "$STARTUP_TIMEOUT_S" "$@"
+      --listen "$LISTEN" --time-scale "$TIME_SCALE" --wait-robots-s "$STARTUP_TIMEOUT_S" \
+      --tls "$TLS_DIR" "$@"
     ;;
   robot)
     if [ -z "${ROBOT_ID:-}" ]; then
       echo "eifp-entrypoint: the robot role needs ROBOT_ID in the environment" >&2
       exit 2
     fi
+    await_certs "robot-$ROBOT_ID"
     exec python -m agent --run "$RUN_ID" --id "$ROBOT_ID" --connect "$CONNECT" \
-      --startup-timeout-s "$STARTUP_TIMEOUT_S" "$@"
+      --startup-timeout-s "$STARTUP_TIMEOUT_S" --tls "$TLS_DIR" "$@"
     ;;
   orchestrator)
     IFS='
 '
     # shellcheck disable=SC2046
     set -- $(setup_args) --connect "$CONNECT" --time-scale "$TIME_SCALE" \
-      --startup-timeout-s "$STARTUP_TIMEOUT_S" "$@"
+      --startup-timeout-s "$STARTUP_TIMEOUT_S" --tls "$TLS_DIR" "$@"
     unset IFS
+    await_certs orchestrator
     exec orchestrator compose await "$@"
     ;;
   help|-h|--help)

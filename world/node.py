@@ -63,6 +63,7 @@ from agent.process import (
     ExitCode,
     SessionError,
     StopFlag,
+    check_tls_files,
     close_session,
     die_with_launcher,
     monotonic_clock_id,
@@ -70,6 +71,8 @@ from agent.process import (
     stop_on_signals,
 )
 from protocol import (
+    MAX_CMD_AHEAD_S,
+    WORLD_CN,
     CommandMsg,
     ControlMsg,
     PlanDebugMsg,
@@ -77,6 +80,9 @@ from protocol import (
     ProtocolError,
     RunConfigMsg,
     RunKeys,
+    TlsFiles,
+    access_control,
+    check_seq,
     pose_slot_count,
     pose_slot_of_tick,
     session_settings,
@@ -117,6 +123,9 @@ class WorldOptions:
         linger_s: wall time the world waits after the end for robots to leave.
         link: faults injected on every robot's command link (sim-time delays).
         fault_seed: seeds the command links (with the link kind and the robot id).
+        tls_dir: directory with ``ca.pem``, ``world.pem``, ``world.key``: mutual TLS, and
+            as a router the run's access control (`protocol.access_control`); endpoints
+            are then ``tls/...``. None: plain TCP, no authentication.
     """
 
     run_id: str
@@ -132,6 +141,7 @@ class WorldOptions:
     linger_s: float = 3.0
     link: LinkFaults = field(default_factory=LinkFaults)
     fault_seed: int = 0
+    tls_dir: Path | None = None
 
 
 def parse_args(argv: list[str] | None = None) -> WorldOptions:
@@ -158,6 +168,9 @@ def parse_args(argv: list[str] | None = None) -> WorldOptions:
                         help="wall time to wait for robots to leave after the end")
     faults = argtypes.add_link_fault_flags(parser, "the command links")
     faults.add_argument("--fault-seed", type=int, default=0, help="seeds the command links")
+    parser.add_argument("--tls", type=Path, default=None, metavar="DIR",
+                        help="mutual TLS with DIR/ca.pem, DIR/world.pem, DIR/world.key, and "
+                             "the run's access control (endpoints tls/HOST:PORT)")
     args = parser.parse_args(argv)
     listen = None if args.connect else (args.listen or DEFAULT_ENDPOINT)
     return WorldOptions(
@@ -174,6 +187,7 @@ def parse_args(argv: list[str] | None = None) -> WorldOptions:
         linger_s=max(0.0, args.linger_s),
         link=argtypes.link_faults(args),
         fault_seed=args.fault_seed,
+        tls_dir=args.tls,
     )
 
 
@@ -211,6 +225,7 @@ class WorldNode:
     def __init__(self, session: zenoh.Session, scenario: Scenario, options: WorldOptions,
                  recorder: RunRecorder, stop: StopFlag) -> None:
         self.keys = RunKeys(options.run_id)
+        self.session_zid = session.zid()
         self.scenario = scenario
         self.options = options
         self.recorder = recorder
@@ -222,9 +237,11 @@ class WorldNode:
         self.alive: set[int] = set()
         self.lost: set[int] = set()
         self.last_seq: dict[int, int] = {}
+        self.rx_seq: dict[int, int] = {}  # newest seq passed into each robot's command link
         self.ended = False
         self.counts = {"commands": 0, "rejected": 0, "stale": 0, "queries": 0,
-                       "bad_queries": 0, "overruns": 0, "plans": 0}
+                       "bad_queries": 0, "overruns": 0, "plans": 0, "seq_jumps": 0,
+                       "future_cmds": 0}
         self.tick_s: list[float] = []
         """Wall time of every tick of the loop (`tick`: drain, step, publish, record)."""
         self.rejected_by_key: dict[str, int] = {}
@@ -261,8 +278,16 @@ class WorldNode:
         self.control_pub = session.declare_publisher(
             self.keys.control, congestion_control=zenoh.CongestionControl.BLOCK,
             reliability=zenoh.Reliability.RELIABLE)
+        self.control_sn = 0
         # Declared last: a robot that sees it knows the world is ready to serve.
         self.token = session.liveliness().declare_token(self.keys.alive_world)
+
+    def put_control(self, msg: ControlMsg) -> None:
+        """Publish `msg` with the world's source info: robots accept control only from the
+        session of the router they are connected to (the world)."""
+        self.control_sn += 1
+        self.control_pub.put(msg.encode(),
+                             source_info=zenoh.SourceInfo(self.control_pub.id, self.control_sn))
 
     # --- draining the channels -------------------------------------------------------------
 
@@ -288,6 +313,7 @@ class WorldNode:
                 if rid in self.lost:
                     self.lost.discard(rid)
                     self.last_seq.pop(rid, None)  # a new process numbers from 0 again
+                    self.rx_seq.pop(rid, None)
                     self.cmd_links[rid].clear()
                     self.sim.set_offline(rid, False)
                     self._event("robot_rejoined", robot=rid, wall=time.time())
@@ -347,6 +373,19 @@ class WorldNode:
             except ProtocolError as exc:
                 self._reject(str(exc), key)
                 continue
+            # Bounds a forged but well-formed command cannot pass: a seq far above the
+            # robot's (which would make its genuine commands stale), a plan from the future.
+            if check_seq(msg.seq, self.rx_seq.get(rid)) == "seq_jump":
+                self.counts["seq_jumps"] += 1
+                self._reject(f"cmd.seq: {msg.seq} jumps more than the bound above "
+                             f"{self.rx_seq.get(rid)}", key)
+                continue
+            if msg.pose_stamp_s > self.sim.t_s + MAX_CMD_AHEAD_S:
+                self.counts["future_cmds"] += 1
+                self._reject(f"cmd.pose_stamp: {msg.pose_stamp_s:.3f} s is ahead of the "
+                             f"world's {self.sim.t_s:.3f} s", key)
+                continue
+            self.rx_seq[rid] = max(msg.seq, self.rx_seq.get(rid, -1))
             self.cmd_links[rid].send(self.sim.t_s, (rx_ns, msg))
         for rid, link in self.cmd_links.items():
             for rx_ns, msg in link.receive(self.sim.t_s):
@@ -373,7 +412,7 @@ class WorldNode:
 
     def _hold(self, rid: int, msg: CommandMsg, rx_ns: int) -> None:
         """Apply one released command unless its ``seq`` is not newer."""
-        if msg.seq <= self.last_seq.get(rid, -1):
+        if check_seq(msg.seq, self.last_seq.get(rid)) == "stale":
             self.counts["stale"] += 1
             return
         self.last_seq[rid] = msg.seq
@@ -413,7 +452,8 @@ class WorldNode:
         on the pose slot of the current tick."""
         pub = self.poses_pubs[pose_slot_of_tick(self.sim.tick, self.pose_slots)]
         pub.put(PosesMsg.from_snapshot(self.sim.snapshot(), pub_ns=time.monotonic_ns(),
-                                       clock_id=self.clock_id).encode())
+                                       clock_id=self.clock_id).encode(),
+                source_info=zenoh.SourceInfo(pub.id, self.sim.tick))
 
     def tick(self) -> None:
         """Apply commands, step the world by dt, publish and record."""
@@ -463,7 +503,7 @@ class WorldNode:
     def finish(self, reason: str) -> int:
         """Announce the end, record the summary, let robots leave; return the exit status."""
         self.ended = True
-        self.control_pub.put(ControlMsg("end", self.sim.t_s, reason).encode())
+        self.put_control(ControlMsg("end", self.sim.t_s, reason))
         success = self.sim.all_arrived() and self.sim.contact_count == 0
         arrived = [int(r) for r in self.sim.robot_ids[self.sim.arrived]]
         self._event(
@@ -494,12 +534,14 @@ class WorldNode:
     def run(self) -> int:
         """Wait for the robots, run, finish."""
         self._event("world_ready", run=self.options.run_id, n_robots=len(self.robot_ids),
-                    endpoint=self.options.listen or self.options.connect, wall=time.time())
+                    endpoint=self.options.listen or self.options.connect,
+                    tls=self.options.tls_dir is not None, zid=str(self.session_zid),
+                    wall=time.time())
         log.info("run %s: waiting for %d robots", self.options.run_id, len(self.robot_ids))
         if not self.wait_for_robots():
             self.finish("signal" if self.stop else "startup_timeout")
             return ExitCode.INTERRUPTED if self.stop else ExitCode.ROBOT_LOST
-        self.control_pub.put(ControlMsg("start", self.sim.t_s).encode())
+        self.put_control(ControlMsg("start", self.sim.t_s))
         self._event("start", mode="distributed", n_robots=len(self.robot_ids),
                     cmd_link=self.options.link.as_dict(), fault_seed=self.options.fault_seed,
                     world_rate_hz=self.options.rate_hz,
@@ -527,6 +569,31 @@ def _tally(counts: dict[str, int], name: str) -> None:
     counts[name] = counts.get(name, 0) + 1
 
 
+def world_settings(options: WorldOptions, scenario: Scenario) -> dict[str, str]:
+    """The world's Zenoh settings: a router on `options.listen` (with TLS: mutual TLS and the
+    run's access control), or a client of `options.connect`.
+
+    Raises:
+        ValueError: a plain endpoint with TLS, or a TLS file that is missing or unreadable.
+    """
+    tls = None
+    if options.tls_dir is not None:
+        tls = TlsFiles.in_dir(options.tls_dir, WORLD_CN)
+        problem = check_tls_files(tls)
+        if problem:
+            raise ValueError(f"--tls {options.tls_dir}: {problem}")
+    if options.connect:
+        return session_settings(mode="client", connect=[options.connect],
+                                connect_timeout_ms=int(options.wait_robots_s * 1e3), tls=tls)
+    listen = options.listen or DEFAULT_ENDPOINT
+    host = listen.partition("/")[2].rpartition(":")[0].strip("[]")
+    if tls is None and host in ("0.0.0.0", "::"):
+        raise ValueError(f"--listen {listen}: every interface only with --tls (mutual TLS "
+                         "and access control); plain TCP listens on one address")
+    acl = access_control(options.run_id, [r.id for r in scenario.robots]) if tls else None
+    return session_settings(mode="router", listen=[listen], tls=tls, acl=acl)
+
+
 def run_world(options: WorldOptions) -> int:
     """Run the world process to the end; returns its exit status.
 
@@ -541,11 +608,12 @@ def run_world(options: WorldOptions) -> int:
     with stop_on_signals() as stop:
         recorder = RunRecorder(options.out_dir, scenario)
         try:
-            if options.connect:
-                settings = session_settings(mode="client", connect=[options.connect],
-                                            connect_timeout_ms=int(options.wait_robots_s * 1e3))
-            else:
-                settings = session_settings(mode="router", listen=[options.listen])
+            try:
+                settings = world_settings(options, scenario)
+            except ValueError as exc:
+                log.error("%s", exc)
+                recorder.event("end", 0.0, reason="bad_input", success=False, error=str(exc))
+                return ExitCode.BAD_INPUT
             try:
                 session = open_session(settings)
             except SessionError as exc:

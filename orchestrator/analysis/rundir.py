@@ -258,17 +258,23 @@ def write_json(path: Path, content: Any) -> Path:
 
 
 END_FIELDS = ("reason", "lost", "rejected", "stale", "stale_poses", "cmd_timeouts",
-              "cmd_hold_expiries", "overruns", "rejected_by_reason")
+              "cmd_hold_expiries", "overruns", "rejected_by_reason", "seq_jumps", "future_cmds")
 """What `metrics.json` keeps of the run's ``end`` event (under ``end``)."""
+ROBOT_FIELDS = ("rejected_poses", "refused_poses", "refused_control", "refused_config")
+"""What `metrics.json` keeps (under ``end``) of the robots' totals in ``robots.json`` (a
+distributed run): malformed poses, and well-formed poses, control messages and configuration
+replies refused as not the world's."""
 
 
 def write_metrics(run_dir: Path, metrics: RunMetrics, *, partial: bool = False) -> Path:
     """`metrics.json` of a run directory: the metrics, how the run ended (``end``: reason,
-    lost robots, rejected and stale message counts) and ``partial`` (true when the run was
-    interrupted before its end: the figures cover only what was recorded)."""
+    lost robots, rejected, refused and stale message counts) and ``partial`` (true when the
+    run was interrupted before its end: the figures cover only what was recorded)."""
     end = end_event(run_dir)
     content = metrics.to_json_dict()
     content["end"] = {k: end[k] for k in END_FIELDS if k in end}
+    robots = read_json(Path(run_dir) / "robots.json")
+    content["end"].update({k: robots[k] for k in ROBOT_FIELDS if k in robots})
     content["partial"] = bool(partial or not end)
     return write_json(Path(run_dir) / "metrics.json", content)
 

@@ -85,3 +85,26 @@ def make_dir(path: Path, flag: str = "--out") -> Path:
     except OSError as exc:
         raise BadInput(f"{flag}: cannot write to {path}: {exc.strerror or exc}") from None
     return path
+
+
+def add_tls_args(p: argparse.ArgumentParser) -> None:
+    """``--insecure`` and ``--tls-ca``: the transport's security of a distributed run."""
+    p.add_argument("--insecure", action="store_true",
+                   help="plain TCP: no TLS, no access control (default: mutual TLS with a "
+                        "per-run CA in <out>/tls and the run's access control on the world)")
+    p.add_argument("--tls-ca", metavar="DIR",
+                   help="sign the run's certificates with the CA in DIR (ca.pem, ca.key) "
+                        "instead of a fresh per-run CA")
+
+
+def tls_ca(args: argparse.Namespace) -> Path | None:
+    """The ``--tls-ca`` directory, checked (`BadInput` if unusable or with ``--insecure``)."""
+    if not getattr(args, "tls_ca", None):
+        return None
+    if getattr(args, "insecure", False):
+        raise BadInput("--tls-ca and --insecure exclude each other")
+    ca = Path(args.tls_ca)
+    missing = [n for n in ("ca.pem", "ca.key") if not (ca / n).is_file()]
+    if missing:
+        raise BadInput(f"--tls-ca {ca}: missing {', '.join(missing)}")
+    return ca

@@ -7,11 +7,13 @@ from pathlib import Path
 
 from agent.flags import positive, run_id
 from agent.process import ExitCode
+from orchestrator.cli.common import BadInput
 from orchestrator.experiments.compose import (
     DEFAULT_CONNECT,
     DEFAULT_RUNS_DIR,
     SetupOptions,
     await_and_report,
+    make_certs,
     prepare_scenario,
 )
 
@@ -22,8 +24,8 @@ from orchestrator.experiments.compose import (
 def add_parser(sub: argparse._SubParsersAction) -> None:
     parser = sub.add_parser(
         "compose", help="steps of the docker-compose demo",
-        description="Steps of the docker-compose demo (compose.yaml): the world's scenario "
-                    "and the orchestrator's watch and report.")
+        description="Steps of the docker-compose demo (compose.yaml): the run's certificates, "
+                    "the world's scenario and the orchestrator's watch and report.")
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument("--setup", required=True,
                         help="setup_a..setup_g, a family or a scenario .yaml file")
@@ -52,11 +54,25 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--live-host", default="127.0.0.1",
                    help="address the live view binds (0.0.0.0 in a container whose port is "
                         "published)")
+    p.add_argument("--tls", type=Path, default=None, metavar="DIR",
+                   help="mutual TLS with DIR/ca.pem, DIR/orchestrator.pem, DIR/orchestrator.key")
+    c = sub.add_parser("certs", help="the run's CA and certificates, one directory per service")
+    c.add_argument("--run", required=True, type=run_id, help="run id")
+    c.add_argument("--robots", required=True, type=int, help="robot services (ids 0..N-1)")
+    c.add_argument("--out", required=True, type=Path,
+                   help="<out>/<cn>/ for world, orchestrator, observer, robot-<id>")
+    c.add_argument("--world-host", action="append", default=None,
+                   help="a name clients dial the world by (default: world)")
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """``orchestrator compose STEP ...``; returns the exit status."""
+    if args.step == "certs":
+        if not 0 < args.robots <= 4096:
+            raise BadInput(f"--robots: expected 1..4096, got {args.robots}")
+        make_certs(args.run, args.robots, args.out, tuple(args.world_host or ("world",)))
+        return ExitCode.OK
     options = SetupOptions(setup=args.setup, agents=args.agents, planner=args.planner,
                            seed=args.seed, robots=args.robots, run_id=args.run,
                            runs_dir=args.runs_dir)
@@ -65,4 +81,4 @@ def run(args: argparse.Namespace) -> int:
         return ExitCode.OK
     live = (args.live_host, args.live_port) if args.live else None
     return await_and_report(options, args.connect, args.startup_timeout_s, args.time_scale,
-                            live=live)
+                            args.tls, live=live)

@@ -21,9 +21,11 @@ from orchestrator.cli.common import (
     MODES,
     BadInput,
     add_fault_args,
+    add_tls_args,
     fault_plan,
     make_dir,
     planner_label,
+    tls_ca,
 )
 
 RUN_ENDINGS = frozenset({ExitCode.OK, ExitCode.CONTACT, ExitCode.INCOMPLETE, ExitCode.ROBOT_LOST,
@@ -60,6 +62,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--live-host", default="127.0.0.1",
                    help="address the live view binds (default 127.0.0.1: this machine only)")
     p.add_argument("--quiet", action="store_true", help="no progress line and no summary")
+    add_tls_args(p)
     add_fault_args(p)
     p.set_defaults(func=run)
 
@@ -191,4 +194,5 @@ def _run_distributed(scenario: Scenario, out_dir: Path, args: argparse.Namespace
 
     return run_scenario_distributed(scenario, out_dir, args.seed,
                                     time_scale=args.time_scale or 1.0,
-                                    on_progress=progress, faults=faults, live=live)
+                                    on_progress=progress, faults=faults, live=live,
+                                    tls=not args.insecure, tls_ca=tls_ca(args))

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from agent.core.config import PLANNER_NAMES
 from agent.flags import positive, robot_counts
-from orchestrator.cli.common import make_dir
+from orchestrator.cli.common import BadInput, add_tls_args, make_dir, tls_ca
 from orchestrator.experiments.scale import (
     DEFAULT_FAMILY,
     FAMILIES,
@@ -73,12 +73,17 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                              "each N (no processes, no transport)")
     parser.add_argument("--ticks", type=int, default=500,
                         help="ticks timed per N with --world-bench (default 500)")
+    add_tls_args(parser)
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Entry point of `orchestrator scale`; returns 0 (figures), 2 for bad arguments."""
     argv = ["orchestrator", *args.argv]
+    if args.insecure and list(args.hosts) != ["127.0.0.1"]:
+        raise BadInput("--hosts listens on every interface (0.0.0.0): not with --insecure, "
+                       "only with TLS and the run's access control")
+    args.tls_ca_dir = tls_ca(args)
     out_root = Path(args.out)
     make_dir(out_root)
     if args.world_bench:

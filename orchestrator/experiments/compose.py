@@ -36,7 +36,9 @@ from agent.process import (
 )
 from world.scenario_file import ScenarioError, dump_scenario
 
-DEFAULT_CONNECT = "tcp/world:7447"
+DEFAULT_CONNECT = "tls/world:7447"
+CONTAINER_UID = 1000
+"""The user every service runs as (Dockerfile): owner of the certificates `make_certs` writes."""
 DEFAULT_RUNS_DIR = Path("/runs")
 SCENARIO_FILE = "scenario.input.yaml"
 CONNECT_ATTEMPT_MS = 1000
@@ -122,16 +124,44 @@ def prepare_scenario(options: SetupOptions) -> Path:
     return path
 
 
+def make_certs(run_id: str, robots: int, out: Path, world_hosts: tuple[str, ...] = ("world",)
+               ) -> list[Path]:
+    """``orchestrator compose certs``: the run's CA and certificates, one directory per service
+    under `out` (``<out>/<cn>/``: ``ca.pem``, ``<cn>.pem``, ``<cn>.key``; compose mounts each
+    as a volume of that service alone, so no service holds another's key). The CA key is
+    never written. Run as root (the one-shot ``certs`` service), the files are handed to
+    `CONTAINER_UID`. Returns the directories."""
+    import os
+
+    from agent.security import make_run_pki
+
+    files = make_run_pki(out, run_id, range(robots), world_hosts=world_hosts, split=True)
+    dirs = [Path(f.cert).parent for f in files.values()]
+    if os.geteuid() == 0:
+        for d in dirs:
+            for path in (d, *d.iterdir()):
+                os.chown(path, CONTAINER_UID, CONTAINER_UID)
+    log.info("run %s: certificates of %s in %s", run_id, ", ".join(sorted(files)), out)
+    return dirs
+
+
 # --------------------------------------------------------------------------------------
 # await
 # --------------------------------------------------------------------------------------
 
-def _open_session(connect: str, deadline: float, stop: StopFlag) -> zenoh.Session | None:
-    """A client session to `connect`, retrying until `deadline` (monotonic); None if not."""
-    from protocol import session_settings
+def _open_session(connect: str, deadline: float, stop: StopFlag,
+                  tls_dir: Path | None = None) -> zenoh.Session | None:
+    """A client session to `connect`, retrying until `deadline` (monotonic); None if not.
+    With `tls_dir`: mutual TLS as the ``orchestrator`` identity."""
+    from protocol import ORCHESTRATOR_CN, TlsFiles, session_settings
 
-    settings = session_settings(mode="client", connect=[connect],
-                                connect_timeout_ms=CONNECT_ATTEMPT_MS)
+    tls = TlsFiles.in_dir(tls_dir, ORCHESTRATOR_CN) if tls_dir is not None else None
+    try:
+        settings = session_settings(mode="client", connect=[connect],
+                                    connect_timeout_ms=CONNECT_ATTEMPT_MS, tls=tls)
+    except ValueError as exc:
+        log.error("%s", exc)
+        return None
     try:
         return open_session(settings, deadline=deadline, stop=stop)
     except SessionError as exc:  # the router is not up (or `world` does not resolve)
@@ -184,7 +214,7 @@ def _drain(watch: RunWatch, robot_sub: zenoh.Subscriber, world_sub: zenoh.Subscr
 
 
 def watch_run(options: SetupOptions, scenario: Scenario, connect: str, startup_timeout_s: float,
-              time_scale: float, stop: StopFlag) -> str:
+              time_scale: float, stop: StopFlag, tls_dir: Path | None = None) -> str:
     """Follow the run over Zenoh until the world leaves; returns why the watch ended.
 
     Returns:
@@ -198,7 +228,7 @@ def watch_run(options: SetupOptions, scenario: Scenario, connect: str, startup_t
 
     keys = RunKeys(options.run_id)
     t0 = time.monotonic()
-    session = _open_session(connect, t0 + startup_timeout_s, stop)
+    session = _open_session(connect, t0 + startup_timeout_s, stop, tls_dir)
     if session is None:
         return "signal" if stop else "no_world"
     watch = RunWatch(frozenset(r.id for r in scenario.robots), set())
@@ -235,7 +265,8 @@ def watch_run(options: SetupOptions, scenario: Scenario, connect: str, startup_t
 
 
 def write_report(options: SetupOptions, scenario: Scenario, time_scale: float,
-                 started: str) -> int:
+                 started: str, connect: str = DEFAULT_CONNECT, tls_dir: Path | None = None
+                 ) -> int:
     """metrics.json, trajectory.png, report.txt and run.json of the finished run; the status."""
     from orchestrator.analysis.console import run_summary
     from orchestrator.analysis.plots import write_run_plots
@@ -254,6 +285,9 @@ def write_report(options: SetupOptions, scenario: Scenario, time_scale: float,
         "setup": options.setup, "scenario": scenario.name, "planner": planner,
         "seed": options.seed, "mode": "docker-compose", "agents": len(scenario.robots),
         "run_id": options.run_id, "time_scale": time_scale, "started": started,
+        "zenoh": {"endpoints": [connect], "tls": tls_dir is not None,
+                  **({"ca": str(Path(tls_dir) / "ca.pem"), "access_control": True}
+                     if tls_dir is not None else {})},
     })
     try:
         metrics = metrics_from_run_dir(run_dir)
@@ -283,7 +317,8 @@ def write_report(options: SetupOptions, scenario: Scenario, time_scale: float,
 
 
 def await_and_report(options: SetupOptions, connect: str, startup_timeout_s: float,
-                     time_scale: float, live: tuple[str, int] | None = None) -> int:
+                     time_scale: float, tls_dir: Path | None = None,
+                     live: tuple[str, int] | None = None) -> int:
     """The orchestrator container: watch the run, then write the report; the exit status.
 
     With `live` (host, port), a live Foxglove view of the run is served meanwhile
@@ -295,10 +330,16 @@ def await_and_report(options: SetupOptions, connect: str, startup_timeout_s: flo
         from orchestrator.experiments.live import LiveBridge, start_live_view
 
         view = start_live_view(live[0], live[1], scenario)
-        bridge = LiveBridge(options.run_id, connect, scenario, view).start()
+        tls = None
+        if tls_dir is not None:
+            from protocol import ORCHESTRATOR_CN, TlsFiles
+
+            tls = TlsFiles.in_dir(tls_dir, ORCHESTRATOR_CN)
+        bridge = LiveBridge(options.run_id, connect, scenario, view, tls=tls).start()
     try:
         with stop_on_signals() as stop:
-            outcome = watch_run(options, scenario, connect, startup_timeout_s, time_scale, stop)
+            outcome = watch_run(options, scenario, connect, startup_timeout_s, time_scale, stop,
+                                tls_dir)
     finally:
         if bridge is not None:
             bridge.stop()
@@ -311,4 +352,4 @@ def await_and_report(options: SetupOptions, connect: str, startup_timeout_s: flo
         return ExitCode.TRANSPORT
     if outcome != "done":
         return ExitCode.WORLD_LOST
-    return write_report(options, scenario, time_scale, started)
+    return write_report(options, scenario, time_scale, started, connect, tls_dir)

@@ -38,7 +38,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import FrameType
@@ -47,7 +47,7 @@ from typing import IO, TYPE_CHECKING
 from agent.core.scenario import Scenario
 from agent.process import PARENT_PID_ENV
 from orchestrator.analysis.metrics import RunMetrics
-from protocol import validate_run_id
+from protocol import OBSERVER_CN, TlsFiles, tls_endpoint, validate_run_id
 from world.scenario_file import load_scenario
 from world.sim.faults import FaultPlan, ProcessFault
 
@@ -65,6 +65,10 @@ EXIT_MARGIN_S = 60.0
 POLL_S = 0.2
 FAULT_POLL_S = 0.02
 """Wall period of the launcher's loop while process faults are pending."""
+TLS_DIR = "tls"
+"""Where a run's certificates go, under its run directory."""
+REFUSED_COUNTERS = ("refused_poses", "refused_control", "refused_config")
+"""Robot counters of well-formed messages refused as not the world's (totals in robots.json)."""
 EXIT_LINE = re.compile(r"robot (\d+) exit: reason='([^']*)' code=(\d+)(.*)$", re.MULTILINE)
 
 
@@ -149,27 +153,62 @@ def _last_trajectory_time(path: Path) -> float:
     return 0.0
 
 
+def _tls_args(tls_dir: Path | None) -> list[str]:
+    return [] if tls_dir is None else ["--tls", str(Path(tls_dir).resolve())]
+
+
 def world_command(run_id: str, scenario_path: Path, out_dir: Path, endpoint: str, *,
                   rate_hz: float = 50.0, time_scale: float = 1.0, wait_robots_s: float = 30.0,
-                  extra_args: Sequence[str] = ()) -> list[str]:
-    """Command line of a world process (a router listening on `endpoint`)."""
+                  extra_args: Sequence[str] = (), tls_dir: Path | None = None) -> list[str]:
+    """Command line of a world process (a router listening on `endpoint`; with `tls_dir`,
+    mutual TLS and the run's access control)."""
     return [
         sys.executable, "-m", "world", "--run", run_id,
         "--scenario", str(Path(scenario_path).resolve()), "--listen", endpoint,
         "--rate-hz", repr(float(rate_hz)), "--time-scale", repr(float(time_scale)),
         "--out", str(Path(out_dir).resolve()), "--wait-robots-s", repr(float(wait_robots_s)),
-        *extra_args,
+        *_tls_args(tls_dir), *extra_args,
     ]
 
 
 def robot_command(run_id: str, robot_id: int, endpoint: str, *,
-                  startup_timeout_s: float = 30.0, extra_args: Sequence[str] = ()) -> list[str]:
+                  startup_timeout_s: float = 30.0, extra_args: Sequence[str] = (),
+                  tls_dir: Path | None = None) -> list[str]:
     """Command line of one robot process (a client of the router at `endpoint`)."""
     return [
         sys.executable, "-m", "agent", "--run", run_id, "--id", str(int(robot_id)),
         "--connect", endpoint, "--startup-timeout-s", repr(float(startup_timeout_s)),
-        *extra_args,
+        *_tls_args(tls_dir), *extra_args,
     ]
+
+
+def endpoint_host(endpoint: str) -> str:
+    """The host of ``proto/HOST:PORT`` (brackets of an IPv6 literal removed)."""
+    host = endpoint.partition("/")[2].rpartition(":")[0]
+    return host.strip("[]")
+
+
+def prepare_tls(out_dir: Path, run_id: str, robot_ids: Sequence[int],
+                endpoints: Iterable[str], ca_dir: Path | None = None) -> Path:
+    """The run's certificates in ``<out_dir>/tls`` (`agent.security.make_run_pki`); the world's
+    certificate names every host of `endpoints`. Returns the directory."""
+    from agent.security import make_run_pki
+
+    hosts = [h for h in map(endpoint_host, endpoints) if h and h not in ("0.0.0.0", "::")]
+    tls_dir = Path(out_dir) / TLS_DIR
+    make_run_pki(tls_dir, run_id, robot_ids, world_hosts=hosts, ca_dir=ca_dir)
+    return tls_dir
+
+
+def transport_info(endpoints: Sequence[str], tls_dir: Path | None) -> dict:
+    """What run.json records of the transport: the endpoints a tool joins as a Zenoh client,
+    whether TLS is on, and (with TLS) the CA and the read-only observer's certificate."""
+    info: dict = {"endpoints": list(dict.fromkeys(endpoints)), "tls": tls_dir is not None}
+    if tls_dir is not None:
+        d = Path(tls_dir).resolve()
+        info.update(ca=str(d / "ca.pem"), observer_cert=str(d / "observer.pem"),
+                    observer_key=str(d / "observer.key"), access_control=True)
+    return info
 
 
 def _link_args(plan: FaultPlan) -> list[str]:
@@ -274,11 +313,13 @@ def collect_robot_exits(out_dir: Path) -> dict:
                               "reason": m.group(2), "code": int(m.group(3)), **counters})
     return {"processes": processes,
             "rejected_poses": sum(p.get("rejected", 0) for p in processes),
-            "stale_poses": sum(p.get("stale", 0) for p in processes)}
+            "stale_poses": sum(p.get("stale", 0) for p in processes),
+            **{k: sum(p.get(k, 0) for p in processes) for k in REFUSED_COUNTERS}}
 def fleet_command(run_id: str, robot_ids: Sequence[int], endpoint: str, log_dir: Path, *,
                   startup_timeout_s: float = 30.0,
                   robot_endpoints: Mapping[int, str] | None = None,
                   nice: int = 0, cpu_tokens: int | None = None,
+                  tls_dir: Path | None = None,
                   robot_args: Sequence[str] = ()) -> list[str]:
     """Command line of one `agent.fleet` process that forks every robot process
     (`cpu_tokens` None: the fleet's default, none; `robot_args` go to every robot)."""
@@ -290,7 +331,7 @@ def fleet_command(run_id: str, robot_ids: Sequence[int], endpoint: str, log_dir:
         "--log-dir", str(Path(log_dir).resolve()),
         "--startup-timeout-s", repr(float(startup_timeout_s)), "--nice", str(int(nice)),
         *(() if cpu_tokens is None else ("--cpu-tokens", str(int(cpu_tokens)))),
-        *overrides,
+        *_tls_args(tls_dir), *overrides,
         *(f"--robot-arg={arg}" for arg in robot_args),
     ]
 
@@ -350,6 +391,8 @@ def run_distributed(
     robot_launcher: str = "spawn",
     robot_nice: int = 0,
     cpu_tokens: int | None = None,
+    tls: bool = True,
+    tls_ca: Path | None = None,
     robot_args: Sequence[str] = (),
     live: LiveView | None = None,
 ) -> int:
@@ -375,6 +418,11 @@ def run_distributed(
             process (faster start-up, less memory; its own log is ``fleet.log``).
         robot_nice: with ``"fork"``, robots run this much nicer than the world (>= 0).
         cpu_tokens: with ``"fork"``, robots computing at once (None or 0: no tokens).
+        tls: mutual TLS and the run's access control (`prepare_tls`: certificates in
+            ``<out_dir>/tls``); `endpoint` and `robot_endpoints` become ``tls/...``. False:
+            plain TCP, which `endpoint` may then not listen on every interface with.
+        tls_ca: sign the run's certificates with this CA (``ca.pem``, ``ca.key``) instead of
+            a fresh one whose key is never written.
         robot_args: further ``python -m agent`` arguments for every robot (``--no-plan``).
         live: a live Foxglove server; a passive Zenoh client in this process
             (`orchestrator.experiments.live.LiveBridge`) republishes the run to it.
@@ -392,10 +440,21 @@ def run_distributed(
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     endpoint = endpoint or free_tcp_endpoint()
+    robot_ids = [spec.id for spec in scenario.robots]
+    tls_dir: Path | None = None
+    if tls:
+        endpoint = tls_endpoint(endpoint)
+        robot_endpoints = {rid: tls_endpoint(ep) for rid, ep in (robot_endpoints or {}).items()}
+    elif endpoint_host(endpoint) in ("0.0.0.0", "::"):
+        raise ValueError(f"{endpoint}: listening on every interface needs TLS")
+    joined = [*(robot_endpoints or {}).values()] or [endpoint]
+    if tls:
+        tls_dir = prepare_tls(out_dir, run_id, robot_ids, [endpoint, *joined], tls_ca)
+    _record_transport(out_dir, transport_info(joined, tls_dir))
     world_cmd = world_command(run_id, scenario_path, out_dir, endpoint, rate_hz=rate_hz,
                               time_scale=time_scale, wait_robots_s=startup_timeout_s,
-                              extra_args=[*world_fault_args(faults), *extra_world_args])
-    robot_ids = [spec.id for spec in scenario.robots]
+                              extra_args=[*world_fault_args(faults), *extra_world_args],
+                              tls_dir=tls_dir)
     if faults is not None:
         faults.check(robot_ids)
     # A world that cannot keep pace runs slower than time_scale: be generous before giving up.
@@ -419,7 +478,12 @@ def run_distributed(
         if live is not None:
             from orchestrator.experiments.live import LiveBridge
 
-            bridge = LiveBridge(run_id, endpoint, scenario, live).start()
+            # Read-only: the observer's certificate (the access control lets it subscribe).
+            bridge = LiveBridge(
+                run_id, endpoint if endpoint_host(endpoint) not in ("0.0.0.0", "::")
+                else joined[0], scenario, live,
+                tls=TlsFiles.in_dir(tls_dir, OBSERVER_CN) if tls_dir is not None else None,
+            ).start()
 
         def spawn_robot(rid: int, restart: int = 0) -> subprocess.Popen:
             name = f"robot_{rid}.log" if not restart else f"robot_{rid}.restart{restart}.log"
@@ -427,7 +491,8 @@ def run_distributed(
             proc = spawn_logged(robot_command(run_id, rid, address,
                                               startup_timeout_s=startup_timeout_s,
                                               extra_args=[*robot_fault_args(faults, rid),
-                                                          *robot_args]),
+                                                          *robot_args],
+                                              tls_dir=tls_dir),
                                 out_dir / name)
             robots.append(proc)
             return proc
@@ -438,7 +503,8 @@ def run_distributed(
                 fleet_command(run_id, robot_ids, endpoint, out_dir,
                               startup_timeout_s=startup_timeout_s,
                               robot_endpoints=robot_endpoints, nice=robot_nice,
-                              cpu_tokens=cpu_tokens, robot_args=robot_args),
+                              cpu_tokens=cpu_tokens, robot_args=robot_args,
+                              tls_dir=tls_dir),
                 out_dir / "fleet.log"))
         else:
             current = {rid: spawn_robot(rid) for rid in robot_ids}
@@ -488,17 +554,26 @@ def run_distributed(
                 signal.signal(signal.SIGTERM, previous_term or signal.SIG_DFL)
 
 
+def _record_transport(out_dir: Path, info: dict) -> None:
+    """Add ``zenoh`` (`transport_info`) to the run directory's run.json (made if absent)."""
+    from orchestrator.analysis.rundir import read_json, write_json
+
+    path = Path(out_dir) / "run.json"
+    write_json(path, {**read_json(path), "zenoh": info})
+
+
 def run_scenario_distributed(scenario: Scenario, out_dir: Path, seed: int, *,
                              time_scale: float = 1.0,
                              on_progress: Callable[[DistributedProgress], None] | None = None,
                              faults: FaultPlan | None = None,
-                             live: LiveView | None = None
+                             live: LiveView | None = None, tls: bool = True,
+                             tls_ca: Path | None = None
                              ) -> tuple[RunMetrics | None, int]:
     """One resolved scenario as real processes, with its metrics: `orchestrator run`'s path.
 
     Writes `scenario.input.yaml` into out_dir, runs `run_distributed` (50 Hz world, a run
     id from the scenario name, the seed and a random token) and, when the world left a
-    trajectory, computes and writes `metrics.json`.
+    trajectory, computes and writes `metrics.json`. `tls`, `tls_ca`: as `run_distributed`.
 
     Returns:
         (the metrics, or None when the run left no readable trajectory; the world's exit
@@ -521,7 +596,7 @@ def run_scenario_distributed(scenario: Scenario, out_dir: Path, seed: int, *,
     run_id = f"{safe_name(scenario.name)[:24]}-{seed}-{secrets.token_hex(4)}"
     status = run_distributed(scenario_path, out_dir, run_id, rate_hz=50.0,
                              time_scale=time_scale, on_progress=on_progress, faults=faults,
-                             live=live)
+                             live=live, tls=tls, tls_ca=tls_ca)
     if not (out_dir / "trajectory.csv").exists():
         return None, status
     try:

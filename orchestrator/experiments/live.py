@@ -31,6 +31,7 @@ from protocol import (
     PosesMsg,
     ProtocolError,
     RunKeys,
+    TlsFiles,
     session_settings,
 )
 from world.mcap_log import LiveView, RunViz
@@ -51,11 +52,15 @@ class LiveBridge:
         endpoint: the world's router endpoint, e.g. ``tcp/127.0.0.1:7447``.
         scenario: the run's scenario (goals, radii, obstacles).
         live: the live server to publish to.
+        tls: a read-only identity of the run (``observer``, or ``orchestrator`` in compose)
+            when the run uses TLS.
     """
 
-    def __init__(self, run_id: str, endpoint: str, scenario: Scenario, live: LiveView) -> None:
+    def __init__(self, run_id: str, endpoint: str, scenario: Scenario, live: LiveView,
+                 tls: TlsFiles | None = None) -> None:
         self.keys = RunKeys(run_id)
         self.endpoint = endpoint
+        self.tls = tls
         self.live = live
         self.viz = RunViz(scenario, live.context)
         self.known_ids = frozenset([r.id for r in scenario.robots]
@@ -77,7 +82,7 @@ class LiveBridge:
 
     def _run(self) -> None:
         settings = session_settings(mode="client", connect=[self.endpoint],
-                                    connect_timeout_ms=1000)
+                                    connect_timeout_ms=1000, tls=self.tls)
         try:
             session = open_session(settings, deadline=time.monotonic() + CONNECT_S,
                                    stop=self._stop)

@@ -38,9 +38,11 @@ processes that map them; RSS where the kernel gives no PSS). Per N it reports:
   estimates and the planner; send: encoding and publishing the command; loop: the rest of
   the main thread; threads: the other threads (Zenoh's runtime, the pose callback's).
 
-``--hosts A,B``: the world listens on ``tcp/0.0.0.0:PORT`` and robot k connects to
-``tcp/<hosts[k % len]>:PORT``, as robots on other hosts would (on Linux every 127.x.y.z
-address is loopback, no set-up needed).
+``--hosts A,B``: the world listens on ``tls/0.0.0.0:PORT`` and robot k connects to
+``tls/<hosts[k % len]>:PORT``, as robots on other hosts would (on Linux every 127.x.y.z
+address is loopback, no set-up needed). Runs use mutual TLS and the run's access control
+like ``orchestrator run`` (the world's certificate names every host); ``--insecure`` (plain
+TCP) is refused with ``--hosts``: nothing listens on every interface without TLS.
 
 Written to DIR: ``scale.csv``, ``scale.json`` (rows and the command line) and ``scale.png``
 (one subplot per figure against N). Figures only: nothing here asserts a time budget.
@@ -381,6 +383,8 @@ def run_one(n: int, args: argparse.Namespace, out_root: Path) -> dict[str, Any]:
                                  startup_timeout_s=args.startup_timeout_s,
                                  robot_launcher=args.launcher,
                                  robot_nice=args.robot_nice, cpu_tokens=args.cpu_tokens,
+                                 tls=not getattr(args, "insecure", False),
+                                 tls_ca=getattr(args, "tls_ca_dir", None),
                                  robot_args=["--no-plan"] if getattr(args, "no_plan", False)
                                  else [])
     finally:

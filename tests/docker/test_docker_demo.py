@@ -268,12 +268,21 @@ def test_setup_d_runs_end_to_end(docker_setup: DockerSetup, demo_factory, tmp_pa
     up = demo.compose("up", "--no-build", timeout_s=RUN_S, check=False)
     docker_setup.timings["setup_d_up_s"] = time.monotonic() - t0
     containers = demo.containers()
-    assert sorted(containers) == sorted(["world", "orchestrator", *robot_services(ROBOTS_D)])
+    assert sorted(containers) == sorted(["certs", "world", "orchestrator",
+                                         *robot_services(ROBOTS_D)])
     states = {s: c["State"] for s, c in containers.items()}
     assert all(not st["Running"] for st in states.values()), states
     assert states["orchestrator"]["ExitCode"] == 0, (
         f"orchestrator exit {states['orchestrator']['ExitCode']}:\n{up.stdout[-5000:]}")
     assert states["world"]["ExitCode"] == 0
+    assert states["certs"]["ExitCode"] == 0
+    # Each service holds only its own key (a volume of its own at /tls).
+    for service, c in containers.items():
+        if service == "certs":
+            continue
+        tls_mounts = [m for m in c["Mounts"] if m["Destination"] == "/tls"]
+        assert len(tls_mounts) == 1, (service, c["Mounts"])
+        assert tls_mounts[0]["Name"].endswith(f"_tls-{service}"), (service, tls_mounts)
 
     # Each robot ran in a container of its own, as its own process, and left on the end.
     robots = [containers[s] for s in robot_services(ROBOTS_D)]
@@ -303,6 +312,9 @@ def test_setup_d_runs_end_to_end(docker_setup: DockerSetup, demo_factory, tmp_pa
     assert {int(r.split(",")[1]) for r in rows} == set(range(ROBOTS_D))
     run = json.loads((run_dir / "run.json").read_text())
     assert run["mode"] == "docker-compose" and run["run_id"] == demo.run_id
+    assert run["zenoh"]["tls"] is True and run["zenoh"]["endpoints"] == ["tls/world:7447"]
+    ready = next(e for e in events if e["kind"] == "world_ready")
+    assert ready["tls"] is True and ready["endpoint"] == "tls/0.0.0.0:7447"
     assert re.search(r"^success\s+yes$", (run_dir / "report.txt").read_text(), re.MULTILINE)
     print(f"\ndocker demo timings: {docker_setup.timings}")
 
@@ -359,6 +371,65 @@ def test_stopped_robot_container_leaves_no_contact(docker_setup: DockerSetup, de
     print(f"\ndocker demo timings: {docker_setup.timings}")
 
 
+ROGUE_SCRIPT = r"""
+import sys, time, zenoh
+ok = []
+for name, conf in sys_confs():
+    try:
+        s = zenoh.open(conf)
+    except zenoh.ZError as exc:
+        print(f"{name}: refused: {str(exc)[:120]}")
+        continue
+    sub = s.declare_subscriber("eifp/**")
+    s.put(f"eifp/{sys.argv[1]}/control", b"forged")
+    time.sleep(2.0)
+    got = sub.try_recv()
+    print(f"{name}: CONNECTED, received {got is not None}")
+    ok.append(name)
+    s.close()
+sys.exit(1 if ok else 0)
+"""
+ROGUE_CONFS = r"""
+def sys_confs():
+    import json
+    def conf(endpoint, **extra):
+        c = zenoh.Config()
+        for k, v in {"mode": '"client"', "scouting/multicast/enabled": "false",
+                     "connect/endpoints": json.dumps([endpoint]), "connect/timeout_ms": "3000",
+                     **extra}.items():
+            c.insert_json5(k, v)
+        return c
+    yield "plain tcp", conf("tcp/world:7447")
+    yield "tls without a certificate", conf(
+        "tls/world:7447", **{"transport/link/tls/verify_name_on_connect": "false"})
+"""
+
+
+def test_a_rogue_container_without_a_certificate_cannot_connect(docker_setup: DockerSetup,
+                                                                demo_factory,
+                                                                tmp_path: Path) -> None:
+    """A container on the demo's network, without a certificate: it cannot open a session to
+    the world (plain TCP, or TLS presenting nothing), so it can neither publish nor subscribe;
+    the run is not disturbed."""
+    demo = demo_factory("rogue", time_scale=2.0)
+    demo.compose("up", "--no-build", "--detach", timeout_s=UP_S)
+    demo.wait_event("start", UP_S + 300.0)
+    network = next(iter(demo.containers()["world"]["NetworkSettings"]["Networks"]))
+    rogue = _run(["docker", "run", "--rm", "--network", network, "--entrypoint", "python",
+                  TEST_IMAGE, "-c", ROGUE_CONFS + ROGUE_SCRIPT, demo.run_id], 120.0,
+                 check=False)
+    out = rogue.stdout + rogue.stderr
+    assert rogue.returncode == 0, out[-3000:]
+    assert out.count("refused") == 2, out[-3000:]
+    status = demo.wait_exit("orchestrator", RUN_S)
+    assert status == ExitCode.OK, demo.logs("orchestrator")[-3000:]
+    run_dir = demo.copy_run(tmp_path)
+    events = [json.loads(line) for line in (run_dir / "events.jsonl").read_text().splitlines()]
+    assert not [e for e in events if e["kind"] in ("contact", "robot_lost")]
+    end = [e for e in events if e["kind"] == "end"][0]
+    assert end["reason"] == "all_arrived" and end["rejected"] == 0
+
+
 def test_setup_g_override_runs_16_robot_containers(compose_command: list[str]) -> None:
     """compose.setup-g.yaml turns the demo into setup G: 16 robot services, ids 0..15 (the
     configuration only, no engine needed; the 16-container run is too heavy for every CI
@@ -376,3 +447,21 @@ def test_setup_g_override_runs_16_robot_containers(compose_command: list[str]) -
         assert env["SETUP"] == "setup_g" and str(env["ROBOTS"]) == "16"
         assert env["RUN_ID"] == demo.run_id
     assert all(s["environment"]["RUN_ID"] == demo.run_id for s in robots.values())
+    # Each robot mounts its own certificate volume only; the certs service writes them all.
+    def mounts(service: dict) -> list[tuple[str, str]]:
+        """(source, target) of each volume, short ("src:dst:rw") or long syntax."""
+        out = []
+        for v in service.get("volumes", []):
+            if isinstance(v, str):
+                src, dst = v.split(":")[:2]
+            else:
+                src, dst = v["source"], v["target"]
+            out.append((src, dst))
+        return out
+
+    for name, s in robots.items():
+        tls = [src for src, dst in mounts(s) if dst == "/tls"]
+        assert tls == [f"tls-{name}"], (name, s.get("volumes"))
+    assert str(services["certs"]["environment"]["ROBOTS"]) == "16"
+    certs = {src for src, _ in mounts(services["certs"])}
+    assert {f"tls-{name}" for name in robots} | {"tls-world", "tls-orchestrator"} <= certs

@@ -9,6 +9,7 @@ from collections import deque
 import numpy as np
 import pytest
 
+from agent import node as agent_node
 from agent.core.config import PlannerConfig
 from agent.core.scenario import RobotSpec
 from agent.node import (
@@ -287,8 +288,9 @@ class _Payload:
 
 
 class _Sample:
-    def __init__(self, data: bytes) -> None:
+    def __init__(self, data: bytes, source_info: object = None) -> None:
         self.payload = _Payload(data)
+        self.source_info = source_info
 
 
 def test_the_robot_times_the_next_pose_from_when_the_last_one_arrived_not_when_read() -> None:
@@ -306,10 +308,12 @@ def test_the_robot_times_the_next_pose_from_when_the_last_one_arrived_not_when_r
     node.pose_arrived = threading.Event()
     node.pose_ring = deque(maxlen=2)
     node.known_ids = frozenset({0, 1})
-    node.counts = {k: 0 for k in ("rejected", "skipped", "stale", "link_dropped")}
+    node.counts = {k: 0 for k in ("rejected", "skipped", "stale", "link_dropped",
+                                  "refused_poses")}
     node.last_rx_wall = None
+    node.world_zid = None
     node.clock_tick, node.clock_stamp_s, node.clock_wall = -1, 0.0, 0.0
-    node.config = SimpleNamespace(time_scale=1.0)
+    node.config = SimpleNamespace(time_scale=1.0, world_rate_hz=50.0, time_limit_s=60.0)
     node.pose_link = FaultyLink(LinkFaults(), None)
     node.controller = RobotController(spec, PlannerConfig(), 0.25)
     node.newest = None
@@ -323,6 +327,119 @@ def test_the_robot_times_the_next_pose_from_when_the_last_one_arrived_not_when_r
     assert not node.pose_arrived.is_set() and not node.pose_ring
     assert node.last_rx_wall == arrived and node.clock_wall == arrived
     assert node.sim_now() == pytest.approx(0.2 + 0.03, abs=0.01)  # the pose is 30 ms old
+
+
+def _source(zid: str):
+    from types import SimpleNamespace
+
+    return SimpleNamespace(source_id=SimpleNamespace(zid=zid, eid=1), source_sn=1)
+
+
+def _pose_node(world_zid: str | None):
+    import threading
+    from types import SimpleNamespace
+
+    from agent.planning.controller import RobotController
+    from world.sim.link import FaultyLink, LinkFaults
+
+    node = object.__new__(RobotNode)
+    node.robot_id = 0
+    node.pose_arrived = threading.Event()
+    node.pose_ring = deque(maxlen=2)
+    node.known_ids = frozenset({0, 1})
+    node.counts = {k: 0 for k in ("rejected", "skipped", "stale", "link_dropped",
+                                  "refused_poses", "refused_control")}
+    node.refused_in_callback = 0
+    node.last_rx_wall = None
+    node.world_zid = world_zid
+    node.clock_tick, node.clock_stamp_s, node.clock_wall = -1, 0.0, 0.0
+    node.config = SimpleNamespace(time_scale=1.0, world_rate_hz=50.0, time_limit_s=60.0)
+    node.pose_link = FaultyLink(LinkFaults(), None)
+    node.controller = RobotController(RobotSpec(0, (0.0, 0.0, 0.0), (10.0, 0.0)),
+                                      PlannerConfig(), 0.25)
+    node.newest = None
+    return node
+
+
+def _pose(tick: int, t_s: float):
+    from protocol import PosesMsg
+
+    return PosesMsg(t_s=t_s, tick=tick, robot_ids=[0, 1],
+                    robot_pose=[[0, 0, 0], [5, 0, 3.1]], robot_radius_m=[0.5, 0.5],
+                    obstacle_ids=[], obstacle_xy_m=np.zeros((0, 2)), obstacle_radius_m=[])
+
+
+def test_poses_not_from_the_world_never_enter_the_ring() -> None:
+    node = _pose_node("aa")
+    node._on_pose(_Sample(_pose(10, 0.2).encode(), None))
+    node._on_pose(_Sample(_pose(10, 0.2).encode(), _source("bb")))
+    assert not node.pose_ring and node.refused_in_callback == 2
+    node._on_pose(_Sample(_pose(10, 0.2).encode(), _source("aa")))
+    assert len(node.pose_ring) == 1
+
+
+def test_the_clock_moves_only_on_a_pose_that_passed_every_check() -> None:
+    import time
+
+    node = _pose_node("aa")
+    now = time.monotonic()
+    node.pose_ring.append((now, _Sample(_pose(10, 0.2).encode(), _source("aa"))))
+    assert node.poll_poses() is True
+    assert node.clock_tick == 10 and node.clock_stamp_s == 0.2
+    # Far future, and ahead of the clock (tick and time consistent): refused, clock kept.
+    for tick, t_s in ((50_000_000, 1.0e6), (1000, 20.0), (11, 5.0)):
+        node.pose_ring.append((time.monotonic(), _Sample(_pose(tick, t_s).encode(),
+                                                         _source("aa"))))
+        assert node.poll_poses() is False
+        assert node.clock_tick == 10 and node.clock_stamp_s == 0.2
+    assert node.counts["refused_poses"] == 3
+    # The next genuine pose is observed as usual.
+    node.pose_ring.append((time.monotonic(), _Sample(_pose(15, 0.3).encode(), _source("aa"))))
+    assert node.poll_poses() is True and node.clock_tick == 15
+
+
+def test_control_is_obeyed_only_from_the_worlds_session() -> None:
+    from protocol import ControlMsg
+
+    node = _pose_node("aa")
+    end = ControlMsg("end", 1.0, "all_arrived").encode()
+    queue = deque([_Sample(end, None), _Sample(end, _source("bb"))])
+    node.control_sub = type("Sub", (), {"try_recv": lambda self: queue.popleft()
+                                        if queue else None})()
+    node.poll_control()  # both refused: no exit
+    assert node.counts["refused_control"] == 2
+    queue.append(_Sample(end, _source("aa")))
+    with pytest.raises(agent_node._Exit) as caught:
+        node.poll_control()
+    assert caught.value.reason == "end (all_arrived)" and caught.value.code == ExitCode.OK
+
+
+def test_a_configuration_reply_not_from_the_world_is_refused() -> None:
+    import time
+    from types import SimpleNamespace
+
+    from agent.process import StopFlag
+    from protocol import RunKeys
+
+    good = RunConfigMsg(run_id="r1", robot=RobotSpec(id=3, start=(0.0, 0.0, 0.0),
+                                                      goal=(5.0, 0.0)),
+                        planner=PlannerConfig(), goal_tolerance_m=0.25, control_rate_hz=10.0,
+                        world_rate_hz=50.0, time_scale=1.0, time_limit_s=60.0,
+                        cmd_timeout_s=0.5, known_ids=(3,))
+    forged = RunConfigMsg(**{**good.__dict__, "robot": RobotSpec(id=3, start=(0.0, 0.0, 0.0),
+                                                                 goal=(50.0, 0.0))})
+
+    def reply(msg, zid):
+        data = msg.encode()
+        return SimpleNamespace(ok=SimpleNamespace(payload=SimpleNamespace(
+            to_bytes=lambda: data)), err=None, replier_id=SimpleNamespace(zid=zid))
+
+    session = SimpleNamespace(get=lambda key, timeout, **kw: [reply(forged, "bb"),
+                                                              reply(good, "aa")])
+    counts: dict[str, int] = {}
+    got = agent_node.fetch_config(session, RunKeys("r1"), 3, StopFlag(),
+                                  time.monotonic() + 1.0, "aa", counts)
+    assert got.robot.goal == (5.0, 0.0) and counts == {"refused_config": 1}
 
 
 class _Liveliness:
@@ -426,9 +543,9 @@ def test_a_configuration_out_of_range_is_refused_and_named_at_start_up() -> None
     body["planner"]["threats"]["t_max_s"] = -1.0
     payload = msgpack.packb(body, use_bin_type=True)
     reply = SimpleNamespace(ok=SimpleNamespace(
-        payload=SimpleNamespace(to_bytes=lambda: payload)), err=None)
+        payload=SimpleNamespace(to_bytes=lambda: payload)), err=None, replier_id=None)
     asked = []
-    session = SimpleNamespace(get=lambda key, timeout: asked.append(key) or [reply])
+    session = SimpleNamespace(get=lambda key, timeout, **kw: asked.append(key) or [reply])
     with pytest.raises(node._Exit) as caught:
         node.fetch_config(session, RunKeys("r1"), 3, StopFlag(),
                           deadline=time.monotonic() + 0.25)

@@ -113,9 +113,9 @@ def test_distributed_mode_calls_run_distributed_and_computes_metrics(tmp_path, m
     calls = {}
 
     def fake(scenario_path, out_dir, run_id, *, rate_hz, time_scale, on_progress, faults,
-             live):
+             live, tls, tls_ca):
         calls.update(path=Path(scenario_path), run_id=run_id, rate_hz=rate_hz,
-                     time_scale=time_scale, faults=faults, live=live)
+                     time_scale=time_scale, faults=faults, live=live, tls=tls, tls_ca=tls_ca)
         run_lockstep(load_scenario(scenario_path), out_dir, on_progress=on_progress)
         (Path(out_dir) / "metrics.json").unlink()  # the world does not write metrics
         return 0
@@ -124,6 +124,7 @@ def test_distributed_mode_calls_run_distributed_and_computes_metrics(tmp_path, m
     out = tmp_path / "dist"
     rc = main(["run", "setup_a", "--planner", "ifp", "--time-scale", "4", "--out", str(out)])
     assert rc in (0, 1)
+    assert calls["tls"] is True and calls["tls_ca"] is None  # secure by default
     assert calls["time_scale"] == 4.0 and calls["rate_hz"] == 50.0
     assert calls["faults"] is None and calls["live"] is None  # no fault flag, no --live
     assert calls["path"].parent == out and calls["run_id"].startswith("setup_a-0-")
@@ -417,7 +418,8 @@ def test_benchmark_distributed_mode_takes_the_path_of_orchestrator_run(tmp_path,
     calls = []
 
     def fake(scenario_path, out_dir, run_id, *, rate_hz, time_scale, on_progress, faults,
-             live=None):
+             live=None, tls=True, tls_ca=None):
+        assert tls is True and tls_ca is None  # secure by default, as orchestrator run
         calls.append((Path(scenario_path), run_id, time_scale))
         run_lockstep(load_scenario(scenario_path), out_dir)
         (Path(out_dir) / "metrics.json").unlink()  # the world does not write metrics

@@ -135,3 +135,14 @@ def test_await_follows_a_real_run_and_writes_the_report(tmp_path: Path) -> None:
     run = json.loads((run_dir / "run.json").read_text())
     assert run["mode"] == "docker-compose" and run["run_id"] == run_id
     assert "end reason all_arrived" in (run_dir / "report.txt").read_text()
+
+
+def test_compose_certs_writes_one_directory_per_service_with_only_its_key(tmp_path) -> None:
+    assert main(["compose", "certs", "--run", "r1", "--robots", "2",
+                     "--out", str(tmp_path / "tls")]) == 0
+    for cn in ("world", "orchestrator", "observer", "robot-0", "robot-1"):
+        names = sorted(p.name for p in (tmp_path / "tls" / cn).iterdir())
+        assert names == sorted(["ca.pem", f"{cn}.pem", f"{cn}.key"]), (cn, names)
+    assert not list((tmp_path / "tls").rglob("ca.key"))
+    assert main(["compose", "certs", "--run", "r1", "--robots", "0",
+                     "--out", str(tmp_path / "x")]) == 2

@@ -14,7 +14,16 @@ import zenoh
 
 from agent.process import StopFlag
 from orchestrator.experiments.distributed import free_tcp_endpoint
-from protocol import CommandMsg, ControlMsg, PosesMsg, RunConfigMsg, RunKeys, session_settings
+from protocol import (
+    MAX_CMD_AHEAD_S,
+    MAX_SEQ_JUMP,
+    CommandMsg,
+    ControlMsg,
+    PosesMsg,
+    RunConfigMsg,
+    RunKeys,
+    session_settings,
+)
 from world.node import WorldNode, WorldOptions, parse_args, run_configs
 from world.recorder import RunRecorder
 from world.scenario_file import scenario_from_dict
@@ -157,6 +166,42 @@ def test_commands_applied_stale_dropped_garbage_rejected(rig: Rig) -> None:
     rig.recorder.flush()
     rows = (rig.options.out_dir / "commands.csv").read_text().splitlines()
     assert len(rows) == 3 and rows[1].startswith("0.0000,0,5,")
+
+
+def test_a_seq_jump_or_a_plan_from_the_future_is_refused_not_stored(rig: Rig) -> None:
+    node = rig.node
+    pub0 = rig.client.declare_publisher(rig.keys.cmd(0))
+    until(lambda: pub0.matching_status.matching, lambda: None, "command publisher to match")
+
+    def cmd(seq: int, v: float, stamp: float = 0.0) -> bytes:
+        return CommandMsg(0, seq, stamp, v, 0.0, 2.0, "ok").encode()
+
+    pub0.put(cmd(2**63 - 1, 0.9))  # before any: beyond the first-command bound
+    pub0.put(cmd(1, 0.5))
+    pub0.put(cmd(1 + MAX_SEQ_JUMP + 1, 0.9))  # jumps too far above 1
+    pub0.put(cmd(2, 0.4, stamp=MAX_CMD_AHEAD_S + 5.0))  # planned on a pose of the future
+    pub0.put(cmd(1 + MAX_SEQ_JUMP, 0.3))  # the largest allowed step
+    until(lambda: node.counts["commands"] + node.counts["rejected"] == 5, node.apply_commands,
+          "five commands")
+    assert node.counts["seq_jumps"] == 2 and node.counts["future_cmds"] == 1
+    assert node.counts["commands"] == 2 and node.last_seq[0] == 1 + MAX_SEQ_JUMP
+    assert node.sim.command[node.sim.index_of(0)][0] == pytest.approx(0.3)
+    reasons = node.rejected_by_reason
+    assert reasons["cmd.seq"] == 2 and reasons["cmd.pose_stamp"] == 1
+
+
+def test_control_and_poses_carry_the_worlds_source_info(rig: Rig) -> None:
+    node = rig.node
+    control = rig.client.declare_subscriber(rig.keys.control)
+    poses = rig.client.declare_subscriber(rig.keys.poses_all)
+    until(lambda: node.control_pub.matching_status.matching, lambda: None, "control to match")
+    node.put_control(ControlMsg("start", 0.0))
+    node.publish_poses()
+    for sub in (control, poses):
+        sample = sub.recv()
+        assert isinstance(sample, zenoh.Sample)
+        assert sample.source_info is not None
+        assert str(sample.source_info.source_id.zid) == str(rig.router.zid())
 
 
 def test_tick_publishes_poses(rig: Rig) -> None:

@@ -384,10 +384,13 @@ def test_rogue_publisher_is_rejected_and_counted(tmp_path: Path, launch) -> None
                     time.sleep(0.002)
                     continue
                 try:
-                    return PosesMsg.decode(sample.payload.to_bytes(), known_ids={0, 1})
+                    msg = PosesMsg.decode(sample.payload.to_bytes(), known_ids={0, 1})
                 except ProtocolError:
                     continue
+                world_source.append(sample.source_info)
+                return msg
 
+        world_source: list = []
         real = next_real_pose()
         valid_cmd = CommandMsg(0, 0, real.t_s, 0.0, 0.0, 1.0, "ok")
         for rid, payload, _what in garbage_commands(valid_cmd):
@@ -398,7 +401,9 @@ def test_rogue_publisher_is_rejected_and_counted(tmp_path: Path, launch) -> None
         bad_poses = garbage_poses(real)
         for payload in bad_poses:
             next_real_pose()
-            rogue_poses.put(payload)
+            # With the world's source info copied, past the robots' source check and on to
+            # their decoder.
+            rogue_poses.put(payload, source_info=world_source[-1])
 
         end = wait_for_event(run.out_dir, lambda e: e["kind"] == "end", RUN_S, run.world)
     assert wait_exit(run.world) == 0, (run.out_dir / "world.log").read_text()

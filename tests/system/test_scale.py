@@ -19,9 +19,12 @@ pytestmark = [pytest.mark.system, pytest.mark.timeout(180)]
 
 def test_scale_run_with_robots_connecting_through_a_second_address(tmp_path: Path,
                                                                    capsys) -> None:
-    """The world listens on 0.0.0.0; robots 0, 2 dial 127.0.0.1 and robots 1, 3 dial
-    127.0.0.2, as robots on another host would dial the world's address."""
+    """The world listens on 0.0.0.0 (mutual TLS: never without it); robots 0, 2 dial
+    127.0.0.1 and robots 1, 3 dial 127.0.0.2, as robots on another host would dial the
+    world's address, and check its name against its certificate."""
     out = tmp_path / "scale"
+    assert cli_main(["scale", "--agents", "4", "--hosts", "127.0.0.1,127.0.0.2", "--insecure",
+                     "--out", str(tmp_path / "insecure")]) == 2
     code = cli_main(["scale", "--agents", "4", "--family", "circles",
                      "--hosts", "127.0.0.1,127.0.0.2", "--startup-timeout-s", "60",
                      "--out", str(out), "--json"])
@@ -41,7 +44,7 @@ def test_scale_run_with_robots_connecting_through_a_second_address(tmp_path: Pat
     for rid in range(4):
         log = (run / f"robot_{rid}.log").read_text()
         host = "127.0.0.2" if rid % 2 else "127.0.0.1"
-        assert re.search(rf"connecting to tcp/{re.escape(host)}:\d+", log), log
+        assert re.search(rf"connecting to tls/{re.escape(host)}:\d+", log), log
         assert "exit: reason='end (all_arrived)' code=0" in log
     # Sane figures: present, positive, within physical bounds.
     assert 0.0 < row["alive_s"] < 60.0

@@ -1,0 +1,202 @@
+"""Certificates of a run: a per-run certificate authority and one certificate per process.
+
+The orchestrator calls `make_run_pki` before it starts the world and the robots; each process
+then opens its Zenoh session with its own files (`protocol.TlsFiles`, `protocol.tls_settings`)
+and the world's router enforces `protocol.access_control`, which tells processes apart by the
+common name (CN) of their certificate: ``world``, ``robot-<id>``, ``orchestrator``,
+``observer``.
+
+EC P-256 keys, SHA-256 signatures. The CA is made fresh for each run and, by default, its
+key is never written: once every certificate is issued, nobody can mint another identity
+for the run (the only "revocation" there is: a new run has a new CA). With a user-supplied
+CA (``--tls-ca DIR`` holding ``ca.pem`` and ``ca.key``) the certificates are signed by it
+instead, so that hosts which share that CA can join. Keys are written 0600 from the start
+(never world-readable, not even for a moment), directories 0700.
+
+Only the world's certificate has subjectAltNames: the names clients dial (``world`` in
+compose, ``localhost``, ``127.0.0.1``, and any ``--hosts``). rustls checks the dialled name
+against the SANs only, never the CN.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import ipaddress
+import os
+from collections.abc import Iterable
+from pathlib import Path
+
+from cryptography import x509
+from cryptography.hazmat.primitives import hashes, serialization
+from cryptography.hazmat.primitives.asymmetric import ec
+from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
+
+from protocol import OBSERVER_CN, ORCHESTRATOR_CN, WORLD_CN, TlsFiles, robot_cn
+
+CA_CERT = "ca.pem"
+CA_KEY = "ca.key"
+DEFAULT_WORLD_HOSTS = ("world", "localhost", "127.0.0.1")
+"""Names a client may dial the world by (SANs of the world's certificate)."""
+VALID_DAYS = 2.0
+"""Lifetime of a run's certificates (a run lasts minutes; the CA dies with it)."""
+BACKDATE = dt.timedelta(minutes=5)
+"""Certificates are valid from this long before now (small clock skew between hosts)."""
+
+
+class PkiError(RuntimeError):
+    """A CA directory that cannot be used (missing or unreadable files)."""
+
+
+def _write_private(path: Path, data: bytes) -> None:
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    try:
+        os.write(fd, data)
+    finally:
+        os.close(fd)
+    os.chmod(path, 0o600)
+
+
+def _key_pem(key: ec.EllipticCurvePrivateKey) -> bytes:
+    return key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8,
+                             serialization.NoEncryption())
+
+
+def _name(cn: str, run_id: str) -> x509.Name:
+    return x509.Name([
+        x509.NameAttribute(NameOID.ORGANIZATION_NAME, "eifp-swarm"),
+        x509.NameAttribute(NameOID.ORGANIZATIONAL_UNIT_NAME, f"run {run_id}"),
+        x509.NameAttribute(NameOID.COMMON_NAME, cn),
+    ])
+
+
+def _key_usage(*, ca: bool) -> x509.KeyUsage:
+    return x509.KeyUsage(
+        digital_signature=True, key_cert_sign=ca, crl_sign=ca, content_commitment=False,
+        key_encipherment=False, data_encipherment=False, key_agreement=False,
+        encipher_only=False, decipher_only=False)
+
+
+def _san(names: Iterable[str]) -> x509.SubjectAlternativeName:
+    entries: list[x509.GeneralName] = []
+    for n in dict.fromkeys(names):
+        try:
+            entries.append(x509.IPAddress(ipaddress.ip_address(n)))
+        except ValueError:
+            entries.append(x509.DNSName(n))
+    return x509.SubjectAlternativeName(entries)
+
+
+class RunCA:
+    """A certificate authority that signs the certificates of one run.
+
+    Args:
+        run_id: goes into the subject (``OU=run <id>``).
+        cert, key: an existing CA (`load`); None: a fresh one, valid `VALID_DAYS`.
+    """
+
+    def __init__(self, run_id: str, cert: x509.Certificate | None = None,
+                 key: ec.EllipticCurvePrivateKey | None = None) -> None:
+        self.run_id = run_id
+        now = dt.datetime.now(dt.UTC)
+        self.not_before = now - BACKDATE
+        self.not_after = now + dt.timedelta(days=VALID_DAYS)
+        if cert is not None and key is not None:
+            self.cert, self.key = cert, key
+            self.not_after = min(self.not_after, cert.not_valid_after_utc)
+            return
+        self.key = ec.generate_private_key(ec.SECP256R1())
+        name = _name(f"eifp-run-ca {run_id}", run_id)
+        self.cert = (
+            x509.CertificateBuilder().subject_name(name).issuer_name(name)
+            .public_key(self.key.public_key()).serial_number(x509.random_serial_number())
+            .not_valid_before(self.not_before).not_valid_after(self.not_after)
+            .add_extension(x509.BasicConstraints(ca=True, path_length=0), critical=True)
+            .add_extension(_key_usage(ca=True), critical=True)
+            .add_extension(x509.SubjectKeyIdentifier.from_public_key(self.key.public_key()),
+                           critical=False)
+            .sign(self.key, hashes.SHA256()))
+
+    @classmethod
+    def load(cls, directory: Path, run_id: str) -> RunCA:
+        """The CA in `directory` (``ca.pem`` and ``ca.key``, PEM, unencrypted)."""
+        d = Path(directory)
+        try:
+            cert = x509.load_pem_x509_certificate((d / CA_CERT).read_bytes())
+            key = serialization.load_pem_private_key((d / CA_KEY).read_bytes(), password=None)
+        except (OSError, ValueError, TypeError) as exc:
+            raise PkiError(f"--tls-ca {d}: needs {CA_CERT} and an unencrypted {CA_KEY}: "
+                           f"{exc}") from exc
+        if not isinstance(key, ec.EllipticCurvePrivateKey):
+            raise PkiError(f"--tls-ca {d}: {CA_KEY} must be an EC key")
+        return cls(run_id, cert, key)
+
+    @property
+    def cert_pem(self) -> bytes:
+        return self.cert.public_bytes(serialization.Encoding.PEM)
+
+    def issue(self, cn: str, sans: Iterable[str] = ()) -> tuple[bytes, bytes]:
+        """``(certificate PEM, private key PEM)`` of a leaf for `cn` (TLS server and client)."""
+        key = ec.generate_private_key(ec.SECP256R1())
+        builder = (
+            x509.CertificateBuilder().subject_name(_name(cn, self.run_id))
+            .issuer_name(self.cert.subject).public_key(key.public_key())
+            .serial_number(x509.random_serial_number())
+            .not_valid_before(self.not_before).not_valid_after(self.not_after)
+            .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
+            .add_extension(_key_usage(ca=False), critical=True)
+            .add_extension(x509.ExtendedKeyUsage([ExtendedKeyUsageOID.SERVER_AUTH,
+                                                  ExtendedKeyUsageOID.CLIENT_AUTH]),
+                           critical=False)
+            .add_extension(x509.AuthorityKeyIdentifier.from_issuer_public_key(
+                self.key.public_key()), critical=False)
+            .add_extension(x509.SubjectKeyIdentifier.from_public_key(key.public_key()),
+                           critical=False))
+        sans = list(sans)
+        if sans:
+            builder = builder.add_extension(_san(sans), critical=False)
+        return (builder.sign(self.key, hashes.SHA256()).public_bytes(serialization.Encoding.PEM),
+                _key_pem(key))
+
+
+def run_identities(robot_ids: Iterable[int]) -> list[str]:
+    """Every CN of a run: the world, the orchestrator, the observer, each robot."""
+    return [WORLD_CN, ORCHESTRATOR_CN, OBSERVER_CN, *(robot_cn(int(i)) for i in robot_ids)]
+
+
+def make_run_pki(directory: Path, run_id: str, robot_ids: Iterable[int], *,
+                 world_hosts: Iterable[str] = DEFAULT_WORLD_HOSTS,
+                 ca_dir: Path | None = None, split: bool = False) -> dict[str, TlsFiles]:
+    """Make (or, with `ca_dir`, sign with a given CA) every certificate of a run.
+
+    Args:
+        directory: where the files go (created 0700).
+        run_id: the run.
+        robot_ids: one ``robot-<id>`` certificate each.
+        world_hosts: SANs of the world's certificate (every name clients dial it by).
+        ca_dir: a user's CA (``ca.pem``, ``ca.key``); None: a fresh CA whose key is never
+            written.
+        split: one subdirectory per identity (``<directory>/<cn>/``: ``ca.pem``,
+            ``<cn>.pem``, ``<cn>.key``), so each can be handed to its process alone (compose
+            volumes); else every file in `directory`.
+
+    Returns:
+        CN -> that process's `TlsFiles`.
+    """
+    d = Path(directory)
+    d.mkdir(parents=True, exist_ok=True)
+    os.chmod(d, 0o700)
+    ca = RunCA.load(Path(ca_dir), run_id) if ca_dir is not None else RunCA(run_id)
+    out: dict[str, TlsFiles] = {}
+    hosts = list(dict.fromkeys([*DEFAULT_WORLD_HOSTS, *world_hosts]))
+    for cn in run_identities(robot_ids):
+        where = d / cn if split else d
+        where.mkdir(exist_ok=True)
+        os.chmod(where, 0o700)
+        (where / CA_CERT).write_bytes(ca.cert_pem)
+        cert_pem, key_pem = ca.issue(cn, hosts if cn == WORLD_CN else ())
+        files = TlsFiles.in_dir(where, cn)
+        Path(files.cert).write_bytes(cert_pem)
+        _write_private(Path(files.key), key_pem)
+        out[cn] = files
+    return out
+

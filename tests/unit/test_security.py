@@ -1,0 +1,216 @@
+"""The security rules of the wire layer (`protocol`) and the run's certificates
+(`agent.security`): access control, TLS settings, sequence and clock bounds."""
+
+from __future__ import annotations
+
+import json
+import stat
+from pathlib import Path
+
+import pytest
+from cryptography import x509
+from cryptography.x509.oid import NameOID
+
+from agent.security import make_run_pki
+from protocol import (
+    MAX_POSE_AHEAD_S,
+    MAX_SEQ_JUMP,
+    TlsFiles,
+    access_control,
+    check_pose_time,
+    check_seq,
+    robot_cn,
+    session_settings,
+    tls_endpoint,
+)
+
+# --- sequence numbers -----------------------------------------------------------------------
+
+
+def test_a_robots_first_command_may_start_anywhere_up_to_the_jump_bound() -> None:
+    assert check_seq(0, None) is None
+    assert check_seq(MAX_SEQ_JUMP, None) is None
+    assert check_seq(MAX_SEQ_JUMP + 1, None) == "seq_jump"
+    assert check_seq(2**63 - 1, None) == "seq_jump"
+
+
+def test_a_seq_must_increase_by_at_most_the_bound() -> None:
+    assert check_seq(11, 10) is None
+    assert check_seq(10 + MAX_SEQ_JUMP, 10) is None
+    assert check_seq(11 + MAX_SEQ_JUMP, 10) == "seq_jump"
+    assert check_seq(2**63 - 1, 10) == "seq_jump"
+    assert check_seq(10, 10) == "stale"
+    assert check_seq(3, 10) == "stale"
+
+
+# --- pose time --------------------------------------------------------------------------------
+
+
+def pose_check(tick: int, t_s: float, clock_s: float | None, **kw) -> str | None:
+    return check_pose_time(tick, t_s, world_rate_hz=50.0, time_limit_s=60.0, clock_s=clock_s,
+                           **kw)
+
+
+def test_a_genuine_pose_passes() -> None:
+    assert pose_check(0, 0.0, None) is None
+    assert pose_check(500, 10.0, 9.98) is None
+    assert pose_check(500, 10.0, 10.5) is None  # older than the clock: the controller decides
+
+
+def test_a_pose_whose_time_is_not_its_tick_is_refused() -> None:
+    assert pose_check(500, 10.5, 10.0) == "tick_time"
+    assert pose_check(2**40, 10.0, 10.0) == "tick_time"
+
+
+def test_a_pose_beyond_the_time_limit_is_refused_even_before_the_clock_is_set() -> None:
+    assert pose_check(50_000_000, 1.0e6, None) == "beyond_limit"
+    assert pose_check(3050, 61.0, None) is None
+    assert pose_check(3100, 62.0, None) == "beyond_limit"
+
+
+def test_a_pose_far_ahead_of_the_clock_is_refused() -> None:
+    assert pose_check(1500, 30.0, 10.0) == "ahead"
+    assert pose_check(int((10.0 + MAX_POSE_AHEAD_S) * 50), 10.0 + MAX_POSE_AHEAD_S,
+                      10.0) is None
+    # A faster run gets a proportionally wider bound (wall jitter x time scale).
+    assert pose_check(1000, 20.0, 16.0, time_scale=5.0) is None
+    assert pose_check(1000, 20.0, 14.0, time_scale=5.0) == "ahead"
+
+
+# --- access control ---------------------------------------------------------------------------
+
+
+def rules_of(acl: dict, cn: str) -> list[dict]:
+    subjects = {s["id"] for s in acl["subjects"] if cn in s["cert_common_names"]}
+    names = {r for p in acl["policies"] if subjects & set(p["subjects"]) for r in p["rules"]}
+    return [r for r in acl["rules"] if r["id"] in names]
+
+
+def allowed(acl: dict, cn: str, message: str, flow: str, key: str) -> bool:
+    """Allowed if a rule of `cn` names (message, flow) and a key expression that includes
+    `key` (here: equal, or a ``/**`` or ``/*`` prefix of it)."""
+    def includes(expr: str, k: str) -> bool:
+        if expr == k:
+            return True
+        if expr.endswith("/**"):
+            return k.startswith(expr[:-2]) or k == expr[:-3]
+        if expr.endswith("/*"):
+            head = expr[:-1]
+            return k.startswith(head) and "/" not in k[len(head):] and k != head
+        return False
+
+    return any(message in r["messages"] and flow in r["flows"]
+               and any(includes(e, key) for e in r["key_exprs"])
+               for r in rules_of(acl, cn))
+
+
+def test_only_robot_i_may_put_its_command_and_debug_keys() -> None:
+    acl = access_control("r1", [0, 3])
+    assert acl["enabled"] and acl["default_permission"] == "deny"
+    assert allowed(acl, "robot-3", "put", "ingress", "eifp/r1/cmd/3")
+    assert allowed(acl, "robot-3", "put", "ingress", "eifp/r1/debug/3")
+    for cn in ("robot-0", "observer", "orchestrator", "world", "robot-9"):
+        assert not allowed(acl, cn, "put", "ingress", "eifp/r1/cmd/3"), cn
+        assert not allowed(acl, cn, "put", "ingress", "eifp/r1/debug/3"), cn
+    assert not allowed(acl, "robot-3", "put", "ingress", "eifp/r1/cmd/*")
+
+
+def test_no_client_may_publish_poses_control_or_answer_config() -> None:
+    acl = access_control("r1", [0, 1, 2, 3])
+    for cn in ("robot-0", "robot-3", "observer", "orchestrator"):
+        for key in ("eifp/r1/poses/0", "eifp/r1/control"):
+            assert not allowed(acl, cn, "put", "ingress", key), (cn, key)
+        assert not allowed(acl, cn, "declare_queryable", "ingress", "eifp/r1/config/*")
+        assert not allowed(acl, cn, "reply", "ingress", "eifp/r1/config/3")
+    # ... but robots receive poses and control.
+    assert allowed(acl, "robot-0", "put", "egress", "eifp/r1/poses/3")
+    assert allowed(acl, "robot-0", "put", "egress", "eifp/r1/control")
+
+
+def test_a_robot_queries_and_declares_only_its_own_keys() -> None:
+    acl = access_control("r1", [0, 3])
+    assert allowed(acl, "robot-3", "query", "ingress", "eifp/r1/config/3")
+    assert allowed(acl, "robot-3", "reply", "egress", "eifp/r1/config/3")
+    assert not allowed(acl, "robot-3", "query", "ingress", "eifp/r1/config/0")
+    assert allowed(acl, "robot-3", "liveliness_token", "ingress", "eifp/r1/alive/robot/3")
+    assert not allowed(acl, "robot-3", "liveliness_token", "ingress", "eifp/r1/alive/robot/0")
+    assert not allowed(acl, "robot-3", "liveliness_token", "ingress", "eifp/r1/alive/world")
+    # Declared publishers and queriers match only once the world's declarations reach them.
+    assert allowed(acl, "robot-3", "declare_subscriber", "egress", "eifp/r1/cmd/*")
+    assert allowed(acl, "robot-3", "declare_queryable", "egress", "eifp/r1/config/*")
+
+
+def test_the_observer_and_the_orchestrator_only_read() -> None:
+    acl = access_control("r1", [0])
+    for cn in ("observer", "orchestrator"):
+        assert allowed(acl, cn, "declare_subscriber", "ingress", "eifp/r1/**")
+        assert allowed(acl, cn, "put", "egress", "eifp/r1/cmd/0")
+        assert allowed(acl, cn, "declare_liveliness_subscriber", "ingress", "eifp/r1/alive/**")
+        for message in ("put", "query", "liveliness_token", "declare_queryable"):
+            for key in ("eifp/r1/cmd/0", "eifp/r1/control", "eifp/r1/debug/0"):
+                assert not allowed(acl, cn, message, "ingress", key), (cn, message, key)
+
+
+def test_the_acl_names_only_this_run() -> None:
+    acl = access_control("r1", [0])
+    exprs = [e for r in acl["rules"] for e in r["key_exprs"]]
+    assert exprs and all(e.startswith("eifp/r1/") for e in exprs)
+    with pytest.raises(ValueError):
+        access_control("bad/run", [0])
+
+
+# --- TLS settings ---------------------------------------------------------------------------
+
+
+def test_tls_settings_of_router_and_client() -> None:
+    files = TlsFiles.in_dir("/t", "world")
+    assert files == TlsFiles("/t/ca.pem", "/t/world.pem", "/t/world.key")
+    router = session_settings(mode="router", listen=["tls/127.0.0.1:1"], tls=files,
+                              acl=access_control("r1", [0]))
+    assert json.loads(router["transport/link/protocols"]) == ["tls"]
+    assert router["transport/link/tls/enable_mtls"] == "true"
+    assert json.loads(router["transport/link/tls/listen_private_key"]) == "/t/world.key"
+    assert json.loads(router["access_control"])["default_permission"] == "deny"
+    client = session_settings(mode="client", connect=["tls/world:7447"],
+                              tls=TlsFiles.in_dir("/t", robot_cn(3)))
+    assert client["transport/link/tls/enable_mtls"] == "true"  # else it sends no certificate
+    assert client["transport/link/tls/verify_name_on_connect"] == "true"
+    assert json.loads(client["transport/link/tls/connect_certificate"]) == "/t/robot-3.pem"
+
+
+def test_tls_refuses_plain_endpoints_and_acl_needs_a_tls_router() -> None:
+    files = TlsFiles.in_dir("/t", "world")
+    with pytest.raises(ValueError, match="tls/"):
+        session_settings(mode="router", listen=["tcp/0.0.0.0:1"], tls=files)
+    with pytest.raises(ValueError):
+        session_settings(mode="router", listen=["tcp/127.0.0.1:1"], acl={"enabled": True})
+    assert tls_endpoint("tcp/127.0.0.1:7") == "tls/127.0.0.1:7"
+    assert tls_endpoint("tls/world:7447") == "tls/world:7447"
+    with pytest.raises(ValueError):
+        tls_endpoint("udp/h:1")
+
+
+# --- certificates -------------------------------------------------------------------------
+
+
+def test_run_pki_files_modes_names_and_no_ca_key(tmp_path) -> None:
+    files = make_run_pki(tmp_path / "tls", "r1", [0, 2], world_hosts=["127.0.0.2"])
+    d = tmp_path / "tls"
+    assert stat.S_IMODE(d.stat().st_mode) == 0o700
+    assert set(files) == {"world", "orchestrator", "observer", "robot-0", "robot-2"}
+    assert not (d / "ca.key").exists()
+    for cn, f in files.items():
+        assert stat.S_IMODE((tmp_path / "tls" / f"{cn}.key").stat().st_mode) == 0o600
+        cert = x509.load_pem_x509_certificate(Path(f.cert).read_bytes())
+        assert cert.subject.get_attributes_for_oid(NameOID.COMMON_NAME)[0].value == cn
+    world = x509.load_pem_x509_certificate(Path(files["world"].cert).read_bytes())
+    sans = world.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
+    names = {str(n.value) for n in sans}
+    assert {"world", "localhost", "127.0.0.1", "127.0.0.2"} <= names
+
+
+def test_split_pki_gives_each_identity_its_own_directory(tmp_path) -> None:
+    files = make_run_pki(tmp_path, "r1", [1], split=True)
+    assert files["robot-1"] == TlsFiles.in_dir(tmp_path / "robot-1", "robot-1")
+    assert sorted(p.name for p in (tmp_path / "robot-1").iterdir()) == [
+        "ca.pem", "robot-1.key", "robot-1.pem"]
