@@ -316,7 +316,7 @@ def test_dense_circle_with_a_small_neighbour_cap_has_no_contact(tmp_path):
     Eight robots swap antipodes through one point: near the centre every robot has all
     seven others within its sensing radius but plans against its 4 nearest only (the MPC
     also takes at most `MpcConfig.max_constraints` = 4). Measured here: a cap of 2 makes
-    contact in this scene, 3, 4, 6 and the default 10 do not (README, "Scale").
+    contact in this scene, 3, 4, 6 and the default 10 do not (docs/scale.md).
     """
     import dataclasses
 

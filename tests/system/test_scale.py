@@ -1,7 +1,7 @@
 """`orchestrator scale` end to end with real processes, robots on two addresses of the world.
 
 Small N only: the figures are checked for presence and sanity, never against time budgets
-(the measured table is in the README, "Scale").
+(the measured table is in docs/scale.md).
 """
 
 from __future__ import annotations
