@@ -1,84 +1,53 @@
 """Braking guard: the speed at which a robot can still stop its own approach in time.
 
-Not in the paper. eIFP-MPC's half-planes are soft (`agent.planning.mpc`): in a crowd the QP can be
-infeasible, and then the slack is spread over the neighbours by cost alone, so a robot
-squeezed between a stopped neighbour and one coming at it may choose to drive into the
-stopped one (seen at 100 ms link latency in setup G: 0.2 -> 1.1 m/s into a robot that
-stood still and spun). The guard is a last filter on the command that the QP cannot
+Not in the paper (eIFP-MPC only). The MPC's half-planes are soft (`agent.planning.mpc`): in
+a crowd the QP can be infeasible, and the slack is then spread over the neighbours by cost
+alone, so a robot squeezed between a stopped neighbour and one coming at it may choose to
+drive into the stopped one. The guard is a last filter on the command that the QP cannot
 trade away. It follows the responsibility rule of the RSS model (Shalev-Shwartz et al.,
-2017) along the line to each sensed disc: a robot is responsible for its own approach
-and must be able to cancel it before the gap is gone, given how late its command acts.
+2017) along the line to each sensed disc: a robot answers for its own approach and must be
+able to cancel it before the gap is gone, given how late its command acts.
 
 For each other disc j at centre distance d, with gap g = d - r - r_j - margin, unit vector
-u from the robot to j and heading h, the robot closes along u at v cos a with cos a = h . u;
-a is the smallest angle between u and the headings the robot sweeps if it keeps turning at
-the commanded rate until a braking command can act (tau). Sweeping on through the stop
-(tau + v / decel) was measured too: as safe under latency, but it slowed the crowded
-centre of setup G without faults (oscillations 7.7 -> 9.3 per robot, one of 30 seeds out
-of time); so the planner sweeps through the stop only from delayed poses (older than
-`agent.planning.planners.RECENT_SPEED_MAX_AGE_S`), where a robot turned at full rate into a robot it
-had not faced (setup F at 100 +- 30 ms, lockstep link seed 9, -4.2 cm with the turn term
-alone). Over
-the reaction time tau it keeps closing at that rate (the command in flight and the one
-period it is held), then brakes at `decel` (its closing speed falls at decel cos a). The
-other's speed along u, w = v_j . u, changes the room R the robot has:
+u from the robot to j and heading h, the robot closes along u at v cos a, where a is the
+smallest angle between u and the headings the robot sweeps if it keeps turning at the
+commanded rate until a braking command can act (the reaction time tau). From delayed poses
+(older than `agent.planning.planners.RECENT_SPEED_MAX_AGE_S`) the sweep runs on through the
+stop (tau + v / decel): a robot may then turn at full rate into one it had not faced. Over
+tau it keeps closing at that rate, then brakes at `decel`. The other's speed along u,
+w = v_j . u, changes the room R the robot has:
 
   * receding (w > 0): it can brake as hard, which leaves w^2 / (2 decel) more room;
   * approaching (w < 0): it needs its own stopping distance c tau + c^2 / (2 decel),
-    c = -w, out of the same gap (the RSS rule for two that drive at each other: each
-    answers for its own approach, and the gap must hold both stops);
+    c = -w, out of the same gap (two that drive at each other each answer for their own
+    approach, and the gap must hold both stops).
 
-The estimate w lags: a least-squares slope over the last `window` seconds of poses trails
-a constant acceleration by window / 2, and the poses are `age` old. Over that lag the other
-may have sped up towards the robot, so w is taken `unseen_dv` smaller than estimated;
-`unseen_speed_up_mps` gives it: a unicycle speeds up along its heading (forward only,
-v_min = 0), which may have turned by omega_max lag meanwhile, and never past v_max, so
+The estimate w lags: a least-squares slope over the last `window` seconds of poses trails a
+constant acceleration by window / 2, and the poses are `age` old. Over that lag the other
+may have sped up towards the robot, so w is taken `unseen_dv` smaller than estimated
+(`unseen_speed_up_mps`): a unicycle speeds up along its heading (forward only), which may
+have turned by omega_max lag meanwhile, and never past v_max, so
 
     unseen_dv = min(a_max lag, v_max - |v_j|) max(0, cos(max(0, d - omega_max lag))),
 
 d the angle between the other's observed heading and the direction from it to the robot;
-and one heading away from the robot may have braked as late (a leader the robot follows:
-its estimate still shows the speed it had), which closes the gap by
+and one heading away from the robot may have braked as late (a leader the robot follows),
+which closes the gap by
 
-    unseen_dv_brake = min(a_max lag, |v_j|) max(0, -cos d),
+    unseen_dv_brake = min(a_max lag, |v_j|) max(0, -cos d);
 
-no turn allowed for (a leader that turns away recedes less, but from a robot crossing at
-a right angle it would count every passer-by as braking towards it); the larger of the
-two counts.
-Both bounds are blind: they assume the worst over the whole lag. But the poses show most
-of a speed change before the slope does: the speed between an other's two newest samples
-(`Others.recent_speed_mps`, over an interval of at most a third of the window) is only half
-an interval old. Where it is known, each term is the change it already shows (recent speed
-against the estimate) plus a_max over half the interval and the pose age, if that is less
-than the blind bound; so the term never grows, and a leader that keeps its speed no longer
-counts as braking for a quarter of a second. That bound rests on every robot changing speed
-at most at a_max, true while links are healthy; the planner passes recent speeds only from
-fresh poses (`agent.planning.planners.RECENT_SPEED_MAX_AGE_S`). Measured (lockstep, 5 cm start
-jitter, seeds 0-9, no faults): setup G 9.6 -> 8.5 oscillations per robot. Read at every
-pose age, it let 3 of 10 distributed runs of G at 100 +- 30 ms with 10 % loss touch (see
-the constant), hence the gate.
-The others' limits are taken as the robot's own (a fleet of like robots; a robot cannot
-sense another's limits); an unknown heading counts as facing the robot; scenario obstacles
-move at constant velocity (0). So the term matters for robots at rest or slow that face
-the robot: the case it is for. Without it, at 100 +- 30 ms link latency with 10 % loss
-(lockstep, setups F and G, link seeds 0-19), 3 of 40 runs touched by up to 4 cm: two
-robots at rest side by side set off towards each other, each estimating the other still
-for a quarter of a second. Variants measured and not kept: a_max lag in every direction
-and at any speed kept those 40 clear but made the crowds brake for every robot coming at
-them (without faults, F 3.9 -> 6.7 and G 7.4 -> 9.3 oscillations per robot, seeds 0-9);
-the same along the heading but without the v_max bound, worse still (F 8.2: head-on
-cohorts already at v_max braked for a speed-up they cannot make); the pose age alone as
-the lag left G link seed 4 touching (-4 cm). The braking term came with the command hold
-(`world.sim.dynamics`): in distributed mode at 100 +- 30 ms with 10 % loss, a follower drove
-into a leader that had braked and turned while its slope still showed 0.7 m/s (setup G
-seed 1, -5.8 cm; with the term seeds 0-5 kept clear, but of seeds 0-9 seed 7 touched,
-1.1 cm: two robots turning towards each other at speed, which neither term covers; see the
-README for the variants tried). That is the turn term's case (`unseen_turn_closing_mps`):
-the estimate's direction trails a turn by about window / 2, the observed heading by the
-pose age only, so an other whose heading, carried on at its observed turn rate, points
-more at the robot than its estimate closes that much faster. It is read from delayed poses
-only (`agent.planning.planners.RECENT_SPEED_MAX_AGE_S`), and per other the larger of it and the
-speed term counts.
+the larger of the two counts. Both bounds assume the worst over the whole lag. Where the
+speed between an other's two newest samples is known (`Others.recent_speed_mps`, only from
+fresh poses), each term is instead the change those samples already show plus a_max over
+half their interval and the pose age, if that is less: a leader that keeps its speed no
+longer counts as braking. The others' limits are taken as the robot's own (a fleet of like
+robots; a robot cannot sense another's limits); an unknown heading counts as facing the
+robot; scenario obstacles move at constant velocity.
+
+From delayed poses a turn term is added too (`unseen_turn_closing_mps`): the estimate's
+direction trails a turn by about window / 2 and the observed heading by the pose age, so an
+other whose heading, carried on at its observed turn rate, points more at the robot than
+its estimate closes that much faster; per other the larger of it and the speed term counts.
 
 The largest safe speed solves v cos a tau + v^2 cos a / (2 decel) = R:
 
