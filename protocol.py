@@ -811,6 +811,12 @@ class PosesMsg:
 
 _STATUS_VALUES = frozenset(s.value for s in PlanStatus)
 
+TIMING_COLUMNS = ("robot_clock", "world_clock", "pose_pub_ns", "pose_rx_ns", "plan_start_ns",
+                  "plan_end_ns", "cmd_pub_ns", "cmd_rx_ns", "applied_ns")
+"""Wall stamps per applied command: the robot's and the world's clock ids, then the pose
+published (world), received (robot), planning started and ended, the command published
+(robot), received and applied (world)."""
+
 
 @dataclass(frozen=True)
 class WallStamps:

@@ -26,17 +26,13 @@ import numpy as np
 
 from agent.core.scenario import Scenario
 from agent.core.types import PlanDebug
+from protocol import TIMING_COLUMNS
 
 if TYPE_CHECKING:
     from world.mcap_log import LiveView
 
 TRAJECTORY_HEADER = "t,robot,x,y,theta,v,omega\n"
 COMMANDS_HEADER = "t_applied,robot,seq,pose_stamp,v,omega,plan_ms,status,side,resolved\n"
-TIMING_COLUMNS = ("robot_clock", "world_clock", "pose_pub_ns", "pose_rx_ns", "plan_start_ns",
-                  "plan_end_ns", "cmd_pub_ns", "cmd_rx_ns", "applied_ns")
-"""Wall stamps per applied command: the robot's and the world's clock ids, then the pose
-published (world), received (robot), planning started and ended, the command published
-(robot), received and applied (world)."""
 TIMING_HEADER = "robot,seq," + ",".join(TIMING_COLUMNS) + "\n"
 
 

@@ -64,7 +64,7 @@ from typing import Any
 import numpy as np
 
 from agent.core.scenario import Scenario
-from world.recorder import TIMING_COLUMNS
+from protocol import TIMING_COLUMNS
 
 CONTACT_OVERLAP_M = 1.0e-3
 TURN_RATE_MIN_RADPS = 0.05

@@ -18,7 +18,7 @@ from matplotlib.patches import Circle
 
 from orchestrator.analysis.metrics import WALL_STAGES, RunSpec, contact_episodes
 from orchestrator.analysis.rundir import RunData, read_run_dir, read_timing
-from world.recorder import TIMING_COLUMNS
+from protocol import TIMING_COLUMNS
 
 DISC_INTERVAL_S = 10.0
 """Robot discs are drawn every this many seconds along the paths."""
@@ -298,7 +298,7 @@ def plot_wall_latency(stamps: np.ndarray, path: Path) -> Path | None:
     marked; None (nothing written) if no stage could be measured.
 
     Args:
-        stamps: (K, 9) timing.csv stamps (`world.recorder.TIMING_COLUMNS`).
+        stamps: (K, 9) timing.csv stamps (`protocol.TIMING_COLUMNS`).
         path: the PNG to write.
     """
     stamps = np.asarray(stamps, dtype=np.int64).reshape(-1, len(TIMING_COLUMNS))

@@ -29,7 +29,7 @@ from orchestrator.analysis.metrics import (
     compute_metrics,
     wall_latency_ms,
 )
-from world.recorder import TIMING_COLUMNS
+from protocol import TIMING_COLUMNS
 from world.scenario_file import load_scenario
 
 REQUIRED_COMMAND_COLUMNS = ("t_applied", "robot", "seq", "pose_stamp", "v", "omega",
@@ -225,7 +225,7 @@ def metrics_from_run_dir(run_dir: Path, *, control_period_s: float | None = None
 
 
 def read_timing(run_dir: Path) -> np.ndarray:
-    """timing.csv's stamps as (K, 9) int64 (`metrics.TIMING_COLUMNS`); (0, 9) if none."""
+    """timing.csv's stamps as (K, 9) int64 (`protocol.TIMING_COLUMNS`); (0, 9) if none."""
     path = Path(run_dir) / "timing.csv"
     rows: list[list[int]] = []
     if path.is_file():
