@@ -308,11 +308,12 @@ def plan_eifp(
     primary_id: int | None = None,
     mech: Mechanisms = PAPER_MECHANISMS,
     escape_id: int | None = None,
+    previous: ViaPlan | None = None,
 ) -> ViaPlan:
     """One eIFP cycle without the encounter rules (with `PAPER_MECHANISMS`, the paper's
     eIFP); see `plan_eifp_encounters`."""
     return _plan_eifp(observation, config, side_memory, timer, None, primary_id, mech,
-                      escape_id)[0]
+                      escape_id, previous)[0]
 
 
 def plan_eifp_encounters(
@@ -324,10 +325,11 @@ def plan_eifp_encounters(
     primary_id: int | None = None,
     mech: Mechanisms = PAPER_MECHANISMS,
     escape_id: int | None = None,
+    previous: ViaPlan | None = None,
 ) -> tuple[ViaPlan, dict[int, Role]]:
     """One eIFP cycle with the encounter rules; returns (plan, role memory for next cycle)."""
     plan, roles = _plan_eifp(observation, config, side_memory, timer, role_memory, primary_id,
-                             mech, escape_id)
+                             mech, escape_id, previous)
     return plan, roles or {}
 
 
@@ -340,6 +342,7 @@ def _plan_eifp(
     primary_id: int | None,
     mech: Mechanisms = PAPER_MECHANISMS,
     escape_id: int | None = None,
+    previous: ViaPlan | None = None,
 ) -> tuple[ViaPlan, dict[int, Role] | None]:
     """One eIFP cycle: IFP's iteration with cost-based candidate selection (Eqs. 14-16).
 
@@ -382,7 +385,7 @@ def _plan_eifp(
 
     plan = plan_via_points(observation, config, make_selector, frozenset(), timer,
                            primary_id=primary_id, encounter_rule=rule, mech=mech,
-                           escape_id=escape_id)
+                           escape_id=escape_id, previous=previous)
     if role_memory is None:
         return plan, None
     enc = found.get("encounters")
@@ -472,6 +475,7 @@ class EifpSelector:
         self._roles: dict[int, Role] = {}
         self._primary: int | None = None
         self._escaping: int | None = None
+        self._previous: ViaPlan | None = None
 
     @property
     def side_memory(self) -> dict[int, Side]:
@@ -486,10 +490,11 @@ class EifpSelector:
         if self.mech.encounter_rules:
             plan, self._roles = plan_eifp_encounters(observation, self.config, self._memory,
                                                      self._roles, timer, primary, self.mech,
-                                                     self._escaping)
+                                                     self._escaping, self._previous)
         else:
             plan = plan_eifp(observation, self.config, self._memory, timer, primary,
-                             self.mech, self._escaping)
+                             self.mech, self._escaping, self._previous)
+        self._previous = plan if plan.status == PlanStatus.OK else None
         self._memory = update_side_memory(self._memory, plan, observation.others.ids)
         self._primary = plan.resolved_id
         self._escaping = plan.resolved_id if plan.status == PlanStatus.ESCAPE else None
@@ -501,3 +506,4 @@ class EifpSelector:
         self._roles.clear()
         self._primary = None
         self._escaping = None
+        self._previous = None

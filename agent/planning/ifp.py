@@ -43,6 +43,8 @@ Choices the paper leaves open (documented here, tested in tests/agent/test_ifp.p
   paper, off in its profile): near the goal the measured velocity of an
   overshoot points at whoever stands beyond it, and resolving that sends the robot round
   its goal. Such others still count on the legs of step 4.
+- With `Mechanisms.keep_plan` (eifp-mpc's default), the plan built in step 4 gives way to
+  last cycle's via-points while those still hold (`_keep_previous`).
 - `ViaPlan.via_point_m` is the first via-point after P (where the robot heads now), with
   the side and the id of the threat that via-point resolves.
 
@@ -118,6 +120,15 @@ ESCAPE_BAND_M = 0.1
 two robots on each other's boundary otherwise alternate between escaping and planning
 round each other every cycle."""
 
+KEEP_PLAN_RATIO = 0.2
+"""With `Mechanisms.keep_plan`, last cycle's via-points are kept while every leg through
+them is still clear and the path through them is at most this fraction longer than the
+new plan's."""
+
+PASSED_VIA_M = 0.3
+"""A kept via-point closer to the robot than this, or behind it along the next leg, has
+been passed [m]."""
+
 PRIMARY_HOLD_S = 3.0
 """A head-on threat resolved first last cycle stays first while its TCPA is within this of
 the most imminent one's (`Mechanisms.commitment`): the order of two nearly simultaneous
@@ -163,6 +174,13 @@ class Mechanisms:
         braking_guard: eIFP-MPC's command speed is capped so the robot can still stop its
             own approach to every disc it faces (`agent.planning.safety`): the MPC's
             half-planes are soft and can trade a stopped neighbour's gap away.
+        keep_plan: last cycle's via-points are kept, minus those passed, while every leg
+            through them is still clear and the path is at most `KEEP_PLAN_RATIO` longer
+            than the one the cycle just built (`_keep_previous`). Rebuilt from scratch each
+            cycle, a plan in a crowd jumps between unrelated via-point sequences as the
+            ranking of nearly simultaneous threats reorders; a plan that still holds is
+            the same decision made again, so only a failing or clearly worse plan is
+            replaced.
     """
 
     direct_leg_check: bool = False
@@ -176,6 +194,7 @@ class Mechanisms:
     lines_arcs: bool = False
     clamp_heading: bool = False
     braking_guard: bool = False
+    keep_plan: bool = False
 
 
 PAPER_MECHANISMS = Mechanisms()
@@ -191,7 +210,7 @@ the corners of a lines-and-arcs reference, so it keeps the spline and the paper'
 EIFP_MPC_MECHANISMS = dataclasses.replace(
     EIFP_MECHANISMS, inflated_threats=True, commitment=True, via_margin_m=ARC_VIA_MARGIN_M,
     escape_band_m=ESCAPE_BAND_M, horizon_via_points=True, lines_arcs=True,
-    clamp_heading=False, braking_guard=True)
+    clamp_heading=False, braking_guard=True, keep_plan=True)
 """eifp-mpc in the default profile: every mechanism."""
 
 
@@ -337,6 +356,7 @@ def plan_via_points(
     encounter_rule: EncounterRule | None = None,
     mech: Mechanisms = PAPER_MECHANISMS,
     escape_id: int | None = None,
+    previous: ViaPlan | None = None,
 ) -> ViaPlan:
     """The IFP cycle (module docstring) with a pluggable candidate selector.
 
@@ -506,6 +526,15 @@ def plan_via_points(
     waypoints = np.array([(z.real, z.imag) for z in wps])
     resolved = tuple((int(others.ids[c[0]]), c[1]) for c in chosen if c is not None)
     head = chosen[1]
+    if mech.keep_plan and previous is not None and previous.resolved_sides:
+        kept = _keep_previous(previous, wps, speed, position, velocity, clearance, t_max_s,
+                              others.ids)
+        if kept is not None:
+            kept_wps, kept_sides = kept
+            return ViaPlan(status=PlanStatus.OK, waypoints_m=kept_wps,
+                           via_point_m=kept_wps[1].copy(), side=kept_sides[0][1],
+                           resolved_id=kept_sides[0][0], threats=threats,
+                           resolved_sides=kept_sides, threats_s=threats_s)
     return ViaPlan(
         status=PlanStatus.OK,
         waypoints_m=waypoints,
@@ -516,6 +545,46 @@ def plan_via_points(
         resolved_sides=resolved,
         threats_s=threats_s,
     )
+
+
+def _keep_previous(previous: ViaPlan, new_wps: list[complex], speed: float,
+                   position: np.ndarray, velocity: np.ndarray, clearance: np.ndarray,
+                   t_max_s: float, ids: np.ndarray,
+                   ) -> tuple[np.ndarray, tuple[tuple[int, Side], ...]] | None:
+    """Last cycle's via-points from the robot's position on, if they still hold.
+
+    They hold when every leg of [P, kept via-points, goal] is clear of every disc within
+    T_max at top speed (`threats.legs_threats`) and the path is at most `KEEP_PLAN_RATIO`
+    longer than the new plan's. Via-points the robot has passed are dropped first; None
+    when none is left, or the plan does not hold.
+    """
+    p, goal = new_wps[0], new_wps[-1]
+    vias = [complex(x, y) for x, y in previous.waypoints_m[1:-1]]
+    sides = list(previous.resolved_sides)
+    if len(vias) != len(sides):
+        return None
+    sensed = set(ids.tolist())
+    while vias:
+        nxt = vias[1] if len(vias) > 1 else goal
+        v = vias[0]
+        if abs(v - p) < PASSED_VIA_M or ((p - v) * (nxt - v).conjugate()).real > 0.0:
+            vias.pop(0)
+            sides.pop(0)
+        else:
+            break
+    if not vias or any(i not in sensed for i, _ in sides):
+        return None
+    wps = [p, *vias, goal]
+    length = sum(abs(b - a) for a, b in zip(wps, wps[1:]))
+    new_length = sum(abs(b - a) for a, b in zip(new_wps, new_wps[1:]))
+    if length > (1.0 + KEEP_PLAN_RATIO) * new_length:
+        return None
+    arrival = [0.0, *itertools.accumulate(abs(b - a) / speed for a, b in zip(wps, wps[1:]))]
+    hit, _ = legs_threats(wps[:-1], wps[1:], arrival[:-1], speed, position, velocity,
+                          clearance, t_max_s)
+    if hit.any():
+        return None
+    return np.array([(z.real, z.imag) for z in wps]), tuple(sides)
 
 
 COMMIT_RELEASE_FACTOR = 2.0

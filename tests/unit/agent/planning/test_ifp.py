@@ -439,6 +439,7 @@ def test_mechanisms_follow_the_planner_and_the_profile():
     mpc = mechanisms("eifp-mpc", CFG)
     assert mpc.inflated_threats and mpc.commitment and mpc.horizon_via_points
     assert mpc.lines_arcs and mpc.encounter_rules and mpc.escape_band_m > 0.0
+    assert mpc.keep_plan
     eifp = mechanisms("eifp", CFG)
     assert eifp.encounter_rules and not eifp.lines_arcs and not eifp.commitment
     ifp_ = mechanisms("ifp", CFG)
@@ -492,3 +493,63 @@ def test_goal_tcpa_filter_is_off_in_the_paper_config():
     default = plan_ifp(obs, PlannerConfig())
     assert default.threats and default.via_point_m is None
     assert plan_ifp(obs, paper_config()).via_point_m is not None
+
+
+# keep_plan: last cycle's via-points are kept while they hold.
+
+
+def _previous(via, side=Side.LEFT, other_id=1, start=(0.0, 0.0), goal=(10.0, 0.0)):
+    return ViaPlan(status=PlanStatus.OK, waypoints_m=np.array([start, via, goal], dtype=float),
+                   via_point_m=np.array(via, dtype=float), side=side, resolved_id=other_id,
+                   resolved_sides=((other_id, side),))
+
+
+def test_keep_plan_keeps_last_cycles_via_point_while_it_holds():
+    # A static disc on the straight line: by symmetry both tangents are as long, IFP takes
+    # RIGHT (y < 0). Last cycle went LEFT; that plan still clears the disc, so it stays.
+    obs = observe(others([(5.0, 0.0)]), v=1.0)
+    fresh = _plan(obs, _rules())
+    assert fresh.side is Side.RIGHT and fresh.via_point_m[1] < 0.0
+    prev = _previous((5.0, 0.8))
+    kept = _plan(obs, _rules(keep_plan=True), previous=prev)
+    assert kept.status is PlanStatus.OK
+    np.testing.assert_allclose(kept.waypoints_m, [[0, 0], [5.0, 0.8], [10, 0]])
+    assert kept.side is Side.LEFT and kept.resolved_id == 1
+    assert kept.resolved_sides == ((1, Side.LEFT),)
+    # Without the mechanism the previous plan is ignored.
+    assert _plan(obs, _rules(), previous=prev).side is Side.RIGHT
+
+
+def test_keep_plan_drops_a_plan_whose_leg_is_no_longer_clear():
+    # A second disc now sits on the first leg of last cycle's plan.
+    obs = observe(others([(5.0, 0.0), (2.5, 0.4)]), v=1.0)
+    plan = _plan(obs, _rules(keep_plan=True), previous=_previous((5.0, 0.8)))
+    assert not np.allclose(plan.waypoints_m[1], [5.0, 0.8])
+    for a, b in zip(plan.waypoints_m, plan.waypoints_m[1:]):
+        assert segment_clearance(a, b, (2.5, 0.4)) >= L - 1e-6 or plan.status is not PlanStatus.OK
+
+
+def test_keep_plan_drops_a_much_longer_plan_and_passed_or_unsensed_via_points():
+    obs = observe(others([(5.0, 0.0)]), v=1.0)
+    rules = _rules(keep_plan=True)
+    # A detour far above the disc: more than KEEP_PLAN_RATIO longer than the new plan.
+    assert _plan(obs, rules, previous=_previous((5.0, 4.0))).side is Side.RIGHT
+    # The via-point resolves someone no longer sensed.
+    assert _plan(obs, rules, previous=_previous((5.0, 0.8), other_id=7)).side is Side.RIGHT
+    # The robot is past the via-point along the next leg: it is dropped, nothing is left.
+    past = observe(others([(5.0, 0.0)]), x=5.5, y=0.9, v=1.0)
+    plan = _plan(past, rules, previous=_previous((5.0, 0.8)))
+    assert not any(np.allclose(w, [5.0, 0.8]) for w in plan.waypoints_m)
+
+
+def test_keep_plan_keeps_the_remaining_via_points_of_a_longer_plan():
+    # Two discs, two via-points last cycle; the robot has passed the first.
+    o = others([(3.0, 0.0), (7.0, 0.0)])
+    prev = ViaPlan(status=PlanStatus.OK,
+                   waypoints_m=np.array([[0, 0], [3.0, 0.8], [7.0, 0.8], [10, 0]], float),
+                   via_point_m=np.array([3.0, 0.8]), side=Side.LEFT, resolved_id=1,
+                   resolved_sides=((1, Side.LEFT), (2, Side.LEFT)))
+    obs = observe(o, x=3.4, y=0.85, v=1.0)
+    plan = _plan(obs, _rules(keep_plan=True), previous=prev)
+    np.testing.assert_allclose(plan.waypoints_m, [[3.4, 0.85], [7.0, 0.8], [10, 0]])
+    assert plan.resolved_id == 2 and plan.resolved_sides == ((2, Side.LEFT),)
