@@ -414,7 +414,8 @@ def _own_key_rules(p: str, tag: str, ids: Iterable[int]) -> list[dict[str, Any]]
     ]
 
 
-def _robots_acl(p: str, ids: list[int]) -> tuple[list, list, list]:
+def _robots_acl(p: str, ids: list[int]
+                ) -> tuple[list[dict[str, Any]], list[dict[str, Any]], list[dict[str, Any]]]:
     """(rules, subjects, policies) of robots `ids`: each its own keys, all the shared rules."""
     rules = _robot_side_rules(p)
     subjects: list[dict[str, Any]] = []
