@@ -17,7 +17,7 @@ Wall time measured on the 2-core development machine (Docker 20.10 on fuse-overl
 docker-compose 1.29.2), base image present: 2 min 16 s for the three tests with the build
 cache warm (build 2 s, setup D 50 s, the stopped-robot case 78 s); 3 min 32 s after a
 source change (78 s of rebuild). A change of the dependencies in pyproject.toml adds
-4-6 min, a build with no cache at all takes 3.5-6.5 min. The two-host case adds 38 s.
+4-6 min, a build with no cache at all takes 3.5-6.5 min. The two-host case adds about 30 s.
 """
 
 from __future__ import annotations
