@@ -234,6 +234,7 @@ def session_settings(
     connect_timeout_ms: int = -1,
     tls: TlsFiles | None = None,
     acl: Mapping[str, Any] | None = None,
+    zid: str | None = None,
 ) -> dict[str, str]:
     """Zenoh configuration every process of a run uses, as ``key -> JSON5 value``.
 
@@ -248,8 +249,12 @@ def session_settings(
         connect_timeout_ms: how long `zenoh.open` waits for a connect endpoint (-1: forever).
         tls: this process's certificate, key and the run's CA (`tls_settings`); endpoints
             must then be ``tls/...``. None: plain TCP, no authentication.
-        acl: the router's ``access_control`` block (`access_control`); router with `tls`
-            only, since the rules name certificate CNs.
+        acl: the router's ``access_control`` block (`access_control`,
+            `relay_access_control`); router with `tls` only, since the rules name
+            certificate CNs.
+        zid: this session's Zenoh id (`validate_zid`); None: a random one. The world takes
+            a fixed one when robots reach it through another router (they cannot learn it
+            from the router they dial).
     """
     import json
 
@@ -279,6 +284,8 @@ def session_settings(
         if mode != "router" or tls is None:
             raise ValueError("access control is for the router, with TLS (rules name CNs)")
         settings["access_control"] = json.dumps(dict(acl))
+    if zid is not None:
+        settings["id"] = json.dumps(validate_zid(zid))
     return settings
 
 
@@ -292,6 +299,10 @@ ORCHESTRATOR_CN = "orchestrator"
 """CN of the orchestrator's watch session (compose): read-only, like `OBSERVER_CN`."""
 OBSERVER_CN = "observer"
 """CN of a read-only tool (recorder, visualiser): may subscribe to everything, publish nothing."""
+ROUTER_CN_PREFIX = "router-"
+"""CNs of relay routers are ``router-<name>`` (`router_cn`)."""
+_ROUTER_NAME_RE = re.compile(r"[a-z0-9][a-z0-9-]{0,31}")
+_ZID_RE = re.compile(r"[1-9a-f][0-9a-f]{0,31}")
 MAX_SEQ_JUMP = 64
 """Largest step a command's ``seq`` may take above the last one the world accepted from that
 robot (6.4 s of lost commands at 10 Hz); a robot's first command has ``seq <= MAX_SEQ_JUMP``.
@@ -311,6 +322,23 @@ rate from 0)."""
 def robot_cn(robot_id: int) -> str:
     """Certificate common name of robot `robot_id` (``robot-<id>``)."""
     return f"robot-{_check_robot_id(robot_id)}"
+
+
+def router_cn(name: str) -> str:
+    """Certificate common name of the relay router `name` (``router-<name>``): a router on
+    another host through which some robots reach the world (`relay_access_control`)."""
+    if not isinstance(name, str) or _ROUTER_NAME_RE.fullmatch(name) is None:
+        raise ValueError(f"bad router name {name!r}: 1..32 chars of [a-z0-9-], starting with "
+                         "a letter or digit")
+    return f"{ROUTER_CN_PREFIX}{name}"
+
+
+def validate_zid(zid: object) -> str:
+    """Return `zid` if Zenoh accepts it as a session id: 1..32 lowercase hex digits, no
+    leading zero."""
+    if not isinstance(zid, str) or _ZID_RE.fullmatch(zid) is None:
+        raise ValueError(f"bad Zenoh id {zid!r}: 1..32 lowercase hex digits, no leading zero")
+    return zid
 
 
 @dataclass(frozen=True)
@@ -346,27 +374,17 @@ def _acl_rule(rid: str, messages: list[str], flows: list[str], keys: list[str]
             "key_exprs": keys}
 
 
-def access_control(run_id: str, robot_ids: Iterable[int]) -> dict[str, Any]:
-    """The ``access_control`` block of the world's router for one run (default deny).
+ACL_MESSAGES = ("put", "delete", "declare_subscriber", "declare_queryable", "query", "reply",
+                "liveliness_token", "declare_liveliness_subscriber", "liveliness_query")
+"""Every message kind Zenoh's access control filters."""
+_ROBOT_SIDE_RULES = ("robot-sub", "robot-recv", "alive-watch", "alive-see", "robot-routes-sub",
+                     "robot-routes-qbl")
 
-    Rules are evaluated by the router against the remote end of each client link, by the CN
-    of the client's certificate: ``ingress`` is what a client sends, ``egress`` what the
-    router sends to it. The world is the router's own session, not a subject: nobody but the
-    world can publish poses or control, or answer configuration queries, because no client
-    is allowed to.
 
-    - ``robot-<i>``: put ``cmd/<i>`` and ``debug/<i>``; query ``config/<i>`` (and receive
-      the reply); declare the token ``alive/robot/<i>``; subscribe to ``poses/**`` and
-      ``control``; watch ``alive/**``. Robots see subscriber and queryable declarations
-      (a declared Publisher or Querier only sends once it has matched one); they cannot
-      put, query or declare tokens anywhere else.
-    - ``observer``: subscribe to and receive everything under ``eifp/<run>/``; nothing else.
-    - ``orchestrator``: the same read-only rights as the observer (its live view, compose
-      ``await --live``, republishes the run); nothing else.
-    """
-    p = f"{KEY_ROOT}/{validate_run_id(run_id)}"
-    ids = sorted({_check_robot_id(i) for i in robot_ids})
-    rules = [
+def _robot_side_rules(p: str) -> list[dict[str, Any]]:
+    """Rules shared by every robot and every relay (which carries robots): subscribe to and
+    receive poses and control, watch liveliness, see the world's declarations."""
+    return [
         _acl_rule("robot-sub", ["declare_subscriber"], ["ingress"],
                   [f"{p}/poses/**", f"{p}/control"]),
         _acl_rule("robot-recv", ["put"], ["egress"], [f"{p}/poses/**", f"{p}/control"]),
@@ -378,28 +396,88 @@ def access_control(run_id: str, robot_ids: Iterable[int]) -> dict[str, Any]:
         # Publisher / Querier never matches and drops every message, silently.
         _acl_rule("robot-routes-sub", ["declare_subscriber"], ["egress"], [f"{p}/**"]),
         _acl_rule("robot-routes-qbl", ["declare_queryable"], ["egress"], [f"{p}/config/*"]),
-        _acl_rule("obs-sub", ["declare_subscriber"], ["ingress"], [f"{p}/**"]),
-        _acl_rule("obs-recv", ["put", "delete"], ["egress"], [f"{p}/**"]),
     ]
+
+
+def _own_key_rules(p: str, tag: str, ids: Iterable[int]) -> list[dict[str, Any]]:
+    """The keys only robots `ids` may use: put ``cmd/<i>`` and ``debug/<i>``, query
+    ``config/<i>`` (and receive the reply), declare the token ``alive/robot/<i>``."""
+    ids = list(ids)
+    return [
+        _acl_rule(f"cmd-{tag}", ["put"], ["ingress"],
+                  [k for i in ids for k in (f"{p}/cmd/{i}", f"{p}/debug/{i}")]),
+        _acl_rule(f"config-{tag}", ["query"], ["ingress"], [f"{p}/config/{i}" for i in ids]),
+        _acl_rule(f"config-{tag}-reply", ["reply"], ["egress"],
+                  [f"{p}/config/{i}" for i in ids]),
+        _acl_rule(f"alive-{tag}", ["liveliness_token"], ["ingress"],
+                  [f"{p}/alive/robot/{i}" for i in ids]),
+    ]
+
+
+def _robots_acl(p: str, ids: list[int]
+                ) -> tuple[list[dict[str, Any]], list[dict[str, Any]], list[dict[str, Any]]]:
+    """(rules, subjects, policies) of robots `ids`: each its own keys, all the shared rules."""
+    rules = _robot_side_rules(p)
     subjects: list[dict[str, Any]] = []
     policies: list[dict[str, Any]] = []
     for i in ids:
-        rules += [
-            _acl_rule(f"cmd-{i}", ["put"], ["ingress"], [f"{p}/cmd/{i}", f"{p}/debug/{i}"]),
-            _acl_rule(f"config-{i}", ["query"], ["ingress"], [f"{p}/config/{i}"]),
-            _acl_rule(f"config-{i}-reply", ["reply"], ["egress"], [f"{p}/config/{i}"]),
-            _acl_rule(f"alive-{i}", ["liveliness_token"], ["ingress"],
-                      [f"{p}/alive/robot/{i}"]),
-        ]
+        own = _own_key_rules(p, str(i), [i])
+        rules += own
         subjects.append({"id": f"s-robot-{i}", "cert_common_names": [robot_cn(i)]})
         policies.append({"id": f"p-robot-{i}", "subjects": [f"s-robot-{i}"],
-                         "rules": [f"cmd-{i}", f"config-{i}", f"config-{i}-reply",
-                                   f"alive-{i}"]})
+                         "rules": [r["id"] for r in own]})
     if ids:
         subjects.append({"id": "s-robots", "cert_common_names": [robot_cn(i) for i in ids]})
         policies.append({"id": "p-robots", "subjects": ["s-robots"],
-                         "rules": ["robot-sub", "robot-recv", "alive-watch", "alive-see",
-                                   "robot-routes-sub", "robot-routes-qbl"]})
+                         "rules": list(_ROBOT_SIDE_RULES)})
+    return rules, subjects, policies
+
+
+def access_control(run_id: str, robot_ids: Iterable[int],
+                   relays: Mapping[str, Iterable[int]] | None = None) -> dict[str, Any]:
+    """The ``access_control`` block of the world's router for one run (default deny).
+
+    Rules are evaluated by the router against the remote end of each link, by the CN of
+    the certificate it presented: ``ingress`` is what the remote sends, ``egress`` what the
+    router sends to it. The world is the router's own session, not a subject: nobody but the
+    world can publish poses or control, or answer configuration queries, because no remote
+    is allowed to.
+
+    - ``robot-<i>``: put ``cmd/<i>`` and ``debug/<i>``; query ``config/<i>`` (and receive
+      the reply); declare the token ``alive/robot/<i>``; subscribe to ``poses/**`` and
+      ``control``; watch ``alive/**``. Robots see subscriber and queryable declarations
+      (a declared Publisher or Querier only sends once it has matched one); they cannot
+      put, query or declare tokens anywhere else.
+    - ``router-<name>`` (`relays`: name -> the robot ids behind that relay router, on
+      another host): the union of those robots' rights and nothing more, so a relay's
+      certificate can speak only for its own robots (`relay_access_control` is the
+      relay's side).
+    - ``observer``: subscribe to and receive everything under ``eifp/<run>/``; nothing else.
+    - ``orchestrator``: the same read-only rights as the observer (its live view, compose
+      ``await --live``, republishes the run); nothing else.
+    """
+    p = f"{KEY_ROOT}/{validate_run_id(run_id)}"
+    ids = sorted({_check_robot_id(i) for i in robot_ids})
+    rules, subjects, policies = _robots_acl(p, ids)
+    rules += [
+        _acl_rule("obs-sub", ["declare_subscriber"], ["ingress"], [f"{p}/**"]),
+        _acl_rule("obs-recv", ["put", "delete"], ["egress"], [f"{p}/**"]),
+    ]
+    behind: dict[int, str] = {}
+    for name, relay_ids in (relays or {}).items():
+        cn = router_cn(name)
+        mine = sorted({_check_robot_id(i) for i in relay_ids})
+        if not mine or not set(mine) <= set(ids):
+            raise ValueError(f"relay {cn}: robots {mine} must be robots of the run {ids}")
+        for i in mine:
+            if i in behind:
+                raise ValueError(f"robot {i} is behind both {behind[i]} and {cn}")
+            behind[i] = cn
+        own = _own_key_rules(p, cn, mine)
+        rules += own
+        subjects.append({"id": f"s-{cn}", "cert_common_names": [cn]})
+        policies.append({"id": f"p-{cn}", "subjects": [f"s-{cn}"],
+                         "rules": [r["id"] for r in own] + list(_ROBOT_SIDE_RULES)})
     subjects += [{"id": "s-observer", "cert_common_names": [OBSERVER_CN]},
                  {"id": "s-orchestrator", "cert_common_names": [ORCHESTRATOR_CN]}]
     policies += [
@@ -412,26 +490,51 @@ def access_control(run_id: str, robot_ids: Iterable[int]) -> dict[str, Any]:
             "subjects": subjects, "policies": policies}
 
 
+def relay_access_control(run_id: str, robot_ids: Iterable[int],
+                         upstream_cn: str = WORLD_CN) -> dict[str, Any]:
+    """The ``access_control`` block of a relay router: robots `robot_ids` reach the world
+    through it (default deny).
+
+    - ``robot-<i>`` for `robot_ids`: the same rights as on the world's router
+      (`access_control`), enforced here, where their messages enter the router network.
+      Any other identity of the run may connect and do nothing.
+    - `upstream_cn` (the world's router, which this relay dials): everything under
+      ``eifp/<run>/``, both ways. What comes from there was filtered by the world's router
+      on its own links; what goes there was filtered here on the robots' links.
+    """
+    p = f"{KEY_ROOT}/{validate_run_id(run_id)}"
+    ids = sorted({_check_robot_id(i) for i in robot_ids})
+    if not ids:
+        raise ValueError("a relay needs at least one robot behind it")
+    rules, subjects, policies = _robots_acl(p, ids)
+    rules.append(_acl_rule("upstream", list(ACL_MESSAGES), ["ingress", "egress"], [f"{p}/**"]))
+    subjects.append({"id": "s-upstream", "cert_common_names": [upstream_cn]})
+    policies.append({"id": "p-upstream", "subjects": ["s-upstream"], "rules": ["upstream"]})
+    return {"enabled": True, "default_permission": "deny", "rules": rules,
+            "subjects": subjects, "policies": policies}
+
+
 def tls_settings(mode: Literal["router", "client"], tls: TlsFiles) -> dict[str, str]:
     """The TLS part of a session's settings (`session_settings` adds it).
 
-    Both sides require mutual TLS: the router lists only ``tls`` as a link protocol (no
+    Both sides require mutual TLS: a router lists only ``tls`` as a link protocol (no
     unauthenticated door), a client presents its certificate (``enable_mtls`` on the client
-    too, else it sends none) and checks the world's name against its certificate's SANs.
+    too, else it sends none) and checks the router's name against its certificate's SANs. A
+    router that dials another router (a relay dialling the world) presents the same
+    certificate and checks the name the same way.
     """
     import json
 
     prefix = "transport/link/tls"
     out = {f"{prefix}/root_ca_certificate": json.dumps(str(tls.ca)),
-           f"{prefix}/enable_mtls": "true"}
+           f"{prefix}/enable_mtls": "true",
+           f"{prefix}/connect_certificate": json.dumps(str(tls.cert)),
+           f"{prefix}/connect_private_key": json.dumps(str(tls.key)),
+           f"{prefix}/verify_name_on_connect": "true"}
     if mode == "router":
         out[f"{prefix}/listen_certificate"] = json.dumps(str(tls.cert))
         out[f"{prefix}/listen_private_key"] = json.dumps(str(tls.key))
         out["transport/link/protocols"] = json.dumps(["tls"])
-    else:
-        out[f"{prefix}/connect_certificate"] = json.dumps(str(tls.cert))
-        out[f"{prefix}/connect_private_key"] = json.dumps(str(tls.key))
-        out[f"{prefix}/verify_name_on_connect"] = "true"
     return out
 
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 import math
 
-from protocol import ProtocolError, validate_run_id
+from protocol import ProtocolError, router_cn, validate_run_id, validate_zid
 from world.sim.link import LinkFaults
 
 
@@ -55,6 +55,41 @@ def positive_int(text: str) -> int:
     if value < 1:
         raise argparse.ArgumentTypeError(f"must be a positive integer, got {text!r}")
     return value
+
+
+def robot_ids(text: str) -> tuple[int, ...]:
+    """Distinct robot ids >= 0: comma-separated ids or ranges, e.g. ``2,3`` or ``8-15,20``."""
+    ids: list[int] = []
+    try:
+        for part in (p.strip() for p in text.split(",")):
+            lo, sep, hi = part.partition("-")
+            ids += range(int(lo), int(hi) + 1) if sep else [int(part)]
+    except ValueError:
+        ids = []
+    if not ids or min(ids) < 0 or len(set(ids)) != len(ids):
+        raise argparse.ArgumentTypeError(f"expected distinct robot ids >= 0 (e.g. 2,3 or 8-15), "
+                                         f"got {text!r}")
+    return tuple(ids)
+
+
+def relay(text: str) -> tuple[str, tuple[int, ...]]:
+    """``NAME=IDS``: the relay router ``router-<NAME>`` carries robots IDS (`robot_ids`)."""
+    name, sep, ids = text.partition("=")
+    if not sep:
+        raise argparse.ArgumentTypeError(f"expected NAME=IDS (e.g. b=2,3), got {text!r}")
+    try:
+        router_cn(name)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from exc
+    return name, robot_ids(ids)
+
+
+def zid(text: str) -> str:
+    """A Zenoh session id: 1..32 lowercase hex digits, no leading zero."""
+    try:
+        return validate_zid(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from exc
 
 
 def robot_counts(text: str) -> list[int]:

@@ -168,7 +168,8 @@ class AgentOptions:
             TLS (the endpoint is then ``tls/...``). None: plain TCP.
         world_zid: the world's Zenoh id; poses, control and configuration replies from any
             other session are refused. None: the router this robot is connected to (the
-            world is the run's router).
+            world is the run's router); a robot behind a relay router (`world.router`)
+            needs it.
         plan: False: command a stop every cycle without planning (``--no-plan``: measures
             the process's own cost per cycle, `orchestrator bench --process`).
     """
@@ -218,8 +219,9 @@ def parse_args(argv: list[str] | None = None) -> AgentOptions:
                         help="plan on the poses as stamped (no forward prediction by age)")
     parser.add_argument("--tls", type=Path, default=None, metavar="DIR",
                         help="mutual TLS with DIR/ca.pem, DIR/robot-<id>.pem, DIR/robot-<id>.key")
-    parser.add_argument("--world-zid", default=None, metavar="HEX",
-                        help="the world's Zenoh id (default: the router connected to)")
+    parser.add_argument("--world-zid", type=argtypes.zid, default=None, metavar="HEX",
+                        help="the world's Zenoh id (default: the router connected to; behind "
+                             "a relay router, the world's --zid)")
     parser.add_argument("--no-plan", action="store_true",
                         help="sense and command a stop every cycle without planning (to "
                              "measure the process's own cost)")
@@ -311,6 +313,9 @@ def fetch_config(session: zenoh.Session, keys: RunKeys, robot_id: int, stop: Sto
                     counts["refused_config"] = counts.get("refused_config", 0) + 1
                 log.warning("robot %d: refused a configuration reply from %s (not the world)",
                             robot_id, reply.replier_id)
+                problem = (f"every reply came from {reply.replier_id.zid}, not the world "
+                           f"({world_zid}); behind a relay router, give the world's id with "
+                           "--world-zid")
                 continue
             if reply.ok is None:
                 problem = f"world replied an error: {reply.err.payload.to_string()}"

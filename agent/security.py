@@ -13,8 +13,10 @@ CA (``--tls-ca DIR`` holding ``ca.pem`` and ``ca.key``) the certificates are sig
 instead, so that hosts which share that CA can join. Keys are written 0600 from the start
 (never world-readable, not even for a moment), directories 0700.
 
-Only the world's certificate has subjectAltNames: the names clients dial (``world`` in
-compose, ``localhost``, ``127.0.0.1``, and any ``--hosts``). rustls checks the dialled name
+Only routers' certificates have subjectAltNames: the names they are dialled by. The world's:
+``world`` in compose, ``localhost``, ``127.0.0.1``, and any ``--hosts``; a relay router's
+(``router-<name>``, on another host, `protocol.relay_access_control`): ``router-<name>``,
+``localhost``, ``127.0.0.1`` and the names of its host. rustls checks the dialled name
 against the SANs only, never the CN.
 """
 
@@ -23,7 +25,7 @@ from __future__ import annotations
 import datetime as dt
 import ipaddress
 import os
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 
 from cryptography import x509
@@ -31,7 +33,7 @@ from cryptography.hazmat.primitives import hashes, serialization
 from cryptography.hazmat.primitives.asymmetric import ec
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
-from protocol import OBSERVER_CN, ORCHESTRATOR_CN, WORLD_CN, TlsFiles, robot_cn
+from protocol import OBSERVER_CN, ORCHESTRATOR_CN, WORLD_CN, TlsFiles, robot_cn, router_cn
 
 CA_CERT = "ca.pem"
 CA_KEY = "ca.key"
@@ -158,13 +160,16 @@ class RunCA:
                 _key_pem(key))
 
 
-def run_identities(robot_ids: Iterable[int]) -> list[str]:
-    """Every CN of a run: the world, the orchestrator, the observer, each robot."""
-    return [WORLD_CN, ORCHESTRATOR_CN, OBSERVER_CN, *(robot_cn(int(i)) for i in robot_ids)]
+def run_identities(robot_ids: Iterable[int], relays: Iterable[str] = ()) -> list[str]:
+    """Every CN of a run: the world, the orchestrator, the observer, each robot, each relay
+    router (by name)."""
+    return [WORLD_CN, ORCHESTRATOR_CN, OBSERVER_CN, *(robot_cn(int(i)) for i in robot_ids),
+            *(router_cn(name) for name in relays)]
 
 
 def make_run_pki(directory: Path, run_id: str, robot_ids: Iterable[int], *,
                  world_hosts: Iterable[str] = DEFAULT_WORLD_HOSTS,
+                 relays: Mapping[str, Iterable[str]] | None = None,
                  ca_dir: Path | None = None, split: bool = False) -> dict[str, TlsFiles]:
     """Make (or, with `ca_dir`, sign with a given CA) every certificate of a run.
 
@@ -172,7 +177,10 @@ def make_run_pki(directory: Path, run_id: str, robot_ids: Iterable[int], *,
         directory: where the files go (created 0700).
         run_id: the run.
         robot_ids: one ``robot-<id>`` certificate each.
-        world_hosts: SANs of the world's certificate (every name clients dial it by).
+        world_hosts: SANs of the world's certificate (every name clients and relays dial
+            it by).
+        relays: relay router name -> the names its host is dialled by (SANs of
+            ``router-<name>``, besides ``router-<name>``, ``localhost`` and ``127.0.0.1``).
         ca_dir: a user's CA (``ca.pem``, ``ca.key``); None: a fresh CA whose key is never
             written.
         split: one subdirectory per identity (``<directory>/<cn>/``: ``ca.pem``,
@@ -187,13 +195,17 @@ def make_run_pki(directory: Path, run_id: str, robot_ids: Iterable[int], *,
     os.chmod(d, 0o700)
     ca = RunCA.load(Path(ca_dir), run_id) if ca_dir is not None else RunCA(run_id)
     out: dict[str, TlsFiles] = {}
-    hosts = list(dict.fromkeys([*DEFAULT_WORLD_HOSTS, *world_hosts]))
-    for cn in run_identities(robot_ids):
+    relays = dict(relays or {})
+    sans = {WORLD_CN: list(dict.fromkeys([*DEFAULT_WORLD_HOSTS, *world_hosts]))}
+    for name, hosts in relays.items():
+        cn = router_cn(name)
+        sans[cn] = list(dict.fromkeys([cn, "localhost", "127.0.0.1", *hosts]))
+    for cn in run_identities(robot_ids, relays):
         where = d / cn if split else d
         where.mkdir(exist_ok=True)
         os.chmod(where, 0o700)
         (where / CA_CERT).write_bytes(ca.cert_pem)
-        cert_pem, key_pem = ca.issue(cn, hosts if cn == WORLD_CN else ())
+        cert_pem, key_pem = ca.issue(cn, sans.get(cn, ()))
         files = TlsFiles.in_dir(where, cn)
         Path(files.cert).write_bytes(cert_pem)
         _write_private(Path(files.key), key_pem)

@@ -1,11 +1,13 @@
 #!/usr/bin/env bash
 # Build and run the docker-compose demo, then copy the run out of the volume.
 #
-# Usage: docker/demo.sh [--offline] [--setup d|g] [--time-scale X] [--keep]
+# Usage: docker/demo.sh [--offline] [--setup d|g | --routers] [--time-scale X] [--keep]
 #   --offline       no registry: build the local base image (docker/build-base-image.sh,
 #                   reused when present) and download the wheels on the host
 #                   (docker/fetch-wheels.sh); BASE_IMAGE defaults to eifp-swarm-base:bookworm
 #   --setup g       setup G with 16 robot containers (compose.setup-g.yaml); default d
+#   --routers       setup D on two "hosts" joined through Zenoh routers
+#                   (compose.routers.yaml: robots 2-3 behind a relay router)
 #   --time-scale X  sim seconds per wall second (default 1)
 #   --keep          leave the containers and the volume (default: `down -v` at the end)
 # Environment: BASE_IMAGE (default python:3.11-slim, or the local base with --offline),
@@ -23,6 +25,7 @@ while [ "$#" -gt 0 ]; do
   case "$1" in
     --offline) offline=1 ;;
     --setup) setup=${2:?--setup needs d or g}; shift ;;
+    --routers) setup=routers ;;
     --time-scale) TIME_SCALE=${2:?--time-scale needs a value}; shift ;;
     --keep) keep=1 ;;
     -h|--help) awk 'NR > 1 && /^#/ { sub(/^# ?/, ""); print; next } NR > 1 { exit }' "$0"; exit 0 ;;
@@ -35,6 +38,7 @@ files=(-f compose.yaml)
 case "$setup" in
   d|setup_d) setup=d ;;
   g|setup_g) setup=g; files+=(-f compose.setup-g.yaml) ;;
+  routers) files=(-f compose.routers.yaml) ;;
   *) echo "demo: --setup must be d or g, got $setup" >&2; exit 2 ;;
 esac
 

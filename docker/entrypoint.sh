@@ -9,6 +9,10 @@
 #                 run's access control), recording the run into <RUNS_DIR>/<RUN_ID>; it
 #                 starts once every robot is alive
 #   robot         `python -m agent` for robot ROBOT_ID, a client of the router at CONNECT
+#   router        `python -m world.router`: a relay router on another "host" for the robots
+#                 ROUTER_ROBOTS, certificate router-ROUTER_NAME, listening on LISTEN and
+#                 dialling the world's router at CONNECT (compose.routers.yaml); it leaves
+#                 once the run is over
 #   orchestrator  `orchestrator compose await`: waits for every robot, follows the run,
 #                 writes metrics.json, trajectory.png and report.txt into the run directory
 #                 and exits with the run's status (0 all arrived without contact, 1 not,
@@ -19,8 +23,10 @@
 # in the compose file; the setup must have as many robots) [not checked], AGENTS, PLANNER,
 # SEED [0], ROBOT_ID (robot), CONNECT [tls/world:7447], LISTEN [tls/0.0.0.0:7447],
 # RUNS_DIR [/runs], TIME_SCALE [1], STARTUP_TIMEOUT_S [300], TLS_DIR (this service's
-# certificate, key and the run's CA) [/tls], TLS_ROOT (certs) [/tls]. Extra arguments go
-# to the role's command.
+# certificate, key and the run's CA) [/tls], TLS_ROOT (certs) [/tls], RELAYS (certs, world:
+# the relay routers and their robots, e.g. "b=2,3 c=4-7") [none], WORLD_ZID (world: its
+# Zenoh id; robot: the world's, needed behind a relay) [random / the router dialled],
+# ROUTER_NAME and ROUTER_ROBOTS (router). Extra arguments go to the role's command.
 set -eu
 
 role=${1:-help}
@@ -63,6 +69,9 @@ case "$role" in
       echo "eifp-entrypoint: the certs role needs ROBOTS in the environment" >&2
       exit 2
     fi
+    for relay in ${RELAYS:-}; do
+      set -- "$@" --relay "${relay%%=*}"
+    done
     exec orchestrator compose certs --run "$RUN_ID" --robots "$ROBOTS" \
       --out "${TLS_ROOT:-/tls}" "$@"
     ;;
@@ -74,6 +83,10 @@ case "$role" in
     orchestrator compose scenario $(setup_args)
     unset IFS
     await_certs world
+    for relay in ${RELAYS:-}; do
+      set -- "$@" --relay "$relay"
+    done
+    [ -n "${WORLD_ZID:-}" ] && set -- "$@" --zid "$WORLD_ZID"
     exec python -m world --run "$RUN_ID" \
       --scenario "$RUNS_DIR/$RUN_ID/scenario.input.yaml" --out "$RUNS_DIR/$RUN_ID" \
       --listen "$LISTEN" --time-scale "$TIME_SCALE" --wait-robots-s "$STARTUP_TIMEOUT_S" \
@@ -85,8 +98,19 @@ case "$role" in
       exit 2
     fi
     await_certs "robot-$ROBOT_ID"
+    [ -n "${WORLD_ZID:-}" ] && set -- "$@" --world-zid "$WORLD_ZID"
     exec python -m agent --run "$RUN_ID" --id "$ROBOT_ID" --connect "$CONNECT" \
       --startup-timeout-s "$STARTUP_TIMEOUT_S" --tls "$TLS_DIR" "$@"
+    ;;
+  router)
+    if [ -z "${ROUTER_NAME:-}" ] || [ -z "${ROUTER_ROBOTS:-}" ]; then
+      echo "eifp-entrypoint: the router role needs ROUTER_NAME and ROUTER_ROBOTS" >&2
+      exit 2
+    fi
+    await_certs "router-$ROUTER_NAME"
+    exec python -m world.router --run "$RUN_ID" --name "$ROUTER_NAME" \
+      --robots "$ROUTER_ROBOTS" --listen "$LISTEN" --connect "$CONNECT" --tls "$TLS_DIR" \
+      --wait-world-s "$STARTUP_TIMEOUT_S" "$@"
     ;;
   orchestrator)
     IFS='

@@ -5,9 +5,11 @@ processes that only sense poses and send velocity commands (see `protocol` for t
 
 Lifecycle:
 1. Load the scenario, open the run directory (`RunRecorder`), open a Zenoh session (by
-   default a router listening on one TCP endpoint; with ``--connect`` a client of an
-   existing router), declare the configuration queryable, the command subscriber, the
-   robot liveliness subscriber (history on) and finally the world's own liveliness token.
+   default a router listening on one endpoint, which with ``--tls`` enforces the run's
+   access control, relay routers of other hosts included (``--relay``); without TLS,
+   ``--connect`` makes it a client of an existing router), declare the configuration
+   queryable, the command subscriber, the robot liveliness subscriber (history on) and
+   finally the world's own liveliness token.
 2. Wait until every robot's liveliness token is present (deadline ``--wait-robots-s``),
    then publish a ``start`` `ControlMsg`.
 3. Fixed-rate loop: each tick is ``1 / rate_hz`` of sim time, paced to
@@ -85,6 +87,7 @@ from protocol import (
     check_seq,
     pose_slot_count,
     pose_slot_of_tick,
+    router_cn,
     session_settings,
 )
 from world.recorder import RunRecorder
@@ -125,7 +128,13 @@ class WorldOptions:
         fault_seed: seeds the command links (with the link kind and the robot id).
         tls_dir: directory with ``ca.pem``, ``world.pem``, ``world.key``: mutual TLS, and
             as a router the run's access control (`protocol.access_control`); endpoints
-            are then ``tls/...``. None: plain TCP, no authentication.
+            are then ``tls/...``. None: plain TCP, no authentication. Not with `connect`:
+            the world's own router is what enforces the access control.
+        relays: relay routers on other hosts (``python -m world.router``), as
+            ``(name, robot ids behind it)``: router ``router-<name>`` may speak for those
+            robots only (`protocol.access_control`).
+        zid: the session's Zenoh id (None: random). Robots behind a relay check the source
+            of poses against it (``python -m agent --world-zid``).
     """
 
     run_id: str
@@ -142,6 +151,8 @@ class WorldOptions:
     link: LinkFaults = field(default_factory=LinkFaults)
     fault_seed: int = 0
     tls_dir: Path | None = None
+    relays: tuple[tuple[str, tuple[int, ...]], ...] = ()
+    zid: str | None = None
 
 
 def parse_args(argv: list[str] | None = None) -> WorldOptions:
@@ -171,6 +182,14 @@ def parse_args(argv: list[str] | None = None) -> WorldOptions:
     parser.add_argument("--tls", type=Path, default=None, metavar="DIR",
                         help="mutual TLS with DIR/ca.pem, DIR/world.pem, DIR/world.key, and "
                              "the run's access control (endpoints tls/HOST:PORT)")
+    parser.add_argument("--relay", type=argtypes.relay, action="append", default=[],
+                        metavar="NAME=IDS",
+                        help="robots IDS (e.g. 2,3 or 8-15) reach the world through the relay "
+                             "router NAME on another host (python -m world.router; its "
+                             "certificate is router-NAME); repeatable")
+    parser.add_argument("--zid", type=argtypes.zid, default=None, metavar="HEX",
+                        help="the session's Zenoh id (robots behind a relay are given it "
+                             "with --world-zid); default: random")
     args = parser.parse_args(argv)
     listen = None if args.connect else (args.listen or DEFAULT_ENDPOINT)
     return WorldOptions(
@@ -188,6 +207,8 @@ def parse_args(argv: list[str] | None = None) -> WorldOptions:
         link=argtypes.link_faults(args),
         fault_seed=args.fault_seed,
         tls_dir=args.tls,
+        relays=tuple(args.relay),
+        zid=args.zid,
     )
 
 
@@ -536,6 +557,7 @@ class WorldNode:
         self._event("world_ready", run=self.options.run_id, n_robots=len(self.robot_ids),
                     endpoint=self.options.listen or self.options.connect,
                     tls=self.options.tls_dir is not None, zid=str(self.session_zid),
+                    relays={router_cn(name): list(ids) for name, ids in self.options.relays},
                     wall=time.time())
         log.info("run %s: waiting for %d robots", self.options.run_id, len(self.robot_ids))
         if not self.wait_for_robots():
@@ -571,27 +593,40 @@ def _tally(counts: dict[str, int], name: str) -> None:
 
 def world_settings(options: WorldOptions, scenario: Scenario) -> dict[str, str]:
     """The world's Zenoh settings: a router on `options.listen` (with TLS: mutual TLS and the
-    run's access control), or a client of `options.connect`.
+    run's access control, relays included), or, without TLS only, a client of
+    `options.connect`.
 
     Raises:
-        ValueError: a plain endpoint with TLS, or a TLS file that is missing or unreadable.
+        ValueError: a plain endpoint with TLS, TLS with `connect` (the access control is
+            enforced by the world's own router), relays without TLS or naming robots that
+            are not in the scenario, or a TLS file that is missing or unreadable.
     """
     tls = None
     if options.tls_dir is not None:
+        if options.connect:
+            raise ValueError("--tls with --connect: the world's own router enforces the run's "
+                             "access control; robots on other hosts reach it through a relay "
+                             "router (python -m world.router), so the world listens")
         tls = TlsFiles.in_dir(options.tls_dir, WORLD_CN)
         problem = check_tls_files(tls)
         if problem:
             raise ValueError(f"--tls {options.tls_dir}: {problem}")
+    if options.relays and tls is None:
+        raise ValueError("--relay needs --tls: relays are told apart by their certificates")
     if options.connect:
         return session_settings(mode="client", connect=[options.connect],
-                                connect_timeout_ms=int(options.wait_robots_s * 1e3), tls=tls)
+                                connect_timeout_ms=int(options.wait_robots_s * 1e3),
+                                zid=options.zid)
     listen = options.listen or DEFAULT_ENDPOINT
     host = listen.partition("/")[2].rpartition(":")[0].strip("[]")
     if tls is None and host in ("0.0.0.0", "::"):
         raise ValueError(f"--listen {listen}: every interface only with --tls (mutual TLS "
                          "and access control); plain TCP listens on one address")
-    acl = access_control(options.run_id, [r.id for r in scenario.robots]) if tls else None
-    return session_settings(mode="router", listen=[listen], tls=tls, acl=acl)
+    acl = None
+    if tls is not None:
+        acl = access_control(options.run_id, [r.id for r in scenario.robots],
+                             relays=dict(options.relays))
+    return session_settings(mode="router", listen=[listen], tls=tls, acl=acl, zid=options.zid)
 
 
 def run_world(options: WorldOptions) -> int:

@@ -100,12 +100,19 @@ def run_summary(metrics: dict[str, Any], label: str) -> str:
     rows = [[label_, metrics.get(k)] for k, label_ in keys]
     rows[1][1] = f"{metrics.get('arrived')}/{metrics.get('robots')}"
     wall = metrics.get("wall_latency_ms") or {}
-    for stage, label_ in (("sense_to_act", "sense to act"), ("end_to_end", "pose to applied"),
-                          ("plan", "plan (wall)")):
+    stages = (("sense_to_act", "sense to act"), ("end_to_end", "pose to applied"),
+              ("plan", "plan (wall)"), ("transport", "on the wire, both ways"))
+    for stage, label_ in stages:
         if stage in wall:
             w = wall[stage]
             rows.append([f"{label_} p50/p99/max [wall ms]",
                          f"{w['p50']:.1f} / {w['p99']:.1f} / {w['max']:.1f}"])
+    for router, by_stage in (metrics.get("wall_latency_ms_by_router") or {}).items():
+        for stage, label_ in (stages[0], stages[3]):
+            if stage in by_stage:
+                w = by_stage[stage]
+                rows.append([f"{label_}, robots on {router} p50/p99/max [wall ms]",
+                             f"{w['p50']:.2f} / {w['p99']:.2f} / {w['max']:.2f}"])
     end = metrics.get("end") or {}
     rows += [["end reason", end.get("reason")],
              ["robots lost", ", ".join(map(str, end.get("lost") or [])) or "none"],

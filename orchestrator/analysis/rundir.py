@@ -27,7 +27,9 @@ from orchestrator.analysis.metrics import (
     RunSpec,
     Trajectory,
     compute_metrics,
+    router_groups,
     wall_latency_ms,
+    wall_latency_ms_by_group,
 )
 from protocol import TIMING_COLUMNS
 from world.scenario_file import load_scenario
@@ -221,12 +223,26 @@ def metrics_from_run_dir(run_dir: Path, *, control_period_s: float | None = None
         world_dt_s=world_dt_s or tick,
         contact_events=contact_events(data.events),
     )
-    return replace(metrics, wall_latency_ms=wall_latency_ms(read_timing(Path(run_dir))))
+    robot, stamps = read_timing_by_robot(Path(run_dir))
+    groups = router_groups([r.id for r in data.scenario.robots], run_relays(data.events))
+    return replace(metrics, wall_latency_ms=wall_latency_ms(stamps),
+                   wall_latency_ms_by_router=wall_latency_ms_by_group(robot, stamps, groups))
 
 
-def read_timing(run_dir: Path) -> np.ndarray:
-    """timing.csv's stamps as (K, 9) int64 (`protocol.TIMING_COLUMNS`); (0, 9) if none."""
+def run_relays(events: Iterable[dict[str, Any]]) -> dict[str, list[int]]:
+    """The relay routers of a run and their robots (the world's ``world_ready`` event:
+    certificate name -> robot ids); empty if it had none."""
+    for e in events:
+        if e.get("kind") == "world_ready" and isinstance(e.get("relays"), dict):
+            return {str(name): [int(i) for i in ids] for name, ids in e["relays"].items()}
+    return {}
+
+
+def read_timing_by_robot(run_dir: Path) -> tuple[np.ndarray, np.ndarray]:
+    """timing.csv as ``(robot ids (K,), stamps (K, 9))`` int64 (`protocol.TIMING_COLUMNS`);
+    K = 0 if there is none."""
     path = Path(run_dir) / "timing.csv"
+    robots: list[int] = []
     rows: list[list[int]] = []
     if path.is_file():
         with open(path, encoding="utf-8", newline="") as f:
@@ -234,12 +250,20 @@ def read_timing(run_dir: Path) -> np.ndarray:
             next(reader, None)
             for row in reader:
                 try:
+                    robot = int(row[0])
                     values = [int(v) for v in row[2:]]
-                except ValueError:
+                except (ValueError, IndexError):
                     continue  # a killed run's half-written last line
                 if len(values) == len(TIMING_COLUMNS):
+                    robots.append(robot)
                     rows.append(values)
-    return np.array(rows, dtype=np.int64).reshape(-1, len(TIMING_COLUMNS))
+    return (np.array(robots, dtype=np.int64),
+            np.array(rows, dtype=np.int64).reshape(-1, len(TIMING_COLUMNS)))
+
+
+def read_timing(run_dir: Path) -> np.ndarray:
+    """timing.csv's stamps as (K, 9) int64 (`protocol.TIMING_COLUMNS`); (0, 9) if none."""
+    return read_timing_by_robot(run_dir)[1]
 
 
 def write_json(path: Path, content: Any) -> Path:

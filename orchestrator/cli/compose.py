@@ -63,7 +63,23 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="<out>/<cn>/ for world, orchestrator, observer, robot-<id>")
     c.add_argument("--world-host", action="append", default=None,
                    help="a name clients dial the world by (default: world)")
+    c.add_argument("--relay", action="append", type=_relay_hosts, default=[],
+                   metavar="NAME[=HOST,...]",
+                   help="a relay router's certificate router-NAME, for the names its host is "
+                        "dialled by (always router-NAME, localhost, 127.0.0.1); repeatable")
     parser.set_defaults(func=run)
+
+
+def _relay_hosts(text: str) -> tuple[str, tuple[str, ...]]:
+    """``NAME[=HOST,...]`` of ``compose certs --relay``."""
+    from protocol import router_cn
+
+    name, _, hosts = text.partition("=")
+    try:
+        router_cn(name)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from exc
+    return name, tuple(h.strip() for h in hosts.split(",") if h.strip())
 
 
 def run(args: argparse.Namespace) -> int:
@@ -71,7 +87,8 @@ def run(args: argparse.Namespace) -> int:
     if args.step == "certs":
         if not 0 < args.robots <= 4096:
             raise BadInput(f"--robots: expected 1..4096, got {args.robots}")
-        make_certs(args.run, args.robots, args.out, tuple(args.world_host or ("world",)))
+        make_certs(args.run, args.robots, args.out, tuple(args.world_host or ("world",)),
+                   relays=dict(args.relay))
         return ExitCode.OK
     options = SetupOptions(setup=args.setup, agents=args.agents, planner=args.planner,
                            seed=args.seed, robots=args.robots, run_id=args.run,

@@ -21,6 +21,7 @@ from __future__ import annotations
 import datetime as dt
 import logging
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -124,18 +125,20 @@ def prepare_scenario(options: SetupOptions) -> Path:
     return path
 
 
-def make_certs(run_id: str, robots: int, out: Path, world_hosts: tuple[str, ...] = ("world",)
-               ) -> list[Path]:
+def make_certs(run_id: str, robots: int, out: Path, world_hosts: tuple[str, ...] = ("world",),
+               relays: Mapping[str, tuple[str, ...]] | None = None) -> list[Path]:
     """``orchestrator compose certs``: the run's CA and certificates, one directory per service
     under `out` (``<out>/<cn>/``: ``ca.pem``, ``<cn>.pem``, ``<cn>.key``; compose mounts each
     as a volume of that service alone, so no service holds another's key). The CA key is
-    never written. Run as root (the one-shot ``certs`` service), the files are handed to
-    `CONTAINER_UID`. Returns the directories."""
+    never written. `relays`: relay router name -> the names its host is dialled by (a
+    ``router-<name>`` certificate each). Run as root (the one-shot ``certs`` service), the
+    files are handed to `CONTAINER_UID`. Returns the directories."""
     import os
 
     from agent.security import make_run_pki
 
-    files = make_run_pki(out, run_id, range(robots), world_hosts=world_hosts, split=True)
+    files = make_run_pki(out, run_id, range(robots), world_hosts=world_hosts, relays=relays,
+                         split=True)
     dirs = [Path(f.cert).parent for f in files.values()]
     if os.geteuid() == 0:
         for d in dirs:

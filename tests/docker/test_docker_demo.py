@@ -1,7 +1,9 @@
-"""System test of the docker-compose demo (Dockerfile, compose.yaml, compose.setup-g.yaml).
+"""System test of the docker-compose demo (Dockerfile, compose.yaml, compose.setup-g.yaml,
+compose.routers.yaml).
 
 Builds the image and runs the demo for real: the world, every robot and the orchestrator in
-containers of their own on a Compose network, talking only through Zenoh. Skipped, with the
+containers of their own on a Compose network, talking only through Zenoh; and the two-host
+variant, robots 2-3 behind a relay router on a network of their own. Skipped, with the
 reason, where there is no Docker Engine or no Compose tool (or EIFP_SKIP_DOCKER is set).
 
 The base image: EIFP_BASE_IMAGE if set; else the local base eifp-swarm-base:bookworm if it
@@ -15,7 +17,7 @@ Wall time measured on the 2-core development machine (Docker 20.10 on fuse-overl
 docker-compose 1.29.2), base image present: 2 min 16 s for the three tests with the build
 cache warm (build 2 s, setup D 50 s, the stopped-robot case 78 s); 3 min 32 s after a
 source change (78 s of rebuild). A change of the dependencies in pyproject.toml adds
-4-6 min, a build with no cache at all takes 3.5-6.5 min.
+4-6 min, a build with no cache at all takes 3.5-6.5 min. The two-host case adds about 30 s.
 """
 
 from __future__ import annotations
@@ -41,8 +43,9 @@ pytestmark = [pytest.mark.system, pytest.mark.docker, pytest.mark.timeout(2400)]
 REPO = Path(__file__).resolve().parents[2]
 LOCAL_BASE_IMAGE = "eifp-swarm-base:bookworm"
 REGISTRY_BASE_IMAGE = "python:3.11-slim"
-TEST_IMAGE = "eifp-swarm:test"
-"""A tag of its own (kept between runs, so the build cache keeps serving it)."""
+TEST_IMAGE = os.environ.get("EIFP_TEST_IMAGE", "eifp-swarm:test")
+"""A tag of its own (kept between runs, so the build cache keeps serving it); EIFP_TEST_IMAGE
+gives another, e.g. for two worktrees testing on one Docker Engine at once."""
 
 DOCKER_INFO_S = 30.0
 BASE_IMAGE_S = 900.0
@@ -428,6 +431,115 @@ def test_a_rogue_container_without_a_certificate_cannot_connect(docker_setup: Do
     assert not [e for e in events if e["kind"] in ("contact", "robot_lost")]
     end = [e for e in events if e["kind"] == "end"][0]
     assert end["reason"] == "all_arrived" and end["rejected"] == 0
+
+
+TIME_SCALE_ROUTERS = 2.0
+HOST_OF = {"world": "host-a", "orchestrator": "host-a", "robot-0": "host-a",
+           "robot-1": "host-a", "router-b": "host-b", "robot-2": "host-b", "robot-3": "host-b"}
+"""compose.routers.yaml: the "host" network of each service (world and router-b are on `wan`
+too)."""
+RELAY_ROGUE = r"""
+import sys, time, zenoh
+from agent.process import zenoh_config
+from protocol import RunKeys, TlsFiles, session_settings
+keys = RunKeys(sys.argv[1])
+tls = TlsFiles.in_dir("/tls", "robot-2")
+def session(endpoint):
+    return zenoh.open(zenoh_config(session_settings(
+        mode="client", connect=[endpoint], connect_timeout_ms=1000, tls=tls)))
+try:
+    session("tls/world:7447").close()
+    print("world: CONNECTED")
+except zenoh.ZError:
+    print("world: unreachable")
+s = session("tls/router-b:7447")
+others = [keys.cmd(0), keys.cmd(3), *(keys.poses_slot(k) for k in range(5)), keys.control]
+pubs = [s.declare_publisher(k) for k in [*others, keys.cmd(2)]]
+deadline = time.monotonic() + 10.0
+while not pubs[-1].matching_status.matching and time.monotonic() < deadline:
+    time.sleep(0.05)
+matched = pubs[-1].matching_status.matching
+for _ in range(3):
+    for pub in pubs:
+        pub.put(b"forged")
+    time.sleep(0.1)
+time.sleep(1.0)
+s.close()
+print("sent, own key matched:", matched)
+"""
+"""Holds robot 2's certificate, on host B: the world is out of reach; through router-b it
+puts garbage on robot 2's own command key (the world must count it: the path is open) and
+on robots 0 and 3's commands, every pose slot and control (router-b must drop them)."""
+
+
+def test_robots_on_two_hosts_through_routers(docker_setup: DockerSetup, demo_factory,
+                                             tmp_path: Path) -> None:
+    """compose.routers.yaml: robots 0-1 dial the world's router on host A, robots 2-3 a relay
+    router on host B that dials the world over the `wan` network. The run completes (every
+    robot arrives, no contact); robots behind router-b are one router further from the world
+    (`wall_latency_ms_by_router`); a robot's certificate on host B gets nothing through
+    router-b but its own keys."""
+    demo = demo_factory("routers", time_scale=TIME_SCALE_ROUTERS,
+                        files=("compose.routers.yaml",))
+    t0 = time.monotonic()
+    demo.compose("up", "--no-build", "--detach", timeout_s=UP_S)
+    demo.wait_event("start", UP_S + 300.0)
+    rogue = _run(["docker", "run", "--rm", "--network", f"{demo.project}_host-b",
+                  "-v", f"{demo.project}_tls-robot-2:/tls:ro", "--entrypoint", "python",
+                  TEST_IMAGE, "-c", RELAY_ROGUE, demo.run_id], 120.0, check=False)
+    rogue_out = rogue.stdout + rogue.stderr
+    assert rogue.returncode == 0, rogue_out[-3000:]
+    assert "world: unreachable" in rogue_out, rogue_out[-3000:]
+    assert "sent, own key matched: True" in rogue_out, rogue_out[-3000:]
+    status = demo.wait_exit("orchestrator", RUN_S)
+    assert status == ExitCode.OK, demo.logs("orchestrator")[-4000:]
+    assert demo.wait_exit("router-b", 60.0) == 0, demo.logs("router-b")[-3000:]
+    docker_setup.timings["routers_case_s"] = time.monotonic() - t0
+
+    containers = demo.containers()
+    assert sorted(containers) == sorted(["certs", *HOST_OF])
+    for service, c in containers.items():
+        assert not c["State"]["Running"] and c["State"]["ExitCode"] == 0, (service, c["State"])
+        if service == "certs":
+            continue
+        nets = {n[len(demo.project) + 1:] for n in c["NetworkSettings"]["Networks"]}
+        wan = {"wan"} if service in ("world", "router-b") else set()
+        assert nets == {HOST_OF[service], *wan}, (service, nets)
+        tls = [m["Name"] for m in c["Mounts"] if m["Destination"] == "/tls"]
+        assert len(tls) == 1 and tls[0].endswith(f"_tls-{service}"), (service, tls)
+    for rid in range(ROBOTS_D):
+        log = demo.logs(f"robot-{rid}")
+        router = "router-b" if rid >= 2 else "world"
+        assert f"connecting to tls/{router}:7447" in log, log[-2000:]
+        exit_line = next(line for line in log.splitlines() if f"robot {rid} exit:" in line)
+        assert "reason='end (all_arrived)' code=0" in exit_line
+        for counter in ("rejected=0", "refused_poses=0", "refused_control=0",
+                        "refused_config=0"):
+            assert f" {counter} " in exit_line + " ", exit_line
+    assert "the run is over" in demo.logs("router-b")
+
+    run_dir = demo.copy_run(tmp_path)
+    assert_run_files(run_dir)
+    metrics = json.loads((run_dir / "metrics.json").read_text())
+    assert metrics["success"] is True and metrics["contacts"] == 0
+    assert metrics["robots"] == ROBOTS_D and metrics["arrived"] == ROBOTS_D
+    events = [json.loads(line) for line in (run_dir / "events.jsonl").read_text().splitlines()]
+    ready = next(e for e in events if e["kind"] == "world_ready")
+    assert ready["relays"] == {"router-b": [2, 3]} and ready["zid"] == "e1f5"
+    end = next(e for e in events if e["kind"] == "end")
+    # Only the rogue's puts on robot 2's own key reached the world (and were rejected there).
+    assert set(end["rejected_by_key"]) == {f"eifp/{demo.run_id}/cmd/2"}, end
+    by = metrics["wall_latency_ms_by_router"]
+    assert sorted(by) == ["router-b", "world"]
+    for group in by.values():
+        assert group["transport"]["n"] > 100 and group["sense_to_act"]["n"] > 100
+    # One router more, both ways: pose out and command back take longer behind router-b.
+    assert by["router-b"]["transport"]["p50"] > by["world"]["transport"]["p50"], by
+    figures = {g: {st: (by[g][st]["p50"], by[g][st]["p99"])
+                   for st in ("transport", "sense_to_act", "pose_to_robot", "cmd_to_world")}
+               for g in by}
+    print(f"\nwall latency p50/p99 [ms] by router: {figures}")
+    print(f"docker demo timings: {docker_setup.timings}")
 
 
 def test_setup_g_override_runs_16_robot_containers(compose_command: list[str]) -> None:

@@ -146,3 +146,19 @@ def test_compose_certs_writes_one_directory_per_service_with_only_its_key(tmp_pa
     assert not list((tmp_path / "tls").rglob("ca.key"))
     assert main(["compose", "certs", "--run", "r1", "--robots", "0",
                      "--out", str(tmp_path / "x")]) == 2
+
+
+def test_compose_certs_makes_a_relay_certificate_for_its_hosts(tmp_path) -> None:
+    from cryptography import x509
+
+    assert main(["compose", "certs", "--run", "r1", "--robots", "4", "--out", str(tmp_path),
+                 "--relay", "b", "--relay", "c=10.0.0.3,host-c"]) == 0
+    for name, hosts in (("b", set()), ("c", {"10.0.0.3", "host-c"})):
+        cn = f"router-{name}"
+        assert sorted(p.name for p in (tmp_path / cn).iterdir()) == sorted(
+            ["ca.pem", f"{cn}.pem", f"{cn}.key"])
+        cert = x509.load_pem_x509_certificate((tmp_path / cn / f"{cn}.pem").read_bytes())
+        sans = cert.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
+        assert {str(n.value) for n in sans} == {cn, "localhost", "127.0.0.1", *hosts}
+    assert main(["compose", "certs", "--run", "r1", "--robots", "4", "--out", str(tmp_path),
+                 "--relay", "B"]) == 2

@@ -249,3 +249,29 @@ def test_parse_command_link_fault_options() -> None:
     for bad in (["--drop", "-0.1"], ["--reorder", "2"], ["--jitter-ms", "nan"]):
         with pytest.raises(SystemExit):
             parse_args(["--run", "r1", "--scenario", "s.yaml", *bad])
+
+
+def test_relays_and_a_fixed_id_go_into_the_worlds_router_settings(tmp_path: Path) -> None:
+    from agent.security import make_run_pki
+    from world.node import world_settings
+
+    make_run_pki(tmp_path / "tls", "r1", [0, 4])
+    scenario = scenario_from_dict(SCENARIO, "test")
+    opts = parse_args(["--run", "r1", "--scenario", "s.yaml", "--listen", "tls/0.0.0.0:7447",
+                       "--tls", str(tmp_path / "tls"), "--relay", "b=4", "--zid", "e1f0a5"])
+    assert opts.relays == (("b", (4,)),) and opts.zid == "e1f0a5"
+    settings = world_settings(opts, scenario)
+    acl = json.loads(settings["access_control"])
+    assert {"id": "s-router-b", "cert_common_names": ["router-b"]} in acl["subjects"]
+    assert json.loads(settings["id"]) == "e1f0a5"
+    bad = [
+        (["--relay", "b=7"], "robots of the run"),          # not in the scenario
+        (["--connect", "tls/h:1"], "--tls with --connect"),  # the world's router enforces
+    ]
+    for extra, words in bad:
+        argv = ["--run", "r1", "--scenario", "s.yaml", "--tls", str(tmp_path / "tls"), *extra]
+        with pytest.raises(ValueError, match=words):
+            world_settings(parse_args(argv), scenario)
+    with pytest.raises(ValueError, match="--relay needs --tls"):
+        world_settings(parse_args(["--run", "r1", "--scenario", "s.yaml", "--relay", "b=4"]),
+                       scenario)

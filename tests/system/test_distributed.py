@@ -213,15 +213,18 @@ def test_head_on_run_completes_without_contact(tmp_path: Path) -> None:
         assert (out_dir / name).stat().st_size > 0
     assert progress and progress[-1].arrived == {0, 1} and progress[-1].started
     # Every applied command carries its wall stamps; on one host every stage is measured.
-    from orchestrator.analysis.metrics import WALL_STAGES
+    from orchestrator.analysis.metrics import TRANSPORT_STAGE, WALL_STAGES
     from orchestrator.analysis.rundir import metrics_from_run_dir, read_timing
 
     assert read_timing(out_dir).shape[0] == end[0]["commands"]
-    wall = metrics_from_run_dir(out_dir).wall_latency_ms
-    assert set(wall) == {stage for stage, *_ in WALL_STAGES}
+    metrics = metrics_from_run_dir(out_dir)
+    wall = metrics.wall_latency_ms
+    assert set(wall) == {stage for stage, *_ in WALL_STAGES} | {TRANSPORT_STAGE}
     for stage, w in wall.items():
         assert 0.0 <= w["p50"] <= w["p99"] <= w["max"] < 5000.0, (stage, w)
     assert wall["sense_to_act"]["p50"] >= wall["plan"]["p50"]
+    assert wall["sense_to_act"]["p50"] >= wall[TRANSPORT_STAGE]["p50"]
+    assert metrics.wall_latency_ms_by_router == {}  # one router: no groups
     assert not processes_of_run(run_id), "orphan processes left behind"
     print(f"head-on run: {wall_s:.1f} s wall, sim t={end[0]['t']} s")
 

@@ -8,7 +8,8 @@ Layers, lowest first (a module may import its own layer and the layers below it)
 2. simulation: dynamics, link faults, fault plans, schedule, the lockstep loop (`world.sim`)
 3. wire: keys, messages, codec (`protocol`), the scenario file format (`world.scenario_file`)
 4. runtime: the robot and world processes and their plumbing (`agent.node`, `agent.fleet`,
-   `agent.process`, `agent.flags`, `world.node`, `world.recorder`, `world.mcap_log`)
+   `agent.process`, `agent.flags`, `world.node`, `world.router`, `world.recorder`,
+   `world.mcap_log`)
 5. experiments and analysis (`orchestrator.experiments`, `orchestrator.analysis`)
 6. CLI (`orchestrator.cli`)
 """
@@ -29,7 +30,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("protocol", "world.scenario_file"),
     ("agent.node", "agent.fleet", "agent.process", "agent.flags", "agent.security",
      "agent.__main__",
-     "world.node", "world.recorder", "world.mcap_log", "world.__main__"),
+     "world.node", "world.router", "world.recorder", "world.mcap_log", "world.__main__"),
     ("orchestrator.experiments", "orchestrator.analysis"),
     ("orchestrator.cli", "orchestrator.__main__"),
 )

@@ -13,13 +13,16 @@ from cryptography.x509.oid import NameOID
 
 from agent.security import make_run_pki
 from protocol import (
+    ACL_MESSAGES,
     MAX_POSE_AHEAD_S,
     MAX_SEQ_JUMP,
     TlsFiles,
     access_control,
     check_pose_time,
     check_seq,
+    relay_access_control,
     robot_cn,
+    router_cn,
     session_settings,
     tls_endpoint,
 )
@@ -157,6 +160,93 @@ def test_the_acl_names_only_this_run() -> None:
     assert exprs and all(e.startswith("eifp/r1/") for e in exprs)
     with pytest.raises(ValueError):
         access_control("bad/run", [0])
+
+
+# --- relay routers (robots on another host) ---------------------------------------------------
+
+
+def test_a_relay_may_speak_on_the_worlds_router_for_its_robots_only() -> None:
+    acl = access_control("r1", [0, 1, 2, 3], relays={"b": [2, 3]})
+    b = router_cn("b")
+    assert b == "router-b"
+    for i in (2, 3):
+        assert allowed(acl, b, "put", "ingress", f"eifp/r1/cmd/{i}")
+        assert allowed(acl, b, "put", "ingress", f"eifp/r1/debug/{i}")
+        assert allowed(acl, b, "query", "ingress", f"eifp/r1/config/{i}")
+        assert allowed(acl, b, "reply", "egress", f"eifp/r1/config/{i}")
+        assert allowed(acl, b, "liveliness_token", "ingress", f"eifp/r1/alive/robot/{i}")
+    for i in (0, 1):
+        assert not allowed(acl, b, "put", "ingress", f"eifp/r1/cmd/{i}")
+        assert not allowed(acl, b, "query", "ingress", f"eifp/r1/config/{i}")
+        assert not allowed(acl, b, "liveliness_token", "ingress", f"eifp/r1/alive/robot/{i}")
+    for key in ("eifp/r1/poses/0", "eifp/r1/control", "eifp/r1/alive/world"):
+        assert not allowed(acl, b, "put", "ingress", key)
+        assert not allowed(acl, b, "liveliness_token", "ingress", key)
+    assert allowed(acl, b, "put", "egress", "eifp/r1/poses/4")  # poses for its robots
+    assert allowed(acl, b, "declare_subscriber", "ingress", "eifp/r1/poses/4")
+    assert allowed(acl, b, "declare_subscriber", "egress", "eifp/r1/cmd/*")
+    assert allowed(acl, b, "declare_queryable", "egress", "eifp/r1/config/*")
+    assert not allowed(acl, b, "declare_queryable", "ingress", "eifp/r1/config/*")
+    assert not allowed(acl, b, "declare_subscriber", "ingress", "eifp/r1/cmd/*")
+    # The robots keep their own rights, wherever they connect.
+    assert allowed(acl, "robot-2", "put", "ingress", "eifp/r1/cmd/2")
+    # Without relays, the block is the one-router ACL.
+    assert access_control("r1", [0, 1]) == access_control("r1", [0, 1], relays={})
+
+
+def test_relays_must_carry_robots_of_the_run_each_behind_one_relay() -> None:
+    with pytest.raises(ValueError, match="robots of the run"):
+        access_control("r1", [0, 1], relays={"b": [2]})
+    with pytest.raises(ValueError, match="robots of the run"):
+        access_control("r1", [0, 1], relays={"b": []})
+    with pytest.raises(ValueError, match="behind both"):
+        access_control("r1", [0, 1, 2], relays={"b": [1, 2], "c": [2]})
+    with pytest.raises(ValueError, match="router name"):
+        access_control("r1", [0, 1], relays={"B": [1]})
+
+
+def test_a_relay_enforces_its_robots_rights_and_trusts_only_the_worlds_router() -> None:
+    acl = relay_access_control("r1", [2, 3])
+    assert acl["enabled"] and acl["default_permission"] == "deny"
+    assert allowed(acl, "robot-2", "put", "ingress", "eifp/r1/cmd/2")
+    assert not allowed(acl, "robot-2", "put", "ingress", "eifp/r1/cmd/3")
+    assert not allowed(acl, "robot-2", "put", "ingress", "eifp/r1/poses/0")
+    assert allowed(acl, "robot-2", "put", "egress", "eifp/r1/poses/0")
+    for cn in ("robot-0", "observer", "orchestrator", "router-c"):  # not served here
+        for message in ACL_MESSAGES:
+            for flow in ("ingress", "egress"):
+                assert not allowed(acl, cn, message, flow, "eifp/r1/cmd/0"), (cn, message)
+    for message in ACL_MESSAGES:
+        for flow in ("ingress", "egress"):
+            assert allowed(acl, "world", message, flow, "eifp/r1/poses/0")
+    assert not allowed(acl, "world", "put", "ingress", "eifp/r2/poses/0")  # another run
+    with pytest.raises(ValueError):
+        relay_access_control("r1", [])
+
+
+def test_relay_certificates_name_their_host(tmp_path) -> None:
+    files = make_run_pki(tmp_path, "r1", [0], relays={"b": ["10.0.0.2", "host-b"]})
+    cert = x509.load_pem_x509_certificate(Path(files["router-b"].cert).read_bytes())
+    assert cert.subject.get_attributes_for_oid(NameOID.COMMON_NAME)[0].value == "router-b"
+    sans = cert.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
+    assert {str(n.value) for n in sans} == {"router-b", "localhost", "127.0.0.1", "10.0.0.2",
+                                            "host-b"}
+    robot = x509.load_pem_x509_certificate(Path(files["robot-0"].cert).read_bytes())
+    with pytest.raises(x509.ExtensionNotFound):
+        robot.extensions.get_extension_for_class(x509.SubjectAlternativeName)
+
+
+def test_a_router_dials_with_its_certificate_and_may_take_a_fixed_id() -> None:
+    relay = session_settings(mode="router", listen=["tls/0.0.0.0:7447"],
+                             connect=["tls/world:7447"], tls=TlsFiles.in_dir("/t", "router-b"),
+                             acl=relay_access_control("r1", [2]), zid="e1f0a5")
+    assert json.loads(relay["transport/link/tls/connect_certificate"]) == "/t/router-b.pem"
+    assert json.loads(relay["transport/link/tls/listen_certificate"]) == "/t/router-b.pem"
+    assert relay["transport/link/tls/verify_name_on_connect"] == "true"
+    assert json.loads(relay["connect/endpoints"]) == ["tls/world:7447"]
+    assert json.loads(relay["id"]) == "e1f0a5"
+    with pytest.raises(ValueError, match="Zenoh id"):
+        session_settings(mode="router", listen=["tcp/127.0.0.1:1"], zid="0abc")
 
 
 # --- TLS settings ---------------------------------------------------------------------------

@@ -51,3 +51,17 @@ def test_summary_lists_the_run_and_each_robot() -> None:
                         "per_robot": [{"id": 0, "arrived": True}, {"id": 1, "arrived": True}]},
                        "setup_a")
     assert "robots arrived" in text and "2/2" in text and text.count("yes") == 3
+
+
+def test_summary_lists_the_latency_of_each_router_group() -> None:
+    wall = {"p50": 2.0, "p99": 3.0, "max": 4.0, "n": 5}
+    text = run_summary({"success": True, "arrived": 1, "robots": 1, "per_robot": [],
+                        "wall_latency_ms": {"sense_to_act": wall, "transport": wall},
+                        "wall_latency_ms_by_router": {
+                            "world": {"sense_to_act": wall, "transport": wall},
+                            "router-b": {"sense_to_act": wall}}}, "setup_d")
+    assert "on the wire, both ways p50/p99/max" in text
+    assert "sense to act, robots on world" in text
+    assert "on the wire, both ways, robots on world" in text
+    assert "sense to act, robots on router-b" in text
+    assert "on the wire, both ways, robots on router-b" not in text

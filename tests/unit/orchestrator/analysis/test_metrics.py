@@ -419,6 +419,34 @@ def test_metrics_from_a_recorded_run_directory(tmp_path):
     assert json.loads(path.read_text())["arrived"] == 2
 
 
+def test_metrics_of_a_run_with_a_relay_split_the_wall_latency_by_router(tmp_path):
+    scenario = Scenario(
+        name="rd", description="", time_limit_s=30.0, goal_tolerance_m=0.25,
+        planner_config=PlannerConfig(),
+        robots=tuple(RobotSpec(i, (0.0, 3.0 * i, 0.0), (2.0, 3.0 * i)) for i in range(3)))
+    ms = 1_000_000
+    with RunRecorder(tmp_path, scenario) as rec:
+        rec.event("world_ready", 0.0, relays={"router-b": [2]})
+        for k in range(3):
+            rec.record_tick(0.1 * k, np.array([0, 1, 2]), np.zeros((3, 3)), np.zeros((3, 2)))
+        for rid in (0, 1, 2):
+            extra = ms if rid == 2 else 0
+            for seq in range(4):
+                rec.record_command(0.1, rid, seq, 0.0, 0.0, 0.0, 1.0, "ok")
+                rec.record_timing(rid, seq, _stamps(7, 7, 10**9 + seq * 10**8)[:7]
+                                  + [10**9 + seq * 10**8 + 6 * ms + extra, 10**9 + seq * 10**8
+                                     + 20 * ms + extra])
+    m = metrics_from_run_dir(tmp_path)
+    by = m.wall_latency_ms_by_router
+    assert sorted(by) == ["router-b", "world"]
+    assert by["world"]["sense_to_act"]["n"] == 8 and by["router-b"]["sense_to_act"]["n"] == 4
+    assert by["router-b"]["sense_to_act"]["p50"] == pytest.approx(7.0)
+    assert by["world"]["sense_to_act"]["p50"] == pytest.approx(6.0)
+    assert m.wall_latency_ms["sense_to_act"]["n"] == 12
+    assert json.loads(write_metrics(tmp_path, m).read_text())["wall_latency_ms_by_router"][
+        "router-b"]["transport"]["p50"] == pytest.approx(2.9)
+
+
 def test_read_trajectory_pivots_rows_by_robot_id(tmp_path):
     path = tmp_path / "trajectory.csv"
     path.write_text("t,robot,x,y,theta,v,omega\n"
@@ -490,3 +518,55 @@ def test_unstamped_commands_measure_nothing():
 
     assert wall_latency_ms(np.zeros((4, 9), dtype=np.int64)) == {}
     assert wall_latency_ms(np.zeros((0, 9), dtype=np.int64)) == {}
+
+
+def test_transport_is_sense_to_act_less_the_robots_own_time_on_any_clocks():
+    from orchestrator.analysis.metrics import TRANSPORT_STAGE, wall_latency_ms
+
+    # 6 ms pose -> command at the world, 4.1 ms of it between pose received and command
+    # sent at the robot: 1.9 ms on the wire, whether or not the robot shares the clock.
+    for robot_clock in (7, 3):
+        w = wall_latency_ms(np.array([_stamps(robot_clock, 7, 10**9)]))
+        assert w[TRANSPORT_STAGE]["p50"] == pytest.approx(1.9)
+    # A robot on another host: its stamps are on a clock shifted by an unknown offset.
+    row = _stamps(3, 9, 10**9)
+    shifted = row[:3] + [v + 5 * 10**12 for v in row[3:7]] + row[7:]
+    w = wall_latency_ms(np.array([shifted]))
+    assert w[TRANSPORT_STAGE]["p50"] == pytest.approx(1.9)
+    assert w["sense_to_act"]["p50"] == pytest.approx(6.0)
+    unstamped = row[:]
+    unstamped[3] = 0  # pose_rx missing
+    assert TRANSPORT_STAGE not in wall_latency_ms(np.array([unstamped]))
+
+
+def test_router_groups_put_every_robot_not_behind_a_relay_on_the_worlds_router():
+    from orchestrator.analysis.metrics import DIRECT_ROUTER, router_groups
+
+    assert router_groups([0, 1, 2, 3], {}) == {}
+    assert router_groups([0, 1, 2, 3], {"router-b": [3, 2]}) == {
+        DIRECT_ROUTER: [0, 1], "router-b": [2, 3]}
+    assert router_groups([2, 3], {"router-b": [2, 3]}) == {"router-b": [2, 3]}
+
+
+def test_latency_by_group_splits_the_commands_by_robot():
+    from orchestrator.analysis.metrics import wall_latency_ms_by_group
+
+    ms = 1_000_000
+    rows, robots = [], []
+    for k in range(20):
+        robot = k % 4
+        row = _stamps(7, 7, 10**9 + k * 10**8)
+        if robot >= 2:  # behind a relay: 0.5 ms more each way
+            row[3:] = [v + ms // 2 for v in row[3:7]] + [v + ms for v in row[7:]]
+        rows.append(row)
+        robots.append(robot)
+    by = wall_latency_ms_by_group(np.array(robots), np.array(rows),
+                                  {"world": [0, 1], "router-b": [2, 3]})
+    assert by["world"]["sense_to_act"]["p50"] == pytest.approx(6.0)
+    assert by["router-b"]["sense_to_act"]["p50"] == pytest.approx(7.0)
+    assert by["world"]["transport"]["p50"] == pytest.approx(1.9)
+    assert by["router-b"]["transport"]["p50"] == pytest.approx(2.9)
+    assert by["router-b"]["pose_to_robot"]["p50"] == pytest.approx(1.5)
+    assert by["world"]["sense_to_act"]["n"] == by["router-b"]["sense_to_act"]["n"] == 10
+    with pytest.raises(ValueError):
+        wall_latency_ms_by_group(np.array([0]), np.array(rows), {"world": [0]})
