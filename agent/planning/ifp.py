@@ -120,7 +120,7 @@ ESCAPE_BAND_M = 0.1
 two robots on each other's boundary otherwise alternate between escaping and planning
 round each other every cycle."""
 
-KEEP_PLAN_RATIO = 0.2
+KEEP_PLAN_RATIO = 0.1
 """With `Mechanisms.keep_plan`, last cycle's via-points are kept while every leg through
 them is still clear and the path through them is at most this fraction longer than the
 new plan's."""
@@ -460,6 +460,24 @@ def plan_via_points(
             threats_s=threats_s,
         )
 
+    velocity = as_complex(others.velocity_mps)
+    clearance = np.where(ignored, -math.inf, radius - LEG_GRAZE_TOL_M)
+
+    def keep(new_wps: list[complex]) -> ViaPlan | None:
+        """Last cycle's plan instead of the new one (`new_wps`, or [P, goal] when the cycle
+        found no feasible via-point), if it still holds (`keep_plan`)."""
+        if not (mech.keep_plan and previous is not None and previous.resolved_sides):
+            return None
+        kept = _keep_previous(previous, new_wps, speed, position, velocity, clearance,
+                              t_max_s, others.ids)
+        if kept is None:
+            return None
+        kept_wps, kept_sides = kept
+        return ViaPlan(status=PlanStatus.OK, waypoints_m=kept_wps,
+                       via_point_m=kept_wps[1].copy(), side=kept_sides[0][1],
+                       resolved_id=kept_sides[0][0], threats=threats,
+                       resolved_sides=kept_sides, threats_s=threats_s)
+
     # Waypoints as complex numbers x + iy while the list changes.
     world = _World(others, radius, speed, select, mech.via_margin_m,
                    t_max_s if mech.horizon_via_points else math.inf)
@@ -477,7 +495,7 @@ def plan_via_points(
                     k = other_k
                     break
         if split is None:
-            return ViaPlan(
+            return keep(wps) or ViaPlan(
                 status=PlanStatus.NO_FEASIBLE, waypoints_m=np.stack((p, goal)), threats=threats,
                 threats_s=threats_s,
             )
@@ -490,8 +508,6 @@ def plan_via_points(
                        threats_s=threats_s)
 
     # Iteration: re-check every leg from `first` on; split the first resolvable one.
-    velocity = as_complex(others.velocity_mps)
-    clearance = np.where(ignored, -math.inf, radius - LEG_GRAZE_TOL_M)
     first = 0
     while len(wps) - 2 < config.reference.max_depth:
         arrival = [0.0, *itertools.accumulate(abs(b - a) / speed for a, b in zip(wps, wps[1:]))]
@@ -526,15 +542,9 @@ def plan_via_points(
     waypoints = np.array([(z.real, z.imag) for z in wps])
     resolved = tuple((int(others.ids[c[0]]), c[1]) for c in chosen if c is not None)
     head = chosen[1]
-    if mech.keep_plan and previous is not None and previous.resolved_sides:
-        kept = _keep_previous(previous, wps, speed, position, velocity, clearance, t_max_s,
-                              others.ids)
-        if kept is not None:
-            kept_wps, kept_sides = kept
-            return ViaPlan(status=PlanStatus.OK, waypoints_m=kept_wps,
-                           via_point_m=kept_wps[1].copy(), side=kept_sides[0][1],
-                           resolved_id=kept_sides[0][0], threats=threats,
-                           resolved_sides=kept_sides, threats_s=threats_s)
+    kept_plan = keep(wps)
+    if kept_plan is not None:
+        return kept_plan
     return ViaPlan(
         status=PlanStatus.OK,
         waypoints_m=waypoints,
@@ -572,7 +582,7 @@ def _keep_previous(previous: ViaPlan, new_wps: list[complex], speed: float,
             sides.pop(0)
         else:
             break
-    if not vias or any(i not in sensed for i, _ in sides):
+    if not vias or any(i not in sensed for i, _ in sides) :
         return None
     wps = [p, *vias, goal]
     length = sum(abs(b - a) for a, b in zip(wps, wps[1:]))
