@@ -410,6 +410,16 @@ class PoseSnapshot:
         object.__setattr__(self, "pose", _as_array("pose", self.pose, (n, 3)))
         object.__setattr__(self, "radius_m", _as_array("radius_m", self.radius_m, (n,)))
 
+    @classmethod
+    def trusted(cls, stamp_s: float, tick: int, ids: np.ndarray, pose: np.ndarray,
+                radius_m: np.ndarray) -> PoseSnapshot:
+        """A snapshot of arrays that were validated already (a decoded `protocol.PosesMsg`:
+        int64 ids, finite (n, 3) poses and (n,) radii): nothing is converted or checked."""
+        snapshot = object.__new__(cls)
+        snapshot.__dict__.update(stamp_s=stamp_s, tick=tick, ids=ids, pose=pose,
+                                 radius_m=radius_m)
+        return snapshot
+
     @property
     def is_robot(self) -> np.ndarray:
         """(n,) bool: robots have non-negative ids."""
