@@ -77,6 +77,11 @@ class NeighborTracker:
         self._row = -1
         self._last_ids: np.ndarray | None = None  # the previous snapshot's ids, and
         self._last_cols = np.zeros(0, dtype=np.int64)  # their columns (most ticks repeat them)
+        # The previous snapshot's read-only id array (a robot's `protocol.PoseDecoder` hands
+        # out the same one while the ids repeat), its other discs' rows, and where they go.
+        self._same_ids: np.ndarray | None = None
+        self._same_rows = np.zeros(0, dtype=np.int64)
+        self._same_dest: slice | np.ndarray = self._last_cols
 
     def reset(self) -> None:
         """Forget all history."""
@@ -97,8 +102,35 @@ class NeighborTracker:
 
     def update(self, snapshot: PoseSnapshot) -> None:
         """Add one observed snapshot (the caller drops stale or out-of-order ones)."""
-        mask = snapshot.ids != self.own_id
-        ids = snapshot.ids[mask]
+        all_ids = snapshot.ids
+        same = all_ids is self._same_ids
+        if not same:
+            self._match(all_ids)
+        rows, dest = self._same_rows, self._same_dest
+        before = self._t[(self._row - 1) % self.max_samples] if self._row >= 0 else -np.inf
+        if self._row < 0 or snapshot.stamp_s - before >= self.spacing_s:
+            self._row = (self._row + 1) % self.max_samples  # else: replace the newest
+        r = self._row
+        self._t[r] = snapshot.stamp_s
+        if same:  # the same discs as the snapshot before: the same pattern as `_latest`
+            self._seen[r] = self._latest
+        else:
+            self._seen[r] = False
+            self._seen[r, dest] = True
+            self._latest = self._seen[r].copy()  # read-only from here on (never mutated)
+        pose = snapshot.pose[rows]
+        self._pos[r, dest] = pose[:, :2]
+        self._radius[dest] = snapshot.radius_m[rows]
+        self._hdg[r, dest] = pose[:, 2]
+
+    def _match(self, all_ids: np.ndarray) -> None:
+        """Find the other discs' rows in a snapshot with ids `all_ids` and their columns.
+
+        Remembered for the next snapshot: a read-only id array that comes again (the same
+        object) cannot have changed. Columns that are 0, 1, ..., k - 1 are written as a
+        slice (the usual case: the discs come in the order they were first seen)."""
+        mask = all_ids != self.own_id
+        ids = all_ids[mask]
         if self._last_ids is not None and np.array_equal(ids, self._last_ids):
             cols = self._last_cols  # the same discs in the same order as last time
         else:
@@ -108,17 +140,12 @@ class NeighborTracker:
             cols = np.fromiter((self._col[int(i)] for i in ids.tolist()), dtype=np.int64,
                                count=ids.shape[0])
             self._last_ids, self._last_cols = ids.copy(), cols
-        before = self._t[(self._row - 1) % self.max_samples] if self._row >= 0 else -np.inf
-        if self._row < 0 or snapshot.stamp_s - before >= self.spacing_s:
-            self._row = (self._row + 1) % self.max_samples  # else: replace the newest
-        r = self._row
-        self._t[r] = snapshot.stamp_s
-        self._seen[r] = False
-        self._seen[r, cols] = True
-        self._pos[r, cols] = snapshot.pose[mask, :2]
-        self._radius[cols] = snapshot.radius_m[mask]
-        self._hdg[r, cols] = snapshot.pose[mask, 2]
-        self._latest = self._seen[r].copy()
+        k = cols.shape[0]
+        in_order = k == 0 or (int(cols[0]) == 0 and int(cols[-1]) == k - 1
+                              and bool((np.diff(cols) == 1).all()))
+        self._same_ids = None if all_ids.flags.writeable else all_ids
+        self._same_rows = np.flatnonzero(mask)
+        self._same_dest = slice(0, k) if in_order else cols
 
     def others(self, near_m: np.ndarray | None = None, within_m: float = np.inf) -> Others:
         """Estimates for the discs seen in the latest snapshot (ids in first-seen order).
