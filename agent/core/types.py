@@ -330,6 +330,18 @@ class PlanDebug:
     reference_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     predicted_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
 
+    @classmethod
+    def trusted(cls, ego: np.ndarray, threat_ids: tuple[int, ...], via_points_m: np.ndarray,
+                reference_m: np.ndarray, predicted_m: np.ndarray) -> PlanDebug:
+        """Built by a planner from its own finite arrays of the documented shapes (float):
+        the ids are made ints, nothing else is checked (`protocol.PlanDebugMsg` checks every
+        value before one is sent)."""
+        debug = object.__new__(cls)
+        debug.__dict__.update(ego=ego, threat_ids=tuple(int(i) for i in threat_ids),
+                              via_points_m=via_points_m, reference_m=reference_m,
+                              predicted_m=predicted_m)
+        return debug
+
     def __post_init__(self) -> None:
         object.__setattr__(self, "ego", _as_array("ego", self.ego, (3,)))
         object.__setattr__(self, "threat_ids", tuple(int(i) for i in self.threat_ids))

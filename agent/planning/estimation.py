@@ -25,6 +25,8 @@ All neighbours are handled at once with arrays of shape (H samples, n discs).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from agent.core.types import Others, PoseSnapshot
@@ -159,7 +161,7 @@ class NeighborTracker:
             return Others.empty()
         r = self._row
         sel = self._latest
-        if near_m is not None and np.isfinite(within_m):
+        if near_m is not None and math.isfinite(within_m):
             gap = self._pos[r] - np.asarray(near_m, dtype=float)
             sel = sel & (np.hypot(gap[:, 0], gap[:, 1]) <= within_m)
             if not sel.any():
@@ -170,9 +172,10 @@ class NeighborTracker:
         in_window = t_now - t <= self.window_s + 1e-9  # a suffix of `order` (t is sorted)
         cols = sel.nonzero()[0]
         rows = order[in_window]
-        seen = self._seen[rows][:, cols]  # (h, k)
+        window = np.ix_(rows, cols)
+        seen = self._seen[window]  # (h, k)
         tt = t[in_window] - t_now
-        pos = self._pos[rows][:, cols]  # (h, k, 2)
+        pos = self._pos[window]  # (h, k, 2)
         if seen.all():
             # Every disc in every sample of the window (the usual case: the world publishes
             # all discs each tick): one set of least-squares weights serves all columns.
@@ -180,7 +183,7 @@ class NeighborTracker:
         else:
             velocity, start, linearity = self._estimate_sparse(pos, seen, tt)
         recent_speed, recent_turn, recent_interval = _recent_motion(
-            pos, self._hdg[rows][:, cols], seen, tt)
+            pos, self._hdg[window], seen, tt)
         latest = pos[-1]
         ids = self._ids[cols]
         # Built from a validated snapshot (finite poses, radii) by finite arithmetic.

@@ -64,7 +64,8 @@ def run(args: argparse.Namespace) -> int:
                             scenario=bench_scenario(n, planner))
             rows.append(row)
             print(f"bench {planner} N={n}: {row['cycles']} cycles, p50 "
-                  f"{row['plan_ms_p50']:.3f} ms, p99 {row['plan_ms_p99']:.3f} ms "
+                  f"{row['plan_ms_p50']:.3f} ms, p99 {row['plan_ms_p99']:.3f} ms wall; CPU "
+                  f"p50 {row['cpu_ms_p50']:.3f} ms, p99 {row['cpu_ms_p99']:.3f} ms "
                   f"({wall_s:.1f} s)", file=sys.stderr, flush=True)
     print(format_rows(rows))
     if args.json:

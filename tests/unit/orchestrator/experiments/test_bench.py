@@ -27,9 +27,11 @@ def check_row(row: dict, planner: str, robots: int, cycles: int) -> None:
     for key in REQUIRED:
         assert key in row, key
     assert (row["planner"], row["robots"], row["cycles"]) == (planner, robots, cycles)
-    for q in ("p50", "p99", "max"):
-        assert math.isfinite(row[f"plan_ms_{q}"]) and row[f"plan_ms_{q}"] > 0.0
-    assert row["plan_ms_p50"] <= row["plan_ms_p99"] <= row["plan_ms_max"]
+    for name in ("plan", "cpu"):  # wall and thread CPU time of the cycle
+        for q in ("p50", "p99", "max"):
+            assert math.isfinite(row[f"{name}_ms_{q}"]) and row[f"{name}_ms_{q}"] >= 0.0
+        assert row[f"{name}_ms_p50"] <= row[f"{name}_ms_p99"] <= row[f"{name}_ms_max"]
+    assert row["plan_ms_p50"] > 0.0 and math.isfinite(row["cpu_ms_mean"])
     for stage in ("threats", "viapoints", "spline", "control", "obs"):
         p50, p99 = row[f"{stage}_ms_p50"], row[f"{stage}_ms_p99"]
         assert math.isfinite(p50) and math.isfinite(p99) and 0.0 <= p50 <= p99
@@ -56,6 +58,7 @@ def test_bench_one_row_json_is_the_last_line(capsys):
     check_row(row, "eifp-mpc", 4, 40)
     assert row["circle_radius_m"] == pytest.approx(5.0)  # half the 10 m sensing radius
     assert "cycle ms p50/p99/max" in out and "eifp-mpc" in out.splitlines()[2]
+    assert "cycle CPU ms p50/p99/max" in out
 
 
 def test_bench_all_planners_and_several_sizes_make_one_table(capsys):
