@@ -138,3 +138,28 @@ def test_crowded_circle_keeps_osqps_iteration_tail_short():
 def test_bad_arguments_exit_2(argv, capsys):
     assert main(["bench", *argv]) == 2
     assert "orchestrator bench" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("argv", [
+    ["bench", "--robots", "4"],  # no planner, no --process
+    ["bench", "--process", "--planner", "orca", "--robots", "4"],
+    ["bench", "--planner", "orca", "--robots", "4", "--seconds", "3"],
+])
+def test_bench_refuses_options_of_the_other_mode(argv, capsys):
+    assert main(argv) == 2
+    assert "bench" in capsys.readouterr().err
+
+
+def test_process_figures_are_printed_by_part():
+    from orchestrator.experiments.scale import format_process_row
+
+    row = {"agents": 64, "sim_time_s": 20.0, "transport": "TLS", "cpu_pct_per_robot": 0.5,
+           "cpu_ms_per_plan_sense": 0.1, "cpu_ms_per_plan_plan": 0.02,
+           "cpu_ms_per_plan_send": 0.05, "cpu_ms_per_plan_loop": 0.06,
+           "cpu_ms_per_plan_threads": 0.12, "cpu_ms_per_plan_total": 0.35,
+           "sense_to_act_ms_p50": 4.0, "sense_to_act_ms_p99": 12.0, "threads_per_robot": 3,
+           "robots_lost": 0}
+    text = format_process_row(row)
+    for figure in ("sense 0.100", "brake 0.020", "send 0.050", "loop 0.060",
+                   "Zenoh threads 0.120", "= 0.350", "64 robots", "0.500 ms per 100 ms"):
+        assert figure in text, figure
