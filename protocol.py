@@ -21,8 +21,9 @@ Key expressions (all prefixed by the run id, so two runs on one machine never cr
 Messages are msgpack maps with string keys. Every map carries ``"schema"`` (`SCHEMA_VERSION`)
 and ``"type"`` (``"poses"``, ``"cmd"``, ``"config"``, ``"control"``, ``"debug"``), so a message
 published on the wrong key is rejected too. Keys are checked strictly: a missing or an
-extra key is an error. Numeric arrays of `PosesMsg` travel as msgpack ``bin`` holding
-little-endian ``float64`` (``<f8``) or ``int32`` (``<i4``) values, one column per field.
+extra key is an error. Numeric arrays travel as msgpack ``bin`` holding little-endian
+``float64`` (``<f8``) or ``int32`` (``<i4``) values: a `PosesMsg` as one block of ids and one
+block of disc rows (x, y, heading, radius), so a robot reads each with one `numpy.frombuffer`.
 
 Decoding validates types, sizes, finiteness, ranges and the schema version, and every
 malformation raises the one typed error `ProtocolError`.
@@ -31,6 +32,7 @@ malformation raises the one typed error `ProtocolError`.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import re
 import types
@@ -51,7 +53,7 @@ from world.sim.schedule import plan_pose_slot as plan_pose_slot  # contract
 from world.sim.schedule import pose_slot_count as pose_slot_count
 from world.sim.schedule import pose_slot_of_tick as pose_slot_of_tick
 
-SCHEMA_VERSION = 3
+SCHEMA_VERSION = 4
 """Bumped on any incompatible change of a message schema."""
 
 KEY_ROOT = "eifp"
@@ -581,19 +583,28 @@ def _no_duplicate_keys(pairs: list[tuple[Any, Any]]) -> dict[Any, Any]:
     return out
 
 
-def _unpack(data: object) -> Any:
-    if isinstance(data, memoryview | bytearray):
+_BUFFER_TYPES = (memoryview, bytearray)
+
+
+def _unpack(data: object, *, flat: bool = False) -> Any:
+    """Parse a payload; every map is checked for duplicate keys.
+
+    `flat`: the message is one map whose values hold no map (a `PosesMsg`): its duplicate
+    keys are found by comparing its size with the count in its header, without calling a
+    hook on every map (a nested map would go unchecked, and then fails the message's own
+    type checks anyway)."""
+    if isinstance(data, _BUFFER_TYPES):
         data = bytes(data)
     if not isinstance(data, bytes):
         raise ProtocolError(f"payload must be bytes, got {type(data).__name__}")
     if len(data) > MAX_MESSAGE_BYTES:
         raise ProtocolError(f"payload of {len(data)} bytes exceeds {MAX_MESSAGE_BYTES}")
     try:
-        return msgpack.unpackb(
+        obj = msgpack.unpackb(
             data,
             raw=False,
             strict_map_key=True,
-            object_pairs_hook=_no_duplicate_keys,
+            object_pairs_hook=None if flat else _no_duplicate_keys,
             max_str_len=MAX_MESSAGE_BYTES,
             max_bin_len=MAX_MESSAGE_BYTES,
             max_array_len=2 * (MAX_ROBOTS + MAX_OBSTACLES),
@@ -604,22 +615,36 @@ def _unpack(data: object) -> Any:
         raise
     except Exception as exc:  # msgpack raises many kinds (FormatError, StackError, ...)
         raise ProtocolError(f"not valid msgpack: {type(exc).__name__}: {exc}") from exc
+    if flat and type(obj) is dict and len(obj) != _map_count(data):
+        raise ProtocolError("duplicate map key")
+    return obj
+
+
+def _map_count(data: bytes) -> int:
+    """The entry count in the header of the msgpack map `data` starts with."""
+    head = data[0]
+    if head == 0xDE:  # map 16
+        return int.from_bytes(data[1:3], "big")
+    if head == 0xDF:  # map 32
+        return int.from_bytes(data[1:5], "big")
+    return head & 0x0F  # fixmap
 
 
 def _as_map(obj: object, where: str, keys: Collection[str]) -> dict[str, Any]:
     if not isinstance(obj, dict):
         raise ProtocolError(f"{where}: expected a map, got {type(obj).__name__}")
-    got = set(obj)
-    want = set(keys)
-    if got != want:
+    want = keys if isinstance(keys, frozenset) else frozenset(keys)
+    if obj.keys() != want:  # compared as sets
+        got = set(obj)
         missing = sorted(map(str, want - got))
         extra = sorted(map(str, got - want))
         raise ProtocolError(f"{where}: missing keys {missing}, unknown keys {extra}")
     return obj
 
 
-def _open_envelope(data: object, msg_type: str, keys: Collection[str]) -> dict[str, Any]:
-    obj = _unpack(data)
+def _open_envelope(data: object, msg_type: str, keys: Collection[str], *,
+                   flat: bool = False) -> dict[str, Any]:
+    obj = _unpack(data, flat=flat)
     if not isinstance(obj, dict):
         raise ProtocolError(f"expected a map, got {type(obj).__name__}")
     version = obj.get("schema")
@@ -629,7 +654,13 @@ def _open_envelope(data: object, msg_type: str, keys: Collection[str]) -> dict[s
         raise ProtocolError(f"schema version {version}, expected {SCHEMA_VERSION}")
     if obj.get("type") != msg_type:
         raise ProtocolError(f"message type {obj.get('type')!r}, expected {msg_type!r}")
-    return _as_map(obj, msg_type, {"schema", "type", *keys})
+    return _as_map(obj, msg_type, _envelope_keys(keys))
+
+
+@functools.lru_cache(maxsize=64)
+def _envelope_keys(keys: tuple[str, ...]) -> frozenset[str]:
+    """Every key of a message's map: the envelope's and its body's `keys`."""
+    return frozenset(("schema", "type", *keys))
 
 
 def _pack(msg_type: str, body: Mapping[str, Any]) -> bytes:
@@ -639,14 +670,21 @@ def _pack(msg_type: str, body: Mapping[str, Any]) -> bytes:
     return data
 
 
+_NUMBER_TYPES = (int, float, np.integer, np.floating)
+_INT_TYPES = (int, np.integer)
+
+
 def _float(value: object, where: str, lo: float = -math.inf, hi: float = math.inf,
            *, lo_open: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
-        raise ProtocolError(f"{where}: expected a number, got {type(value).__name__}")
-    try:
-        out = float(value)
-    except OverflowError as exc:
-        raise ProtocolError(f"{where}: number too large") from exc
+    if type(value) is float:  # the usual case, as msgpack decodes it
+        out = value
+    else:
+        if isinstance(value, bool) or not isinstance(value, _NUMBER_TYPES):
+            raise ProtocolError(f"{where}: expected a number, got {type(value).__name__}")
+        try:
+            out = float(value)
+        except OverflowError as exc:
+            raise ProtocolError(f"{where}: number too large") from exc
     if not math.isfinite(out):
         raise ProtocolError(f"{where}: non-finite value {out!r}")
     if out < lo or out > hi or (lo_open and out == lo):
@@ -656,9 +694,12 @@ def _float(value: object, where: str, lo: float = -math.inf, hi: float = math.in
 
 
 def _int(value: object, where: str, lo: int, hi: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, int | np.integer):
-        raise ProtocolError(f"{where}: expected an int, got {type(value).__name__}")
-    out = int(value)
+    if type(value) is int:  # the usual case (not bool, a subclass)
+        out = value
+    else:
+        if isinstance(value, bool) or not isinstance(value, _INT_TYPES):
+            raise ProtocolError(f"{where}: expected an int, got {type(value).__name__}")
+        out = int(value)
     if not lo <= out <= hi:
         raise ProtocolError(f"{where}: {out} outside [{lo}, {hi}]")
     return out
@@ -732,12 +773,27 @@ def _check_values(arr: np.ndarray, where: str, lo: float, hi: float,
 # ---------------------------------------------------------------------------------------------
 
 
+_DISC_FIELDS = 4
+"""Values per disc in a `PosesMsg`'s ``discs`` block: x, y, heading, radius."""
+_DISC_LO = (-MAX_COORD_M, -MAX_COORD_M, -1e3, 0.0)
+_DISC_HI = (MAX_COORD_M, MAX_COORD_M, 1e3, MAX_RADIUS_M)
+_DISC_NEAR = min(_DISC_HI)
+"""Discs whose every value is within +-this (and radius > 0) pass every range at once."""
+_DISC_NAMES = ("x", "y", "theta", "radius")
+_POSES_KEYS = ("t", "tick", "pub_ns", "clock", "ids", "discs")
+_POSES_VIEWS = frozenset(("robot_ids", "robot_pose", "robot_radius_m", "obstacle_ids",
+                          "obstacle_xy_m", "obstacle_radius_m"))
+
+
 @dataclass(frozen=True, eq=False)
 class PosesMsg:
     """World -> robots: every disc's pose at one world tick (the robots' only sensor).
 
-    Wire body: ``t`` (float), ``tick`` (int), ``robots`` {``id`` <i4, ``x``, ``y``,
-    ``theta``, ``radius`` <f8}, ``obstacles`` {``id`` <i4, ``x``, ``y``, ``radius`` <f8}.
+    Wire body: ``t`` (float), ``tick``, ``pub_ns``, ``clock`` (ints), ``ids`` (bin: one
+    ``<i4`` per disc, the robots' ids >= 0 first, then the obstacles' < 0), ``discs`` (bin:
+    four ``<f8`` per disc in the order of ``ids``: x, y, heading, radius; an obstacle's
+    heading is 0). One row per disc, so a receiver reads each block with one
+    `numpy.frombuffer` (`PoseDecoder`).
 
     Args:
         t_s: sim time at which the poses were true (>= 0).
@@ -752,7 +808,8 @@ class PosesMsg:
             not stamped); `clock_id` names that clock.
         clock_id: the publishing host's monotonic clock (`WallStamps`); 0: unknown.
 
-    Arrays are stored as read-only copies; an invalid message raises `ProtocolError`.
+    Arrays are read-only (copies when constructed, views of the payload when decoded); an
+    invalid message raises `ProtocolError`.
     """
 
     t_s: float
@@ -769,11 +826,7 @@ class PosesMsg:
     TYPE: typing.ClassVar[str] = "poses"
 
     def __post_init__(self) -> None:
-        self._validate(known_ids=None)
-
-    def _validate(self, known_ids: Collection[int] | None) -> None:
         set_ = object.__setattr__
-        known = _known_set(known_ids)
         set_(self, "t_s", _float(self.t_s, "poses.t", 0.0, MAX_TIME_S))
         set_(self, "tick", _int(self.tick, "poses.tick", 0, MAX_SEQ))
         set_(self, "pub_ns", _int(self.pub_ns, "poses.pub_ns", 0, MAX_SEQ))
@@ -805,8 +858,8 @@ class PosesMsg:
             if isinstance(exc, ProtocolError):
                 raise
             raise ProtocolError(f"poses: bad array: {exc}") from exc
-        _check_ids(fields["robot_ids"], "poses.robots.id", 0, MAX_ROBOT_ID, known)
-        _check_ids(fields["obstacle_ids"], "poses.obstacles.id", MIN_OBSTACLE_ID, -1, known)
+        _check_ids(fields["robot_ids"], "poses.robots.id", 0, MAX_ROBOT_ID, None)
+        _check_ids(fields["obstacle_ids"], "poses.obstacles.id", MIN_OBSTACLE_ID, -1, None)
         _check_values(fields["robot_pose"][:, :2], "poses.robots.xy", -MAX_COORD_M, MAX_COORD_M)
         _check_values(fields["robot_pose"][:, 2], "poses.robots.theta", -1e3, 1e3)
         _check_values(fields["robot_radius_m"], "poses.robots.radius", 0.0, MAX_RADIUS_M,
@@ -817,68 +870,59 @@ class PosesMsg:
         for name, value in fields.items():
             set_(self, name, value)
 
+    def __getattr__(self, name: str) -> np.ndarray:
+        """The per-kind arrays of a decoded message, as views of its disc blocks, made on
+        first use (a robot reads the blocks whole, `to_snapshot`)."""
+        both = self.__dict__.get("_discs")
+        if both is None or name not in _POSES_VIEWS:
+            raise AttributeError(name)
+        ids, values = both
+        n = self.__dict__["_n_robots"]
+        views = {"robot_ids": ids[:n], "robot_pose": values[:n, :3],
+                 "robot_radius_m": values[:n, 3], "obstacle_ids": ids[n:],
+                 "obstacle_xy_m": values[n:, :2], "obstacle_radius_m": values[n:, 3]}
+        self.__dict__.update(views)
+        return views[name]
+
     @property
     def n_robots(self) -> int:
         """Number of robots in the message."""
-        return int(self.robot_ids.shape[0])
+        n = self.__dict__.get("_n_robots")
+        return int(self.robot_ids.shape[0]) if n is None else n
+
+    def discs(self) -> tuple[np.ndarray, np.ndarray]:
+        """Every disc, robots then obstacles: ids (k,) int64 and (k, 4) x, y, heading, radius
+        (heading 0 for obstacles), as on the wire."""
+        both = self.__dict__.get("_discs")
+        if both is not None:  # decoded: the payload's own arrays
+            return both
+        n, m = self.robot_ids.shape[0], self.obstacle_ids.shape[0]
+        values = np.zeros((n + m, _DISC_FIELDS))
+        values[:n, :3] = self.robot_pose
+        values[:n, 3] = self.robot_radius_m
+        values[n:, :2] = self.obstacle_xy_m
+        values[n:, 3] = self.obstacle_radius_m
+        return np.concatenate([self.robot_ids, self.obstacle_ids]), values
 
     def encode(self) -> bytes:
         """Serialise to msgpack."""
+        ids, values = self.discs()
         return _pack(self.TYPE, {
             "t": self.t_s,
             "tick": self.tick,
             "pub_ns": self.pub_ns,
             "clock": self.clock_id,
-            "robots": {
-                "id": self.robot_ids.astype(_I4).tobytes(),
-                "x": self.robot_pose[:, 0].astype(_F8).tobytes(),
-                "y": self.robot_pose[:, 1].astype(_F8).tobytes(),
-                "theta": self.robot_pose[:, 2].astype(_F8).tobytes(),
-                "radius": self.robot_radius_m.astype(_F8).tobytes(),
-            },
-            "obstacles": {
-                "id": self.obstacle_ids.astype(_I4).tobytes(),
-                "x": self.obstacle_xy_m[:, 0].astype(_F8).tobytes(),
-                "y": self.obstacle_xy_m[:, 1].astype(_F8).tobytes(),
-                "radius": self.obstacle_radius_m.astype(_F8).tobytes(),
-            },
+            "ids": ids.astype(_I4).tobytes(),
+            "discs": values.astype(_F8).tobytes(),
         })
 
     @classmethod
     def decode(cls, data: object, *, known_ids: Collection[int] | None = None) -> PosesMsg:
-        """Parse and validate; `known_ids` (robot and obstacle ids) rejects strangers."""
-        body = _open_envelope(data, cls.TYPE,
-                              ("t", "tick", "pub_ns", "clock", "robots", "obstacles"))
-        robots = _as_map(body["robots"], "poses.robots", ("id", "x", "y", "theta", "radius"))
-        obstacles = _as_map(body["obstacles"], "poses.obstacles", ("id", "x", "y", "radius"))
-        rid = _column(robots["id"], "poses.robots.id", _I4, None, MAX_ROBOTS)
-        n = rid.shape[0]
-        robot_cols = [
-            _column(robots[k], f"poses.robots.{k}", _F8, n, MAX_ROBOTS)
-            for k in ("x", "y", "theta", "radius")
-        ]
-        oid = _column(obstacles["id"], "poses.obstacles.id", _I4, None, MAX_OBSTACLES)
-        m = oid.shape[0]
-        obstacle_cols = [
-            _column(obstacles[k], f"poses.obstacles.{k}", _F8, m, MAX_OBSTACLES)
-            for k in ("x", "y", "radius")
-        ]
-        msg = object.__new__(cls)
-        for name, value in {
-            "t_s": body["t"],
-            "tick": body["tick"],
-            "pub_ns": body["pub_ns"],
-            "clock_id": body["clock"],
-            "robot_ids": rid,
-            "robot_pose": np.stack(robot_cols[:3], axis=1).reshape(n, 3),
-            "robot_radius_m": robot_cols[3],
-            "obstacle_ids": oid,
-            "obstacle_xy_m": np.stack(obstacle_cols[:2], axis=1).reshape(m, 2),
-            "obstacle_radius_m": obstacle_cols[2],
-        }.items():
-            object.__setattr__(msg, name, value)
-        msg._validate(known_ids)
-        return msg
+        """Parse and validate; `known_ids` (robot and obstacle ids) rejects strangers.
+
+        A receiver of a stream decodes with its own `PoseDecoder` (the same checks, each
+        id block checked once)."""
+        return PoseDecoder(known_ids).decode(data)
 
     @classmethod
     def from_snapshot(cls, snapshot: PoseSnapshot, *, pub_ns: int = 0,
@@ -899,20 +943,92 @@ class PosesMsg:
         )
 
     def to_snapshot(self) -> PoseSnapshot:
-        """Robots then obstacles in one `PoseSnapshot`; obstacles get heading 0."""
-        m = self.obstacle_ids.shape[0]
-        obstacle_pose = np.zeros((m, 3))
-        obstacle_pose[:, :2] = self.obstacle_xy_m
-        return PoseSnapshot(
-            stamp_s=self.t_s,
-            tick=self.tick,
-            ids=np.concatenate([self.robot_ids, self.obstacle_ids]),
-            pose=np.concatenate([self.robot_pose, obstacle_pose]),
-            radius_m=np.concatenate([self.robot_radius_m, self.obstacle_radius_m]),
-        )
+        """Robots then obstacles in one `PoseSnapshot`; obstacles get heading 0.
+
+        Of a decoded message, the snapshot's arrays are views of the payload (nothing is
+        copied or checked again)."""
+        ids, values = self.discs()
+        return PoseSnapshot.trusted(stamp_s=self.t_s, tick=self.tick, ids=ids,
+                                    pose=values[:, :3], radius_m=values[:, 3])
+
+
+class PoseDecoder:
+    """Decodes the `PosesMsg` stream of one receiver, every message checked in full.
+
+    The world sends the same discs in the same order every tick, so a message's ``ids``
+    block is nearly always the previous one's, byte for byte. Its checks (robots first, ids
+    unique, in range, all in `known_ids`) then passed already: the decoder does not repeat
+    them and hands out the same read-only int64 id array again (`NeighborTracker.update`
+    recognises it). Everything else (the envelope, every key, the time fields, the size,
+    finiteness and range of every value) is checked on every message.
+
+    Args:
+        known_ids: robot and obstacle ids of the run; None: any.
+    """
+
+    def __init__(self, known_ids: Collection[int] | None = None) -> None:
+        self.known_ids = _known_set(known_ids)
+        self._ids_bin: bytes | None = None
+        self._ids = np.zeros(0, dtype=np.int64)
+        self._n_robots = 0
+
+    def decode(self, data: object) -> PosesMsg:
+        """Parse and validate one payload (`PosesMsg.decode`); raises `ProtocolError`."""
+        body = _open_envelope(data, PosesMsg.TYPE, _POSES_KEYS, flat=True)
+        t_s = _float(body["t"], "poses.t", 0.0, MAX_TIME_S)
+        tick = _int(body["tick"], "poses.tick", 0, MAX_SEQ)
+        pub_ns = _int(body["pub_ns"], "poses.pub_ns", 0, MAX_SEQ)
+        clock_id = _int(body["clock"], "poses.clock", 0, MAX_CLOCK_ID)
+        ids_bin, discs_bin = body["ids"], body["discs"]
+        if type(ids_bin) is not bytes or ids_bin != self._ids_bin:
+            self._ids, self._n_robots = self._check_ids(ids_bin)
+            self._ids_bin = ids_bin
+        ids, n = self._ids, self._n_robots
+        k = ids.shape[0]
+        if type(discs_bin) is not bytes:
+            raise ProtocolError(f"poses.discs: expected bin, got {type(discs_bin).__name__}")
+        if len(discs_bin) != 8 * _DISC_FIELDS * k:
+            raise ProtocolError(f"poses.discs: {len(discs_bin)} bytes, expected "
+                                f"{8 * _DISC_FIELDS * k} for {k} discs")
+        values = np.frombuffer(discs_bin, dtype=_F8).reshape(k, _DISC_FIELDS)
+        if k:
+            # Every value within +-`_DISC_NEAR` and every radius > 0 passes every range
+            # (max and min propagate NaN, which fails the comparison); else each column is
+            # checked against its own range (`_check_discs`: far coordinates, or an error).
+            if not (float(np.abs(values).max()) <= _DISC_NEAR
+                    and float(values[:, 3].min()) > _DISC_LO[3]):
+                _check_discs(values)
+            if n < k and values[n:, 2].any():
+                raise ProtocolError("poses.discs: an obstacle's heading is not 0")
+        msg = object.__new__(PosesMsg)  # the per-kind views come on first use (__getattr__)
+        msg.__dict__.update(t_s=t_s, tick=tick, pub_ns=pub_ns, clock_id=clock_id,
+                            _discs=(ids, values), _n_robots=n)
+        return msg
+
+    def _check_ids(self, ids_bin: object) -> tuple[np.ndarray, int]:
+        """The id block as a read-only int64 array and the number of robots; raises."""
+        ids = _column(ids_bin, "poses.ids", _I4, None, MAX_ROBOTS + MAX_OBSTACLES)
+        n = int(np.count_nonzero(ids >= 0))
+        if n and ids[:n].min() < 0:
+            raise ProtocolError("poses.ids: the robots' ids (>= 0) must come first")
+        if n > MAX_ROBOTS or ids.shape[0] - n > MAX_OBSTACLES:
+            raise ProtocolError(f"poses.ids: {n} robots / {ids.shape[0] - n} obstacles exceed "
+                                "the caps")
+        _check_ids(ids, "poses.ids", MIN_OBSTACLE_ID, MAX_ROBOT_ID, self.known_ids)
+        out = ids.astype(np.int64)
+        out.flags.writeable = False
+        return out, n
+
+
+def _check_discs(values: np.ndarray) -> None:
+    """Check each column of a ``discs`` block against its range; the error names it."""
+    for j, name in enumerate(_DISC_NAMES):
+        _check_values(values[:, j], f"poses.discs.{name}", _DISC_LO[j], _DISC_HI[j],
+                      lo_open=name == "radius")
 
 
 _STATUS_VALUES = frozenset(s.value for s in PlanStatus)
+_SIDE_MIN, _SIDE_MAX = int(Side.RIGHT), int(Side.LEFT)
 
 TIMING_COLUMNS = ("robot_clock", "world_clock", "pose_pub_ns", "pose_rx_ns", "plan_start_ns",
                   "plan_end_ns", "cmd_pub_ns", "cmd_rx_ns", "applied_ns")
@@ -950,11 +1066,14 @@ class WallStamps:
     FIELDS: typing.ClassVar[tuple[str, ...]] = (
         "clock_id", "pose_clock_id", "pose_pub_ns", "pose_rx_ns", "plan_start_ns",
         "plan_end_ns", "pub_ns")
+    _CHECKS: typing.ClassVar[tuple[tuple[str, str, int], ...]] = tuple(
+        (name, f"cmd.wall.{name}", MAX_CLOCK_ID if name.endswith("clock_id") else MAX_SEQ)
+        for name in FIELDS)
 
     def __post_init__(self) -> None:
-        for name in self.FIELDS:
-            hi = MAX_CLOCK_ID if name.endswith("clock_id") else MAX_SEQ
-            object.__setattr__(self, name, _int(getattr(self, name), f"cmd.wall.{name}", 0, hi))
+        values = self.__dict__
+        for name, where, hi in self._CHECKS:
+            values[name] = _int(values[name], where, 0, hi)
 
     def as_list(self) -> list[int]:
         """The stamps in `FIELDS` order (the wire form)."""
@@ -1007,23 +1126,23 @@ class CommandMsg:
     TYPE: typing.ClassVar[str] = "cmd"
 
     def __post_init__(self) -> None:
-        set_ = object.__setattr__
-        set_(self, "robot_id", _int(self.robot_id, "cmd.robot", 0, MAX_ROBOT_ID))
-        set_(self, "seq", _int(self.seq, "cmd.seq", 0, MAX_SEQ))
-        set_(self, "pose_stamp_s", _float(self.pose_stamp_s, "cmd.pose_stamp", 0.0, MAX_TIME_S))
-        set_(self, "v_mps", _float(self.v_mps, "cmd.v", -MAX_SPEED, MAX_SPEED))
-        set_(self, "omega_radps", _float(self.omega_radps, "cmd.omega", -MAX_SPEED, MAX_SPEED))
-        set_(self, "plan_ms", _float(self.plan_ms, "cmd.plan_ms", 0.0))
-        status = _str(self.status, "cmd.status", 32)
+        d = self.__dict__  # frozen: fields are written through the instance dict
+        d["robot_id"] = _int(d["robot_id"], "cmd.robot", 0, MAX_ROBOT_ID)
+        d["seq"] = _int(d["seq"], "cmd.seq", 0, MAX_SEQ)
+        d["pose_stamp_s"] = _float(d["pose_stamp_s"], "cmd.pose_stamp", 0.0, MAX_TIME_S)
+        d["v_mps"] = _float(d["v_mps"], "cmd.v", -MAX_SPEED, MAX_SPEED)
+        d["omega_radps"] = _float(d["omega_radps"], "cmd.omega", -MAX_SPEED, MAX_SPEED)
+        d["plan_ms"] = _float(d["plan_ms"], "cmd.plan_ms", 0.0)
+        status = _str(d["status"], "cmd.status", 32)
         if status not in _STATUS_VALUES:
             raise ProtocolError(f"cmd.status: unknown status {status!r}")
-        set_(self, "status", str(status))
-        set_(self, "side", _int(self.side, "cmd.side", Side.RIGHT, Side.LEFT))
-        if self.resolved_id is not None:
-            set_(self, "resolved_id",
-                 _int(self.resolved_id, "cmd.resolved", MIN_OBSTACLE_ID, MAX_ROBOT_ID))
-        if self.hold_s is not None:
-            set_(self, "hold_s", _float(self.hold_s, "cmd.hold", 0.0, MAX_HOLD_S, lo_open=True))
+        d["status"] = str(status)
+        d["side"] = _int(d["side"], "cmd.side", _SIDE_MIN, _SIDE_MAX)
+        if d["resolved_id"] is not None:
+            d["resolved_id"] = _int(d["resolved_id"], "cmd.resolved", MIN_OBSTACLE_ID,
+                                    MAX_ROBOT_ID)
+        if d["hold_s"] is not None:
+            d["hold_s"] = _float(d["hold_s"], "cmd.hold", 0.0, MAX_HOLD_S, lo_open=True)
         if not isinstance(self.wall, WallStamps):
             raise ProtocolError(f"cmd.wall: expected WallStamps, got {type(self.wall).__name__}")
 

@@ -5,15 +5,17 @@ explicit endpoint). It knows nothing but what arrives on the wire (see `protocol
 
 1. Connect (retrying until ``--startup-timeout-s``), fetch this robot's `RunConfigMsg` from
    the world's queryable (retrying with the same deadline), build the controller.
-2. Declare the pose subscriber (a `RingChannel` of 2: the robot always acts on the newest
-   pose, never a backlog), the control subscriber, the world-liveliness subscriber, the
+2. Declare the pose subscriber (Zenoh's receiving thread puts each sample on a queue the
+   loop blocks on; the loop keeps the newest `POSE_RING` of them: the robot always acts on
+   the newest pose, never a backlog), the control subscriber, the world-liveliness subscriber, the
    command publisher (DROP, express), the debug publisher (its plans' internals for
    viewers, `PlanDebugMsg`, DROP, express) and, last, its own liveliness token.
-3. Loop: drain control and liveliness, drain the pose ring (the newest valid snapshot goes
-   to `RobotController.observe`, which drops stale or out-of-order ones), and plan at the
-   control rate in SIM time: when the newest pose's stamp reaches the next scheduled plan
-   time, plan and publish one `CommandMsg`; the schedule advances by one period (slots
-   already passed are skipped and counted as overruns, never planned as a backlog).
+3. Loop: drain control and liveliness, decode the ring (a `protocol.PoseDecoder`; the
+   newest valid snapshot goes to `RobotController.observe`, which drops stale or
+   out-of-order ones), and plan at the control rate in SIM time: when the newest pose's
+   stamp reaches the next scheduled plan time, plan and publish one `CommandMsg`; the
+   schedule advances by one period (slots already passed are skipped and counted as
+   overruns, never planned as a backlog).
 
 Faults: a malformed pose or control message raises `ProtocolError`; it is counted, logged
 to stderr (the first few, then every 100th) and the robot keeps running. The robot stops
@@ -54,9 +56,10 @@ and a robot subscribes to the one slot its plans fall on (`protocol.plan_pose_sl
 receives and decodes 10 poses per second instead of 50, and the router sends a fifth of the
 bytes. A robot whose plan slots are not on one pose slot (``--control-phase-s`` between
 ticks, ``--control-rate-hz`` 20 ...) subscribes to every slot (``poses/*``).
-Between slots the loop sleeps until just before the slot's pose is due, then waits on the
-pose subscriber's event (woken by the pose itself: no polling while the world runs late).
-An idle robot costs little CPU (see docs/scale.md).
+Between poses the loop blocks on the pose queue (woken by the pose itself: no polling while
+the world runs late), at most `MAX_NAP_S`. Zenoh runs on one thread of the process
+(`agent.process.use_one_zenoh_thread`). A robot's cost per cycle is in docs/scale.md
+(`orchestrator bench --process`).
 """
 
 from __future__ import annotations
@@ -65,8 +68,8 @@ import argparse
 import logging
 import math
 import os
+import queue
 import sys
-import threading
 import time
 from collections import deque
 from collections.abc import Callable
@@ -85,14 +88,17 @@ from agent.process import (
     check_tls_files,
     close_session,
     die_with_launcher,
+    enqueue_on_receive,
     monotonic_clock_id,
     open_session,
     stop_on_signals,
+    use_one_zenoh_thread,
 )
 from protocol import (
     CommandMsg,
     ControlMsg,
     PlanDebugMsg,
+    PoseDecoder,
     PosesMsg,
     ProtocolError,
     RunConfigMsg,
@@ -111,7 +117,8 @@ if TYPE_CHECKING:
     from agent.planning.controller import RobotController
 
 POSE_RING = 2
-"""Capacity of the pose ring: older poses are overwritten, never queued."""
+"""The world's newest pose samples a robot keeps after draining its queue (older ones are
+dropped unread)."""
 CONNECT_ATTEMPT_MS = 1000
 QUERY_TIMEOUT_S = 1.0
 STAMP_EPS_S = 1e-6
@@ -128,9 +135,10 @@ own loop stall and waited), the other 4 exited at once and stood in the way for 
 of the run (`orchestrator scale --agents 128`, 23 contacts)."""
 STALE_PLAN_S = 1.0
 """Poses older than this [sim s] when planning: brake instead (compensation is capped there)."""
-WAKE_MARGIN_S = 0.001
-"""Wall time before the next plan slot's pose is due at which the robot wakes to wait for it."""
-MAX_NAP_S = 0.1
+MAX_NAP_S = 0.25
+"""Longest wait for a pose: without poses, control and liveliness messages are read at least
+this often. Longer than the control period, so a robot receiving its poses wakes for them
+only (a wait as long as the period ran out just before every other pose)."""
 CPU_TOKEN_WAIT_S = 0.05
 """Longest wait for a CPU token (`RobotNode.sense_and_plan`) before planning without one."""
 
@@ -142,7 +150,6 @@ class CpuTokens(Protocol):
 
     def release(self) -> None: ...
 
-"""Longest single sleep: control and liveliness messages are read at least this often."""
 
 log = logging.getLogger("agent")
 
@@ -453,14 +460,12 @@ class RobotNode:
         if not phase_s:
             phase_s = plan_phase_s(config.robot.id, period_s, 1.0 / config.world_rate_hz)
         self.schedule = PlanSchedule(period_s, phase_s)
-        self.tick_wall_s = 1.0 / (config.world_rate_hz * config.time_scale)
-        self.known_ids = frozenset(config.known_ids)
+        self.decoder = PoseDecoder(config.known_ids)
         self.counts = {"rejected": 0, "stale": 0, "skipped": 0, "plans": 0, "overruns": 0,
                        "plan_errors": 0, "stale_plans": 0, "link_dropped": 0, "suspended": 0,
                        "token_timeouts": 0, "refused_poses": 0, "refused_control": 0,
                        "refused_config": refused_config}
         self.world_zid = world_zid
-        self.refused_in_callback = 0  # poses the callback refused (`_on_pose`)
         self.seq = 0
         # CPU time of the loop by part (thread CPU clock of this, the main, thread) and the
         # process's CPU clock at the loop's start: see `cpu_summary`.
@@ -492,11 +497,14 @@ class RobotNode:
             pose_slot_count(config.world_rate_hz, config.control_rate_hz))
         pose_key = (self.keys.poses_all if self.pose_slot is None
                     else self.keys.poses_slot(self.pose_slot))
-        # The subscriber's callback only appends to a ring and sets an event (it runs on a
-        # Zenoh thread, under the GIL): the loop waits on the event instead of polling.
-        self.pose_ring: deque[tuple[float, zenoh.Sample]] = deque(maxlen=POSE_RING)
-        self.pose_arrived = threading.Event()
-        self.pose_sub = session.declare_subscriber(pose_key, self._on_pose)
+        # Zenoh's receiving thread puts each sample on a queue (a C call, no Python frame
+        # and no thread of ours in between); the loop blocks on the queue, so it wakes when
+        # a pose arrives, and then drains it into the ring (`wait_for_poses`).
+        self.pose_queue: queue.SimpleQueue[zenoh.Sample] = queue.SimpleQueue()
+        self.pose_ring: deque[zenoh.Sample] = deque(maxlen=POSE_RING)
+        self.pose_rx_wall = 0.0  # when the loop took the ring's samples off the queue
+        self.pose_sub = session.declare_subscriber(pose_key,
+                                                   enqueue_on_receive(self.pose_queue.put))
         log.info("robot %d: poses from %s", self.robot_id, pose_key)
         self.control_sub = session.declare_subscriber(self.keys.control)
         self.world_sub = session.liveliness().declare_subscriber(self.keys.alive_world,
@@ -511,20 +519,6 @@ class RobotNode:
             express=True)
         # Declared last: once the world sees it, every subscription above is in place.
         self.token = session.liveliness().declare_token(self.keys.alive_robot(self.robot_id))
-
-    def _on_pose(self, sample: zenoh.Sample) -> None:
-        """Zenoh callback: keep the sample and its arrival time (the ring drops the oldest),
-        wake the loop.
-
-        A sample that is not from the world's session never enters the ring (counted in
-        ``refused_poses``): a flood of forged poses must not push the world's out of it."""
-        if self.world_zid is not None:
-            info = sample.source_info
-            if info is None or str(info.source_id.zid) != self.world_zid:
-                self.refused_in_callback += 1
-                return
-        self.pose_ring.append((time.monotonic(), sample))
-        self.pose_arrived.set()
 
     def _reject(self, what: str, exc: ProtocolError) -> None:
         self.counts["rejected"] += 1
@@ -602,27 +596,23 @@ class RobotNode:
         Every sample is decoded (a malformed one is rejected and counted wherever it sits
         in the ring), newest first; only the newest valid one enters the link: the older
         ones are older than it, so the controller would drop them as out of order anyway
-        (they are counted as ``skipped``).
+        (they are counted as ``skipped``). Without injected faults the link is a no-op and
+        is bypassed.
 
         Returns:
             True if a pose newer than any observed before was released.
         """
-        self.pose_arrived.clear()  # before draining: a pose after the drain sets it again
-        samples = []
-        while self.pose_ring:
-            samples.append(self.pose_ring.popleft())
+        ring = self.pose_ring
         newest: PosesMsg | None = None
-        arrived = 0.0
-        for rx_wall, sample in reversed(samples):
-            source = sample.source_info.source_id if sample.source_info else None
-            if not from_world(source, self.world_zid):
-                self._refuse("pose message", "refused_poses",
-                             f"from {source.zid if source else 'an unnamed source'}")
-                continue
+        while ring:
+            sample = ring.pop()  # newest first
             try:
-                msg = PosesMsg.decode(sample.payload.to_bytes(), known_ids=self.known_ids)
+                msg = self.decoder.decode(sample.payload.to_bytes())
             except ProtocolError as exc:
                 self._reject("pose message", exc)
+                continue
+            if newest is not None:
+                self.counts["skipped"] += 1
                 continue
             # The clock moves only on a pose that passed every check: a forged far-future
             # pose would otherwise make every genuine one look out of date.
@@ -634,40 +624,45 @@ class RobotNode:
                 self._refuse("pose message", "refused_poses",
                              f"{why}: tick {msg.tick}, t {msg.t_s:.3f} s")
                 continue
-            if newest is None:
-                newest, arrived = msg, rx_wall
-            else:
-                self.counts["skipped"] += 1
+            newest = msg
+        released: list[tuple[PosesMsg, int]] = []
         if newest is not None:
-            # The pose's arrival, not the moment it was read: a robot that once read late
-            # would otherwise predict every next pose that much late and stay late (and
-            # its sim clock would run behind by as much).
+            # When the loop took the pose off the queue: it waits on the queue, so normally
+            # as the pose arrived.
+            arrived = self.pose_rx_wall
             self.last_rx_wall = arrived
             if newest.tick > self.clock_tick:
                 self.clock_tick, self.clock_stamp_s, self.clock_wall = (
                     newest.tick, newest.t_s, arrived)
-            self.pose_link.send(self.sim_now(), (newest, round(arrived * 1e9)))
+            released.append((newest, round(arrived * 1e9)))
+        link = self.pose_link
+        if link.faults.active:
+            for item in released:
+                link.send(self.sim_now(), item)
+            released = link.receive(self.sim_now())
+            self.counts["link_dropped"] = link.counts.dropped
         fresh = False
-        for msg, rx_ns in self.pose_link.receive(self.sim_now()):
+        for msg, rx_ns in released:
             if not self.controller.observe(msg.to_snapshot()):
                 self.counts["stale"] += 1
                 continue
             self.newest, self.newest_rx_ns = msg, rx_ns
             fresh = True
-        self.counts["link_dropped"] = self.pose_link.counts.dropped
         return fresh
 
-    def plan_and_send(self) -> None:
+    def plan_and_send(self, cpu_start_s: float | None = None) -> None:
         """Plan on the newest pose if its stamp reached the schedule; publish the command.
 
         The planner gets the sim clock's time, so it forward-predicts by the pose's real
         age (injected delay included); a pose older than `STALE_PLAN_S` gives a brake.
+        `cpu_start_s`: this thread's CPU clock when the caller stopped counting (counted
+        from here on as planning); None: read it now.
         """
         msg = self.newest
         if msg is None or not self.schedule.due(msg.t_s):
             return
         now_s = self.sim_now()
-        cpu0 = time.thread_time()
+        cpu0 = time.thread_time() if cpu_start_s is None else cpu_start_s
         plan_start_ns = time.monotonic_ns()
         try:
             if not self.options.plan:
@@ -730,40 +725,49 @@ class RobotNode:
         try:
             cpu0 = time.thread_time()
             fresh = self.poll_poses()
-            self.cpu_s["sense"] += time.thread_time() - cpu0
+            cpu1 = time.thread_time()
+            self.cpu_s["sense"] += cpu1 - cpu0
             if fresh and self.world_alive:  # never command a world we cannot see
-                self.plan_and_send()
+                self.plan_and_send(cpu1)
             return fresh
         finally:
             if held and tokens is not None:
                 tokens.release()
 
-    def _sleep(self) -> None:
-        """Wait for the next thing to do: the plan slot's pose, or the pose link's next release.
+    def wait_for_poses(self) -> None:
+        """Block until a pose arrives, the pose link releases one, or `MAX_NAP_S` passed;
+        then move every queued sample from the world into the ring.
 
-        Until `WAKE_MARGIN_S` before the slot's pose is due (predicted from the newest
-        received pose's stamp and arrival time at the world's pace) the robot sleeps; one
-        subscribed to every slot (``poses/*``) so sleeps through the ticks in between, their
-        poses wait in the ring. From then on it waits on the subscriber's event: it wakes
-        when the pose arrives, however late, without polling (a loop that polled while the
-        world ran late burnt the CPU the world was short of). Control messages and
-        liveliness are read at least every `MAX_NAP_S`.
+        The loop wakes once per pose and is asleep otherwise: no polling, and nothing
+        runs between the pose's arrival and the loop but Zenoh's own thread. A sample that
+        is not from the world's session never enters the ring (counted in
+        ``refused_poses``): a flood of forged poses must not push the world's out of it.
         """
-        now = time.monotonic()
         wait_s = MAX_NAP_S
         link_due_s = self.pose_link.next_due_s
         if link_due_s is not None:
             wait_s = min(wait_s,
                          max(0.0, (link_due_s - self.sim_now()) / self.config.time_scale))
-        if self.last_rx_wall is not None and self.newest is not None:
-            ahead_s = max(0.0, (self.schedule.next_s or self.clock_stamp_s) - self.clock_stamp_s)
-            expected = self.last_rx_wall + max(ahead_s / self.config.time_scale,
-                                               self.tick_wall_s)
-            due = expected - WAKE_MARGIN_S
-            if now < due:
-                time.sleep(min(due - now, wait_s))
+        pending = self.pose_queue
+        try:
+            sample = pending.get(timeout=wait_s)
+        except queue.Empty:
+            return
+        self.pose_rx_wall = time.monotonic()
+        world_zid = self.world_zid
+        while True:
+            if world_zid is None:
+                self.pose_ring.append(sample)
+            else:
+                info = sample.source_info
+                if info is not None and str(info.source_id.zid) == world_zid:
+                    self.pose_ring.append(sample)
+                else:
+                    self._refuse("pose message", "refused_poses",
+                                 f"from {info.source_id.zid if info else 'an unnamed source'}")
+            if pending.empty():
                 return
-        self.pose_arrived.wait(wait_s)
+            sample = pending.get_nowait()
 
     def run(self, startup_deadline: float) -> tuple[str, int]:
         """The robot's loop; returns (reason, exit status).
@@ -791,7 +795,7 @@ class RobotNode:
                         > self.options.pose_timeout_s):
                     raise _Exit(f"no poses for {self.options.pose_timeout_s:.1f} s",
                                 ExitCode.WORLD_LOST)
-                self._sleep()
+                self.wait_for_poses()
             return "signal", ExitCode.OK
         except _Exit as stop:
             return stop.reason, stop.code
@@ -806,9 +810,9 @@ class RobotNode:
         ``cpu_sense_us``: draining the pose ring, decoding, the pose link, observing
         (`poll_poses`); ``cpu_plan_us``: `RobotController.plan` (estimates, planner, MPC);
         ``cpu_send_us``: encoding and publishing the command; ``cpu_loop_us``: the rest of
-        the main thread (control and liveliness polls, waits); ``cpu_threads_us``: every
-        other thread of the process (Zenoh's runtime: receiving, sending, the lease; and the
-        thread zenoh-python runs the pose callback `_on_pose` on).
+        the main thread (control and liveliness polls, waiting, taking samples off the
+        queue); ``cpu_threads_us``: every other thread of the process (Zenoh's runtime:
+        receiving, putting the pose samples on the queue, sending, the lease).
         Thread and process CPU clocks (`time.thread_time`, `time.process_time`); empty
         before the loop started. `orchestrator scale` divides them by the plans.
         """
@@ -822,11 +826,7 @@ class RobotNode:
 
     def summary(self) -> str:
         """Counters and `cpu_summary` as key=value pairs (integers)."""
-        counts = dict(self.counts)
-        refused = getattr(self, "refused_in_callback", 0)
-        if refused:
-            counts["refused_poses"] = counts.get("refused_poses", 0) + refused
-        fields = {**counts, "seq": self.seq, **self.cpu_summary()}
+        fields = {**self.counts, "seq": self.seq, **self.cpu_summary()}
         return " ".join(f"{k}={v}" for k, v in fields.items())
 
 
@@ -850,6 +850,7 @@ def _run_agent(options: AgentOptions, stop: StopFlag, on_ready: Callable[[], Non
     summary = ""
     session: zenoh.Session | None = None
     deadline = time.monotonic() + options.startup_timeout_s
+    use_one_zenoh_thread()
     log.info("robot %d: run %s, connecting to %s", options.robot_id, options.run_id,
              options.connect)
     try:

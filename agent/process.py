@@ -18,7 +18,7 @@ import signal
 import threading
 import time
 import zlib
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from types import FrameType
 from typing import Any
 
@@ -107,6 +107,35 @@ def stop_on_signals(
     finally:
         for signum, handler in previous.items():
             signal.signal(signum, handler)
+
+
+ONE_THREAD_RUNTIME = ("(app: (worker_threads: 1), rx: (handover: app), tx: (handover: app), "
+                      "net: (handover: app), acc: (handover: app))")
+"""Zenoh's runtimes (``ZENOH_RUNTIME``, RON) folded onto one worker thread. A robot's one
+link carries a pose and a command per control period; by default Zenoh runs it on five
+runtimes of six threads, and every message wakes two or three of them."""
+
+
+def use_one_zenoh_thread() -> None:
+    """Run this process's Zenoh on one thread (`ONE_THREAD_RUNTIME`), unless the environment
+    sets ``ZENOH_RUNTIME`` already. Call before the process opens its first session: Zenoh
+    reads the setting once, when it starts its runtimes."""
+    os.environ.setdefault("ZENOH_RUNTIME", ONE_THREAD_RUNTIME)
+
+
+def enqueue_on_receive(put: Callable[[Any], Any]) -> Any:
+    """A subscriber handler that calls `put(sample)` on the Zenoh thread that received it.
+
+    `put` should be a C-level call that never blocks (``queue.SimpleQueue.put``): it then
+    runs no Python frame, and no thread of the process is woken but the one waiting on the
+    queue. Zenoh's default for a Python callable runs it on a thread of its own, which a
+    sample wakes before it wakes the reader (zenoh-python's ``Callback(indirect=False)``,
+    marked unstable: without it, that default).
+    """
+    try:
+        return zenoh.handlers.Callback(put, indirect=False)
+    except TypeError:
+        return put
 
 
 class SessionError(RuntimeError):

@@ -330,6 +330,18 @@ class PlanDebug:
     reference_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     predicted_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
 
+    @classmethod
+    def trusted(cls, ego: np.ndarray, threat_ids: tuple[int, ...], via_points_m: np.ndarray,
+                reference_m: np.ndarray, predicted_m: np.ndarray) -> PlanDebug:
+        """Built by a planner from its own finite arrays of the documented shapes (float):
+        the ids are made ints, nothing else is checked (`protocol.PlanDebugMsg` checks every
+        value before one is sent)."""
+        debug = object.__new__(cls)
+        debug.__dict__.update(ego=ego, threat_ids=tuple(int(i) for i in threat_ids),
+                              via_points_m=via_points_m, reference_m=reference_m,
+                              predicted_m=predicted_m)
+        return debug
+
     def __post_init__(self) -> None:
         object.__setattr__(self, "ego", _as_array("ego", self.ego, (3,)))
         object.__setattr__(self, "threat_ids", tuple(int(i) for i in self.threat_ids))
@@ -409,6 +421,16 @@ class PoseSnapshot:
         object.__setattr__(self, "ids", ids)
         object.__setattr__(self, "pose", _as_array("pose", self.pose, (n, 3)))
         object.__setattr__(self, "radius_m", _as_array("radius_m", self.radius_m, (n,)))
+
+    @classmethod
+    def trusted(cls, stamp_s: float, tick: int, ids: np.ndarray, pose: np.ndarray,
+                radius_m: np.ndarray) -> PoseSnapshot:
+        """A snapshot of arrays that were validated already (a decoded `protocol.PosesMsg`:
+        int64 ids, finite (n, 3) poses and (n,) radii): nothing is converted or checked."""
+        snapshot = object.__new__(cls)
+        snapshot.__dict__.update(stamp_s=stamp_s, tick=tick, ids=ids, pose=pose,
+                                 radius_m=radius_m)
+        return snapshot
 
     @property
     def is_robot(self) -> np.ndarray:

@@ -71,6 +71,7 @@ class RobotController:
         self.rejected_stale = 0
         self.last_observation: Observation | None = None
         self._row = -1
+        self._row_ids: np.ndarray | None = None  # the read-only ids `_row` was found in
         self._goal = np.asarray(spec.goal, dtype=float)
 
     def observe(self, snapshot: PoseSnapshot) -> bool:
@@ -84,13 +85,19 @@ class RobotController:
         if last is not None and (snapshot.tick <= last.tick or snapshot.stamp_s < last.stamp_s):
             self.rejected_stale += 1
             return False
-        rows = np.flatnonzero(snapshot.ids == self.spec.id)
-        if rows.size == 0:
-            self.rejected_stale += 1
-            return False
+        ids = snapshot.ids
+        if ids is self._row_ids:  # the same read-only ids as last time (`PoseDecoder`)
+            row = self._row
+        else:
+            rows = np.flatnonzero(ids == self.spec.id)
+            if rows.size == 0:
+                self.rejected_stale += 1
+                return False
+            row = int(rows[0])
+            self._row_ids = None if ids.flags.writeable else ids
         self.tracker.update(snapshot)
         self.snapshot = snapshot
-        self._row = int(rows[0])  # this robot's row in `snapshot`
+        self._row = row  # this robot's row in `snapshot`
         return True
 
     def observation(self, now_s: float, *, with_others: bool | None = True) -> Observation:

@@ -25,6 +25,8 @@ All neighbours are handled at once with arrays of shape (H samples, n discs).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from agent.core.types import Others, PoseSnapshot
@@ -77,6 +79,11 @@ class NeighborTracker:
         self._row = -1
         self._last_ids: np.ndarray | None = None  # the previous snapshot's ids, and
         self._last_cols = np.zeros(0, dtype=np.int64)  # their columns (most ticks repeat them)
+        # The previous snapshot's read-only id array (a robot's `protocol.PoseDecoder` hands
+        # out the same one while the ids repeat), its other discs' rows, and where they go.
+        self._same_ids: np.ndarray | None = None
+        self._same_rows = np.zeros(0, dtype=np.int64)
+        self._same_dest: slice | np.ndarray = self._last_cols
 
     def reset(self) -> None:
         """Forget all history."""
@@ -97,8 +104,35 @@ class NeighborTracker:
 
     def update(self, snapshot: PoseSnapshot) -> None:
         """Add one observed snapshot (the caller drops stale or out-of-order ones)."""
-        mask = snapshot.ids != self.own_id
-        ids = snapshot.ids[mask]
+        all_ids = snapshot.ids
+        same = all_ids is self._same_ids
+        if not same:
+            self._match(all_ids)
+        rows, dest = self._same_rows, self._same_dest
+        before = self._t[(self._row - 1) % self.max_samples] if self._row >= 0 else -np.inf
+        if self._row < 0 or snapshot.stamp_s - before >= self.spacing_s:
+            self._row = (self._row + 1) % self.max_samples  # else: replace the newest
+        r = self._row
+        self._t[r] = snapshot.stamp_s
+        if same:  # the same discs as the snapshot before: the same pattern as `_latest`
+            self._seen[r] = self._latest
+        else:
+            self._seen[r] = False
+            self._seen[r, dest] = True
+            self._latest = self._seen[r].copy()  # read-only from here on (never mutated)
+        pose = snapshot.pose[rows]
+        self._pos[r, dest] = pose[:, :2]
+        self._radius[dest] = snapshot.radius_m[rows]
+        self._hdg[r, dest] = pose[:, 2]
+
+    def _match(self, all_ids: np.ndarray) -> None:
+        """Find the other discs' rows in a snapshot with ids `all_ids` and their columns.
+
+        Remembered for the next snapshot: a read-only id array that comes again (the same
+        object) cannot have changed. Columns that are 0, 1, ..., k - 1 are written as a
+        slice (the usual case: the discs come in the order they were first seen)."""
+        mask = all_ids != self.own_id
+        ids = all_ids[mask]
         if self._last_ids is not None and np.array_equal(ids, self._last_ids):
             cols = self._last_cols  # the same discs in the same order as last time
         else:
@@ -108,17 +142,12 @@ class NeighborTracker:
             cols = np.fromiter((self._col[int(i)] for i in ids.tolist()), dtype=np.int64,
                                count=ids.shape[0])
             self._last_ids, self._last_cols = ids.copy(), cols
-        before = self._t[(self._row - 1) % self.max_samples] if self._row >= 0 else -np.inf
-        if self._row < 0 or snapshot.stamp_s - before >= self.spacing_s:
-            self._row = (self._row + 1) % self.max_samples  # else: replace the newest
-        r = self._row
-        self._t[r] = snapshot.stamp_s
-        self._seen[r] = False
-        self._seen[r, cols] = True
-        self._pos[r, cols] = snapshot.pose[mask, :2]
-        self._radius[cols] = snapshot.radius_m[mask]
-        self._hdg[r, cols] = snapshot.pose[mask, 2]
-        self._latest = self._seen[r].copy()
+        k = cols.shape[0]
+        in_order = k == 0 or (int(cols[0]) == 0 and int(cols[-1]) == k - 1
+                              and bool((np.diff(cols) == 1).all()))
+        self._same_ids = None if all_ids.flags.writeable else all_ids
+        self._same_rows = np.flatnonzero(mask)
+        self._same_dest = slice(0, k) if in_order else cols
 
     def others(self, near_m: np.ndarray | None = None, within_m: float = np.inf) -> Others:
         """Estimates for the discs seen in the latest snapshot (ids in first-seen order).
@@ -132,7 +161,7 @@ class NeighborTracker:
             return Others.empty()
         r = self._row
         sel = self._latest
-        if near_m is not None and np.isfinite(within_m):
+        if near_m is not None and math.isfinite(within_m):
             gap = self._pos[r] - np.asarray(near_m, dtype=float)
             sel = sel & (np.hypot(gap[:, 0], gap[:, 1]) <= within_m)
             if not sel.any():
@@ -143,9 +172,10 @@ class NeighborTracker:
         in_window = t_now - t <= self.window_s + 1e-9  # a suffix of `order` (t is sorted)
         cols = sel.nonzero()[0]
         rows = order[in_window]
-        seen = self._seen[rows][:, cols]  # (h, k)
+        window = np.ix_(rows, cols)
+        seen = self._seen[window]  # (h, k)
         tt = t[in_window] - t_now
-        pos = self._pos[rows][:, cols]  # (h, k, 2)
+        pos = self._pos[window]  # (h, k, 2)
         if seen.all():
             # Every disc in every sample of the window (the usual case: the world publishes
             # all discs each tick): one set of least-squares weights serves all columns.
@@ -153,7 +183,7 @@ class NeighborTracker:
         else:
             velocity, start, linearity = self._estimate_sparse(pos, seen, tt)
         recent_speed, recent_turn, recent_interval = _recent_motion(
-            pos, self._hdg[rows][:, cols], seen, tt)
+            pos, self._hdg[window], seen, tt)
         latest = pos[-1]
         ids = self._ids[cols]
         # Built from a validated snapshot (finite poses, radii) by finite arithmetic.

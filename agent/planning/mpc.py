@@ -89,7 +89,7 @@ import scipy.sparse as sp
 
 from agent.core.config import MpcConfig, RobotLimits
 from agent.core.types import PlanStatus
-from agent.planning.unicycle import clamp_command, rollout
+from agent.planning.unicycle import clamp_command, rollout, rollout_with_trig
 
 _INF = 1.0e30  # OSQP_INFTY: bounds beyond it are infinite
 _RHO_INTERVAL = 25  # OSQP iterations between rho adaptations
@@ -508,12 +508,12 @@ class MpcTracker:
             ub[:-1] = self._u_prev[1:]
             ub[-1] = self._u_prev[-1]
         np.minimum(np.maximum(ub, u_min, out=ub), u_max, out=ub)
-        xb = rollout(x0, ub, dt)
+        xb, cos_b, sin_b = rollout_with_trig(x0, ub, dt)
 
         # A: B_k and the v-dependent column of A_k (unicycle.jacobians, entry by entry).
         a = self._a_data
-        cos_dt = np.cos(xb[:-1, 2]) * dt
-        sin_dt = np.sin(xb[:-1, 2]) * dt
+        cos_dt = cos_b * dt
+        sin_dt = sin_b * dt
         a[self._b00] = cos_dt
         a[self._b10] = sin_dt
         a[self._a02] = -ub[1:, 0] * sin_dt[1:]

@@ -228,7 +228,7 @@ class ViaPointPlanner:
         )
         # For viewing only, after the timings: arrays the cycle computed anyway (the MPC's
         # prediction is one vectorised rollout of its planned inputs, about 10 us).
-        debug = PlanDebug(
+        debug = PlanDebug.trusted(
             ego=np.array([ego.x_m, ego.y_m, ego.heading_rad]),
             threat_ids=tuple(t.other_id for t in via.threats),
             via_points_m=via.waypoints_m[1:-1],

@@ -501,8 +501,25 @@ def _line_arc_reference(path: LineArcPath, t: np.ndarray, heading_rad: float, v_
     """`build_reference` on a `LineArcPath`: the same speed profile, no turn feed-forward."""
     s, v = distance_profile(t, path.length_m, v_max_mps, accel_mps2, v_start_mps)
     p, heading = path.evaluate(s)
-    return _sampled(t, s, v, p, np.unwrap(heading), heading_rad, np.zeros_like(t),
+    return _sampled(t, s, v, p, _unwrap(heading), heading_rad, np.zeros_like(t),
                     path.length_m)
+
+
+def _unwrap(heading_rad: np.ndarray) -> np.ndarray:
+    """`numpy.unwrap` of a 1-d float array (period 2 pi), by the same operations in the
+    same order (so the same floats), without its generic set-up.
+
+    Each step is wrapped to [-pi, pi) (+pi where the step is exactly +pi), and steps under
+    pi keep their own value.
+    """
+    step = heading_rad[1:] - heading_rad[:-1]
+    wrapped = np.mod(step + math.pi, _TWO_PI) - math.pi
+    np.copyto(wrapped, math.pi, where=(wrapped == -math.pi) & (step > 0))
+    correction = wrapped - step
+    np.copyto(correction, 0.0, where=np.abs(step) < math.pi)
+    out = heading_rad.copy()
+    out[1:] = heading_rad[1:] + correction.cumsum()
+    return out
 
 
 def _sampled(t: np.ndarray, s: np.ndarray, v: np.ndarray, p: np.ndarray, heading: np.ndarray,

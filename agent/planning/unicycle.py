@@ -12,6 +12,8 @@ The heading is integrated without wrapping (a continuous angle); `wrap_angle` ma
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from agent.core.config import RobotLimits
@@ -79,6 +81,17 @@ def rollout(state: np.ndarray, controls: np.ndarray, dt_s: float) -> np.ndarray:
     Returns:
         (N + 1, 3) states, the first being `state`.
     """
+    return rollout_with_trig(state, controls, dt_s)[0]
+
+
+def rollout_with_trig(state: np.ndarray, controls: np.ndarray, dt_s: float
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """`rollout`, and the cosine and sine of the headings it stepped from.
+
+    Returns:
+        (N + 1, 3) states, and (N,) cos and sin of the states' headings 0..N-1 (the MPC's
+        linearisation needs them: `jacobians`).
+    """
     state = np.asarray(state, dtype=float)
     controls = np.asarray(controls, dtype=float)
     if state.shape != (3,):
@@ -93,17 +106,19 @@ def rollout(state: np.ndarray, controls: np.ndarray, dt_s: float) -> np.ndarray:
     np.multiply(controls[:, 1], dt_s, out=theta[1:])
     np.add.accumulate(theta, out=theta)
     v = controls[:, 0]
+    cos = np.cos(theta[:-1])
+    sin = np.sin(theta[:-1])
     xs = np.empty(n + 1)
     xs[0] = state[0]
-    xs[1:] = v * np.cos(theta[:-1]) * dt_s
+    xs[1:] = v * cos * dt_s
     ys = np.empty(n + 1)
     ys[0] = state[1]
-    ys[1:] = v * np.sin(theta[:-1]) * dt_s
+    ys[1:] = v * sin * dt_s
     out = np.empty((n + 1, 3))
     np.add.accumulate(xs, out=out[:, 0])
     np.add.accumulate(ys, out=out[:, 1])
     out[:, 2] = theta
-    return out
+    return out, cos, sin
 
 
 def jacobians(
@@ -172,16 +187,16 @@ def clamp_command(
             raise ValueError("dt_s is needed to limit the rate of v")
         lv = float(last_v_mps)
         dv = limits.accel_max_mps2 * dt_s
-        v = lv if not np.isfinite(v) else min(max(v, lv - dv), lv + dv)
+        v = lv if not math.isfinite(v) else min(max(v, lv - dv), lv + dv)
     if last_omega_radps is not None:
         if dt_s is None:
             raise ValueError("dt_s is needed to limit the rate of omega")
         lw = float(last_omega_radps)
         dw = limits.alpha_max_radps2 * dt_s
-        w = lw if not np.isfinite(w) else min(max(w, lw - dw), lw + dw)
-    if not np.isfinite(v):
+        w = lw if not math.isfinite(w) else min(max(w, lw - dw), lw + dw)
+    if not math.isfinite(v):
         v = 0.0
-    if not np.isfinite(w):
+    if not math.isfinite(w):
         w = 0.0
     v = min(max(v, limits.v_min_mps), limits.v_max_mps)
     w = min(max(w, -limits.omega_max_radps), limits.omega_max_radps)

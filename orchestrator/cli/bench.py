@@ -6,10 +6,13 @@ import argparse
 import json
 import math
 import sys
+import tempfile
 import time
+from pathlib import Path
 
 from agent.core.config import PLANNER_NAMES
-from agent.flags import positive_int, robot_counts
+from agent.flags import positive, positive_int, robot_counts
+from orchestrator.cli.common import BadInput, make_dir
 from orchestrator.experiments.bench import (
     DEFAULT_CYCLES,
     bench_scenario,
@@ -31,13 +34,27 @@ def _planners(text: str) -> list[str]:
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     parser = sub.add_parser(
-        "bench", help="planning time per cycle by stage, per planner and crowd size",
-        description="Wall time of the planning cycle (RobotController.plan) per planner and "
-                    "crowd size: N robots converging on the centre of a circle.")
-    parser.add_argument("--planner", type=_planners, required=True,
-                        help="a planner, a comma-separated list, or 'all'")
+        "bench", help="planning time per cycle by stage, per planner and crowd size; "
+                      "--process: a robot process's own CPU per cycle",
+        description="Wall and CPU time of the planning cycle (RobotController.plan) per "
+                    "planner and crowd size: N robots converging on the centre of a circle. "
+                    "With --process: N real robot processes that sense and command a stop "
+                    "without planning, and the CPU each spends per cycle, by part.")
+    parser.add_argument("--planner", type=_planners, default=None,
+                        help="a planner, a comma-separated list, or 'all' (required unless "
+                             "--process)")
     parser.add_argument("--robots", type=robot_counts, required=True,
                         help="robot count, or a comma-separated list (e.g. 2,8,16,32,64)")
+    parser.add_argument("--process", action="store_true",
+                        help="run N robot processes and a world for real (orchestrator scale "
+                             "--no-plan) and print the CPU a robot process spends per cycle")
+    parser.add_argument("--seconds", type=positive, default=None,
+                        help="with --process: length of each run [s] (default 20)")
+    parser.add_argument("--out", type=Path, default=None,
+                        help="with --process: run directory (default: a new temporary one)")
+    parser.add_argument("--insecure", action="store_true",
+                        help="with --process: plain TCP (default: mutual TLS and access "
+                             "control, as orchestrator run)")
     parser.add_argument("--cycles", type=positive_int, default=DEFAULT_CYCLES,
                         help=f"planning cycles to time per row (default {DEFAULT_CYCLES})")
     parser.add_argument("--seed", type=int, default=0, help="seeds the start jitter")
@@ -54,6 +71,12 @@ def _json_safe(row: dict) -> dict:
 
 def run(args: argparse.Namespace) -> int:
     """Entry point of `orchestrator bench`; returns the exit status."""
+    if args.process:
+        return run_process(args)
+    if args.planner is None:
+        raise BadInput("orchestrator bench: --planner is required (or --process)")
+    if args.seconds is not None or args.out is not None or args.insecure:
+        raise BadInput("orchestrator bench: --seconds, --out and --insecure go with --process")
     rows = []
     for planner in args.planner:
         for n in args.robots:
@@ -64,7 +87,8 @@ def run(args: argparse.Namespace) -> int:
                             scenario=bench_scenario(n, planner))
             rows.append(row)
             print(f"bench {planner} N={n}: {row['cycles']} cycles, p50 "
-                  f"{row['plan_ms_p50']:.3f} ms, p99 {row['plan_ms_p99']:.3f} ms "
+                  f"{row['plan_ms_p50']:.3f} ms, p99 {row['plan_ms_p99']:.3f} ms wall; CPU "
+                  f"p50 {row['cpu_ms_p50']:.3f} ms, p99 {row['cpu_ms_p99']:.3f} ms "
                   f"({wall_s:.1f} s)", file=sys.stderr, flush=True)
     print(format_rows(rows))
     if args.json:
@@ -73,4 +97,37 @@ def run(args: argparse.Namespace) -> int:
             print(json.dumps(row))
         if len(safe) > 1:
             print(json.dumps({"rows": safe}))
+    return 0
+
+
+def run_process(args: argparse.Namespace) -> int:
+    """`orchestrator bench --process`: one real run per robot count (`orchestrator scale
+    --no-plan`, cut at --seconds) and the CPU per cycle of a robot process, by part."""
+    from orchestrator.experiments.scale import (
+        PROCESS_BENCH_SECONDS,
+        format_process_row,
+        process_bench_args,
+        run_one,
+        write_outputs,
+    )
+
+    if args.planner is not None:
+        raise BadInput("orchestrator bench --process: the robots do not plan; no --planner")
+    seconds = args.seconds or PROCESS_BENCH_SECONDS
+    out_root = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="bench-process-"))
+    make_dir(out_root)
+    argv = ["orchestrator", *getattr(args, "argv", [])]
+    rows = []
+    for n in args.robots:
+        print(f"bench --process: {n} robots, {seconds:g} s ...", file=sys.stderr, flush=True)
+        row = run_one(n, process_bench_args(n, seconds, insecure=args.insecure, argv=argv),
+                      out_root)
+        row["transport"] = "plain TCP" if args.insecure else "TLS"
+        rows.append(row)
+        print(format_process_row(row))
+    for path in write_outputs(rows, out_root, argv):
+        print(path)
+    if args.json:
+        safe = [_json_safe(r) for r in rows]
+        print(json.dumps(safe[0] if len(safe) == 1 else {"rows": safe}))
     return 0

@@ -13,13 +13,15 @@ half the sensing radius (small crowds then see each other from the first cycle).
 robot has passed the centre (or after `EPISODE_TIME_FACTOR` times the ideal time); episodes
 repeat, starts jittered by `JITTER_M` from `--seed`, until C planning cycles were timed.
 
-Timed, for every call: the wall time of `RobotController.plan(now_s)` with
-`time.perf_counter` (the full cycle: building the observation, i.e. the neighbours'
-velocity and linearity estimates from their pose history and the latency forward
-prediction, which is zero here as in-process poses are never old; then the planner), and
-the planner's own stage split (`PlanResult.times`: threats, via-points, spline, control;
-eIFP-MPC's constant-velocity neighbour predictions fall in control). "obs" is the full
-cycle minus the planner's total (observation building and call overhead). `observe()`
+Timed, for every call of `RobotController.plan(now_s)` (the full cycle: building the
+observation, i.e. the neighbours' velocity and linearity estimates from their pose history
+and the latency forward prediction, which is zero here as in-process poses are never old;
+then the planner): its wall time with `time.perf_counter`, and the CPU time this thread
+spent in it with `time.thread_time_ns` (``cpu_ms``: on a machine shared with other jobs the
+wall time also counts the time the thread waited for a core, its CPU time does not). Also
+the planner's own stage split (`PlanResult.times`, wall time: threats, via-points, spline,
+control; eIFP-MPC's constant-velocity neighbour predictions fall in control). "obs" is the
+full cycle minus the planner's total (observation building and call overhead). `observe()`
 (adding the snapshot to the history) is not timed. Not counted: the first `WARMUP_ROUNDS` rounds of
 every episode (a fresh controller sets up its solver on its first plan, and needs two
 snapshots for velocity estimates) and cycles whose status is ARRIVED or STALE (no
@@ -78,6 +80,8 @@ class BenchSamples:
     """Per-cycle records of one (planner, N) row; every list has one entry per counted cycle."""
 
     plan_ms: list[float] = field(default_factory=list)
+    cpu_ms: list[float] = field(default_factory=list)
+    """Thread CPU time of every counted `RobotController.plan` call [ms]."""
     stage_ms: dict[str, list[float]] = field(
         default_factory=lambda: {s: [] for s in STAGES})
     in_range: list[int] = field(default_factory=list)
@@ -96,9 +100,11 @@ class BenchSamples:
         return len(self.plan_ms)
 
     def add(self, plan_ms: float, times: StageTimes, in_range: int, cap: int,
-            status: str, solver_iterations: int = 0) -> None:
-        """Record one counted cycle: its full wall time and the planner's stage split."""
+            status: str, solver_iterations: int = 0, cpu_ms: float = math.nan) -> None:
+        """Record one counted cycle: its full wall and CPU time and the planner's stage
+        split (wall)."""
         self.plan_ms.append(plan_ms)
+        self.cpu_ms.append(cpu_ms)
         self.stage_ms["threats"].append(times.threats_ms)
         self.stage_ms["viapoints"].append(times.viapoints_ms)
         self.stage_ms["spline"].append(times.spline_ms)
@@ -197,9 +203,11 @@ def run_bench(planner: str, n: int, cycles: int, seed: int = 0) -> BenchSamples:
             timed = round_ >= WARMUP_ROUNDS
             for k, ctrl in enumerate(controllers):
                 ctrl.observe(snapshot)
+                c0 = time.thread_time_ns()
                 t0 = time.perf_counter()
                 result = ctrl.plan(world.t_s)
                 elapsed_ms = (time.perf_counter() - t0) * 1e3
+                cpu_ms = (time.thread_time_ns() - c0) * 1e-6
                 world.set_command(ctrl.spec.id, result.v_mps, result.omega_radps)
                 if not timed:
                     out.warmup += 1
@@ -207,7 +215,7 @@ def run_bench(planner: str, n: int, cycles: int, seed: int = 0) -> BenchSamples:
                     out.excluded[str(result.status.value)] += 1
                 elif len(out) < cycles:
                     out.add(elapsed_ms, result.times, int(in_range[k]), cfg.threats.max_neighbors,
-                            str(result.status.value), result.solver_iterations)
+                            str(result.status.value), result.solver_iterations, cpu_ms)
             for _ in range(ticks_per_round):
                 world.step(dt_s)
             out.sim_time_s += period_s
@@ -228,13 +236,14 @@ def summarize(planner: str, n: int, samples: BenchSamples, *, seed: int, wall_s:
     """One row of figures (the JSON object of the row)."""
     cfg = scenario.planner_config
     row: dict = {"planner": planner, "robots": n, "cycles": len(samples)}
-    for name, values in (("plan", samples.plan_ms),
+    for name, values in (("plan", samples.plan_ms), ("cpu", samples.cpu_ms),
                          *((s, samples.stage_ms[s]) for s in STAGES)):
         p50, p99, top = _percentiles(values)
         row[f"{name}_ms_p50"] = p50
         row[f"{name}_ms_p99"] = p99
         row[f"{name}_ms_max"] = top
     row["plan_ms_mean"] = float(np.mean(samples.plan_ms)) if len(samples) else math.nan
+    row["cpu_ms_mean"] = float(np.mean(samples.cpu_ms)) if len(samples) else math.nan
     row.update({
         "neighbors_mean": float(np.mean(samples.considered)) if len(samples) else math.nan,
         "neighbors_max": int(max(samples.considered, default=0)),
@@ -282,16 +291,20 @@ def format_rows(rows: Sequence[dict]) -> str:
     """The table: one line per (planner, N); times in ms as p50/p99/max."""
     from orchestrator.analysis.report import format_table
 
-    header = ["planner", "N", "cycles", "excl", "cycle ms p50/p99/max", "threats ms",
+    header = ["planner", "N", "cycles", "excl", "cycle ms p50/p99/max",
+              "cycle CPU ms p50/p99/max", "threats ms",
               "via-points ms", "spline ms", "control ms", "obs ms", "nbrs mean/max"]
     body = [[r["planner"], r["robots"], r["cycles"], r["excluded"], _ms(r, "plan"),
-             _ms(r, "threats"), _ms(r, "viapoints"), _ms(r, "spline"), _ms(r, "control"),
-             _ms(r, "obs"), f"{r['neighbors_mean']:.1f}/{r['neighbors_max']}"]
+             _ms(r, "cpu"), _ms(r, "threats"), _ms(r, "viapoints"), _ms(r, "spline"),
+             _ms(r, "control"), _ms(r, "obs"), f"{r['neighbors_mean']:.1f}/{r['neighbors_max']}"]
             for r in rows]
     caps = sorted({(r["max_neighbors"], r["sensing_radius_m"]) for r in rows})
     cap_text = ", ".join(f"at most {m} within {s:g} m" for m, s in caps)
     notes = [f"nbrs: others the planner considers per cycle ({cap_text}); "
-             "obs: full cycle minus the planner's stages (observation building)."]
+             "obs: full cycle minus the planner's stages (observation building). "
+             "cycle ms is wall time (perf_counter), cycle CPU ms this thread's CPU time "
+             "(thread_time): on a busy machine only the CPU time is the planner's own; "
+             "the stage split is wall time."]
     silent = sorted({r["planner"] for r in rows
                      if r["planner"] != "orca" and r["threats_ms_max"] == 0.0})
     if silent:

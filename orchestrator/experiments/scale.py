@@ -589,3 +589,49 @@ def plot_scale(rows: Sequence[dict[str, Any]], path: Path) -> Path:
         ax.grid(alpha=0.3)
     fig.savefig(path, dpi=100)
     return path
+
+
+# --------------------------------------------------------------------------------------
+# `orchestrator bench --process`: a non-planning robot's own cost per cycle
+# --------------------------------------------------------------------------------------
+
+PROCESS_BENCH_SECONDS = 20.0
+"""Sim (= wall) seconds of an `orchestrator bench --process` run."""
+
+
+def process_bench_args(robots: int, seconds: float, *, insecure: bool = False,
+                       argv: Sequence[str] = ()) -> argparse.Namespace:
+    """The `run_one` options of `orchestrator bench --process`: the default family at real
+    time, robots forked by `agent.fleet`, ``--no-plan`` and the run cut at `seconds`."""
+    return argparse.Namespace(
+        family=DEFAULT_FAMILY, seed=0, planner=None, agents=[robots], seconds=seconds,
+        time_scale=1.0, hosts=["127.0.0.1"], launcher="fork", robot_nice=ROBOT_NICE,
+        cpu_tokens=None, startup_timeout_s=60.0, no_plan=True, insecure=insecure,
+        tls_ca_dir=None, argv=list(argv))
+
+
+def format_process_row(row: dict[str, Any]) -> str:
+    """The figures of one `orchestrator bench --process` run, one per line.
+
+    Per cycle is per command sent: a non-planning robot senses once and commands a stop
+    once per control period.
+    """
+    parts = [row.get(f"cpu_ms_per_plan_{part}") for part in CPU_PARTS]
+    labels = ("sense", "brake", "send", "loop", "Zenoh threads")
+    split = "  ".join(f"{label} {_fmt(v, 3)}" for label, v in zip(labels, parts))
+    sampled = row.get("cpu_pct_per_robot")
+    lines = [
+        f"robot process without planning, {row['agents']} robots, "
+        f"{_fmt(row.get('sim_time_s'), 0)} s ({row.get('transport', '')}):",
+        f"  CPU ms per cycle: {split} = {_fmt(row.get('cpu_ms_per_plan_total'), 3)}",
+        "    (each robot's own thread and process CPU clocks over its loop: sense = decode "
+        "and observe the pose, brake = the stop command, send = encode and publish, loop = "
+        "the rest of the main thread: waiting, control and liveliness; Zenoh threads = "
+        "every other thread)",
+        f"  robot process CPU sampled from outside (psutil): {_fmt(sampled, 2)} % of a core "
+        f"= {_fmt(sampled, 3)} ms per 100 ms cycle",
+        f"  sense -> act wall ms p50 / p99: {_fmt(row.get('sense_to_act_ms_p50'), 1)} / "
+        f"{_fmt(row.get('sense_to_act_ms_p99'), 1)}; threads per robot "
+        f"{row.get('threads_per_robot')}; robots lost {row.get('robots_lost')}",
+    ]
+    return "\n".join(lines)

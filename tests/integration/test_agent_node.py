@@ -238,7 +238,7 @@ def _node_with(tokens: _Tokens, *, ring: bool, fresh: bool = True) -> RobotNode:
         tokens.log.append(f"poll held={tokens.held}")
         return fresh
 
-    def plan_and_send() -> None:
+    def plan_and_send(cpu_start_s: float | None = None) -> None:
         tokens.log.append(f"plan held={tokens.held}")
 
     node.poll_poses = poll_poses  # type: ignore[method-assign]
@@ -270,7 +270,7 @@ def test_the_token_is_given_back_when_planning_raises() -> None:
     tokens = _Tokens(available=True)
     node = _node_with(tokens, ring=True)
 
-    def boom() -> None:
+    def boom(cpu_start_s: float | None = None) -> None:
         raise RuntimeError("planner bug")
 
     node.plan_and_send = boom  # type: ignore[method-assign]
@@ -293,40 +293,31 @@ class _Sample:
         self.source_info = source_info
 
 
-def test_the_robot_times_the_next_pose_from_when_the_last_one_arrived_not_when_read() -> None:
-    import threading
+def test_the_robot_takes_a_pose_off_its_queue_when_it_arrives_and_clocks_from_then() -> None:
     import time
-    from types import SimpleNamespace
 
-    from agent.planning.controller import RobotController
-    from protocol import PosesMsg
-    from world.sim.link import FaultyLink, LinkFaults
-
-    spec = RobotSpec(0, (0.0, 0.0, 0.0), (10.0, 0.0))
-    node = object.__new__(RobotNode)
-    node.robot_id = 0
-    node.pose_arrived = threading.Event()
-    node.pose_ring = deque(maxlen=2)
-    node.known_ids = frozenset({0, 1})
-    node.counts = {k: 0 for k in ("rejected", "skipped", "stale", "link_dropped",
-                                  "refused_poses")}
-    node.last_rx_wall = None
-    node.world_zid = None
-    node.clock_tick, node.clock_stamp_s, node.clock_wall = -1, 0.0, 0.0
-    node.config = SimpleNamespace(time_scale=1.0, world_rate_hz=50.0, time_limit_s=60.0)
-    node.pose_link = FaultyLink(LinkFaults(), None)
-    node.controller = RobotController(spec, PlannerConfig(), 0.25)
-    node.newest = None
-    pose = PosesMsg(t_s=0.2, tick=10, robot_ids=[0, 1], robot_pose=[[0, 0, 0], [5, 0, 3.1]],
-                    robot_radius_m=[0.5, 0.5], obstacle_ids=[], obstacle_xy_m=np.zeros((0, 2)),
-                    obstacle_radius_m=[])
-    arrived = time.monotonic() - 0.03  # it arrived 30 ms ago; the robot reads it only now
-    node.pose_ring.append((arrived, _Sample(pose.encode())))
-    node.pose_arrived.set()
-    assert node.poll_poses() is True
-    assert not node.pose_arrived.is_set() and not node.pose_ring
-    assert node.last_rx_wall == arrived and node.clock_wall == arrived
+    node = _pose_node(None)
+    node.pose_queue.put(_Sample(_pose(10, 0.2).encode()))
+    before = time.monotonic()
+    node.wait_for_poses()  # returns at once: a pose is waiting
+    assert len(node.pose_ring) == 1 and node.pose_queue.empty()
+    assert before <= node.pose_rx_wall <= time.monotonic()
+    node.pose_rx_wall -= 0.03  # as if it had been taken off 30 ms ago
+    assert node.poll_poses() is True and not node.pose_ring
+    assert node.last_rx_wall == node.pose_rx_wall == node.clock_wall
     assert node.sim_now() == pytest.approx(0.2 + 0.03, abs=0.01)  # the pose is 30 ms old
+
+
+def test_without_poses_the_robot_waits_at_most_its_nap() -> None:
+    import time
+
+    node = _pose_node(None)
+    node.pose_link = type(node.pose_link)(node.pose_link.faults, None)
+    t0 = time.monotonic()
+    node.wait_for_poses()
+    waited = time.monotonic() - t0
+    assert not node.pose_ring
+    assert waited >= agent_node.MAX_NAP_S * 0.9  # no poll: one wait for the whole nap
 
 
 def _source(zid: str):
@@ -336,20 +327,21 @@ def _source(zid: str):
 
 
 def _pose_node(world_zid: str | None):
-    import threading
+    import queue
     from types import SimpleNamespace
 
     from agent.planning.controller import RobotController
+    from protocol import PoseDecoder
     from world.sim.link import FaultyLink, LinkFaults
 
     node = object.__new__(RobotNode)
     node.robot_id = 0
-    node.pose_arrived = threading.Event()
+    node.pose_queue = queue.SimpleQueue()
     node.pose_ring = deque(maxlen=2)
-    node.known_ids = frozenset({0, 1})
+    node.pose_rx_wall = 0.0
+    node.decoder = PoseDecoder({0, 1})
     node.counts = {k: 0 for k in ("rejected", "skipped", "stale", "link_dropped",
                                   "refused_poses", "refused_control")}
-    node.refused_in_callback = 0
     node.last_rx_wall = None
     node.world_zid = world_zid
     node.clock_tick, node.clock_stamp_s, node.clock_wall = -1, 0.0, 0.0
@@ -371,30 +363,41 @@ def _pose(tick: int, t_s: float):
 
 def test_poses_not_from_the_world_never_enter_the_ring() -> None:
     node = _pose_node("aa")
-    node._on_pose(_Sample(_pose(10, 0.2).encode(), None))
-    node._on_pose(_Sample(_pose(10, 0.2).encode(), _source("bb")))
-    assert not node.pose_ring and node.refused_in_callback == 2
-    node._on_pose(_Sample(_pose(10, 0.2).encode(), _source("aa")))
-    assert len(node.pose_ring) == 1
+    for _ in range(3):  # a flood of forged poses, then the world's
+        node.pose_queue.put(_Sample(_pose(10, 0.2).encode(), None))
+        node.pose_queue.put(_Sample(_pose(10, 0.2).encode(), _source("bb")))
+    node.pose_queue.put(_Sample(_pose(10, 0.2).encode(), _source("aa")))
+    node.wait_for_poses()
+    assert len(node.pose_ring) == 1 and node.counts["refused_poses"] == 6
+
+
+def test_a_malformed_pose_is_rejected_and_counted_and_the_next_one_observed() -> None:
+    node = _pose_node(None)
+    node.pose_ring.append(_Sample(b"\x93garbage"))
+    assert node.poll_poses() is False and node.counts["rejected"] == 1
+    node.pose_ring.append(_Sample(_pose(10, 0.2).encode()))
+    node.pose_ring.append(_Sample(b"\x81\xa6schema\x04"))  # newer, but malformed
+    assert node.poll_poses() is True
+    assert node.counts["rejected"] == 2 and node.newest.tick == 10
 
 
 def test_the_clock_moves_only_on_a_pose_that_passed_every_check() -> None:
     import time
 
     node = _pose_node("aa")
-    now = time.monotonic()
-    node.pose_ring.append((now, _Sample(_pose(10, 0.2).encode(), _source("aa"))))
+    node.pose_rx_wall = time.monotonic()
+    node.pose_ring.append(_Sample(_pose(10, 0.2).encode(), _source("aa")))
     assert node.poll_poses() is True
     assert node.clock_tick == 10 and node.clock_stamp_s == 0.2
     # Far future, and ahead of the clock (tick and time consistent): refused, clock kept.
     for tick, t_s in ((50_000_000, 1.0e6), (1000, 20.0), (11, 5.0)):
-        node.pose_ring.append((time.monotonic(), _Sample(_pose(tick, t_s).encode(),
-                                                         _source("aa"))))
+        node.pose_rx_wall = time.monotonic()
+        node.pose_ring.append(_Sample(_pose(tick, t_s).encode(), _source("aa")))
         assert node.poll_poses() is False
         assert node.clock_tick == 10 and node.clock_stamp_s == 0.2
     assert node.counts["refused_poses"] == 3
     # The next genuine pose is observed as usual.
-    node.pose_ring.append((time.monotonic(), _Sample(_pose(15, 0.3).encode(), _source("aa"))))
+    node.pose_ring.append(_Sample(_pose(15, 0.3).encode(), _source("aa")))
     assert node.poll_poses() is True and node.clock_tick == 15
 
 

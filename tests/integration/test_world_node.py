@@ -275,3 +275,39 @@ def test_relays_and_a_fixed_id_go_into_the_worlds_router_settings(tmp_path: Path
     with pytest.raises(ValueError, match="--relay needs --tls"):
         world_settings(parse_args(["--run", "r1", "--scenario", "s.yaml", "--relay", "b=4"]),
                        scenario)
+
+
+def test_a_pose_subscriber_puts_each_sample_on_the_robots_queue(rig: Rig) -> None:
+    """The robot's pose handler (`agent.process.enqueue_on_receive`): Zenoh's receiving
+    thread puts every sample on a queue the robot's loop blocks on; nothing else runs."""
+    import queue
+
+    from agent.process import enqueue_on_receive
+    from protocol import PoseDecoder
+
+    handler = enqueue_on_receive(queue.SimpleQueue().put)
+    if isinstance(handler, zenoh.handlers.Callback):
+        assert handler.indirect is False  # on Zenoh's thread: no thread of its own
+    samples: queue.SimpleQueue = queue.SimpleQueue()
+    sub = rig.client.declare_subscriber(rig.keys.poses_slot(0), enqueue_on_receive(samples.put))
+    try:
+        pub = rig.node.poses_pubs[0]
+        until(lambda: pub.matching_status.matching, lambda: None, "pose subscriber")
+        rig.node.publish_poses()  # tick 0: slot 0
+        sample = samples.get(timeout=DEADLINE_S)
+        assert PoseDecoder().decode(sample.payload.to_bytes()).tick == 0
+    finally:
+        sub.undeclare()
+
+
+def test_one_zenoh_thread_unless_the_environment_says_otherwise(monkeypatch) -> None:
+    import os
+
+    from agent.process import ONE_THREAD_RUNTIME, use_one_zenoh_thread
+
+    monkeypatch.delenv("ZENOH_RUNTIME", raising=False)
+    use_one_zenoh_thread()
+    assert os.environ["ZENOH_RUNTIME"] == ONE_THREAD_RUNTIME
+    monkeypatch.setenv("ZENOH_RUNTIME", "(rx: (worker_threads: 2))")
+    use_one_zenoh_thread()
+    assert os.environ["ZENOH_RUNTIME"] == "(rx: (worker_threads: 2))"

@@ -341,15 +341,15 @@ def garbage_commands(valid: CommandMsg) -> list[tuple[int, bytes, str]]:
 
 def garbage_poses(valid: PosesMsg) -> list[bytes]:
     body = msgpack.unpackb(valid.encode())
-    nan_x = np.frombuffer(body["robots"]["x"], "<f8").copy()
-    nan_x[0] = np.nan
+    nan_x = np.frombuffer(body["discs"], "<f8").copy()
+    nan_x[0] = np.nan  # the first robot's x
     unknown = PosesMsg(valid.t_s, valid.tick + 10**6, [0, 1, 42], np.zeros((3, 3)),
                        [0.3, 0.3, 0.3], [], np.zeros((0, 2)), [])
     data = valid.encode()
     return [
         np.random.default_rng(5).bytes(64),
         data[:-7],
-        msgpack.packb({**body, "robots": {**body["robots"], "x": nan_x.tobytes()}}),
+        msgpack.packb({**body, "discs": nan_x.tobytes()}),
         msgpack.packb({**body, "schema": 0}),
         unknown.encode(),  # valid shape but an id outside the run
         CommandMsg(0, 1, 0.0, 1.0, 0.0, 1.0, "ok").encode(),

@@ -117,3 +117,24 @@ def test_fleet_robots_leave_with_the_fleet(tmp_path: Path, how: str) -> None:
     if how == "sigterm":
         assert "exit: reason='signal' code=0" in log1
         assert "connecting to tcp/127.0.0.1:9" in (tmp_path / "robot_0.log").read_text()
+
+
+def test_bench_process_prints_a_robots_cpu_per_cycle_by_part(tmp_path: Path, capsys) -> None:
+    """`orchestrator bench --process`: real robot processes that do not plan; the figures
+    are printed, complete and consistent, never compared with a budget."""
+    out = tmp_path / "process"
+    assert cli_main(["bench", "--process", "--robots", "3", "--seconds", "3", "--insecure",
+                     "--out", str(out), "--json"]) == 0
+    text = capsys.readouterr().out
+    row = json.loads(text.strip().splitlines()[-1])
+    assert "CPU ms per cycle: sense" in text and "Zenoh threads" in text
+    assert row["agents"] == 3 and row["transport"] == "plain TCP" and row["robots_lost"] == 0
+    parts = [row[f"cpu_ms_per_plan_{p}"] for p in ("sense", "plan", "send", "loop", "threads")]
+    assert all(x is not None and x > 0.0 for x in parts), parts
+    assert abs(sum(parts) - row["cpu_ms_per_plan_total"]) < 1e-9
+    assert sum(parts) < 100.0  # ms per 100 ms cycle: less than a core per robot
+    assert (out / "scale.json").stat().st_size > 0
+    for rid in range(3):  # every robot braked every cycle and left on the world's end
+        log = (out / "circles_3" / f"robot_{rid}.log").read_text()
+        assert "exit: reason='end (time_limit)' code=0" in log, log
+        assert re.search(r" plans=[1-9]\d* ", log), log

@@ -93,6 +93,23 @@ def raw(msg: object) -> dict:
     return msgpack.unpackb(msg.encode())
 
 
+def discs(body: dict) -> np.ndarray:
+    """A writable copy of a raw `PosesMsg` body's disc rows (k, 4): x, y, heading, radius."""
+    return np.frombuffer(body["discs"], dtype="<f8").reshape(-1, 4).copy()
+
+
+def poses_body(ids: list[int], rows: np.ndarray | None = None) -> dict:
+    """A raw `PosesMsg` body with these ids (robots first) and disc rows (default: at the
+    origin, heading 0, radius 1)."""
+    if rows is None:
+        rows = np.zeros((len(ids), 4))
+        rows[:, 3] = 1.0
+    body = raw(make_poses())
+    body["ids"] = np.array(ids, dtype="<i4").tobytes()
+    body["discs"] = np.asarray(rows, dtype="<f8").tobytes()
+    return body
+
+
 def pack(obj: object) -> bytes:
     return msgpack.packb(obj, use_bin_type=True)
 
@@ -112,6 +129,16 @@ def test_poses_round_trip() -> None:
                  "obstacle_radius_m"):
         np.testing.assert_array_equal(getattr(back, name), getattr(msg, name))
     assert back.n_robots == 3
+
+
+def test_poses_far_from_the_origin_round_trip() -> None:
+    """Coordinates beyond the decoder's quick bound (1 km) are checked column by column and
+    pass up to MAX_COORD_M."""
+    msg = make_poses()
+    far = PosesMsg(**{**{f.name: getattr(msg, f.name) for f in dataclasses.fields(msg)},
+                      "robot_pose": msg.robot_pose + [5e5, -9e5, 0.0]})
+    back = PosesMsg.decode(far.encode())
+    np.testing.assert_array_equal(back.robot_pose, far.robot_pose)
 
 
 def test_poses_empty_round_trip() -> None:
@@ -295,11 +322,6 @@ def test_rejects_extra_key(msg) -> None:
 
 
 def test_rejects_missing_and_extra_nested_keys() -> None:
-    for path in (("robots",), ("obstacles",)):
-        body = raw(make_poses())
-        del body[path[0]]["x"]
-        with pytest.raises(ProtocolError, match="missing keys"):
-            PosesMsg.decode(pack(body))
     for path in (("robot", "limits"), ("planner", "mpc"), ("planner",), ("robot",)):
         body = raw(make_config())
         node = body
@@ -320,6 +342,15 @@ def test_rejects_duplicate_map_keys() -> None:
         + pack("cmd")
     with pytest.raises(ProtocolError, match="duplicate"):
         CommandMsg.decode(data)
+    # A PosesMsg map (flat: its size is checked against its header) with "tick" twice.
+    body = raw(make_poses())
+    items = b"".join(pack(k) + pack(v) for k, v in body.items())
+    for head in (bytes([0x80 | len(body) + 1]), b"\xde" + (len(body) + 1).to_bytes(2, "big"),
+                 b"\xdf" + (len(body) + 1).to_bytes(4, "big")):
+        with pytest.raises(ProtocolError, match="duplicate"):
+            PosesMsg.decode(head + items + pack("tick") + pack(body["tick"]))
+    assert PosesMsg.decode(bytes([0x80 | len(body)]) + items).tick == body["tick"]
+    assert PosesMsg.decode(b"\xde" + len(body).to_bytes(2, "big") + items).tick == body["tick"]
 
 
 @pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
@@ -329,13 +360,14 @@ def test_rejects_non_finite(bad) -> None:
         body[key] = bad
         with pytest.raises(ProtocolError, match="non-finite"):
             CommandMsg.decode(pack(body))
-    for column in ("x", "y", "theta", "radius"):
-        body = raw(make_poses())
-        values = np.frombuffer(body["robots"][column], dtype="<f8").copy()
-        values[1] = bad
-        body["robots"][column] = values.tobytes()
-        with pytest.raises(ProtocolError, match="non-finite"):
-            PosesMsg.decode(pack(body))
+    for column in range(4):
+        for row in (1, 4):  # a robot, an obstacle
+            body = raw(make_poses())
+            values = discs(body)
+            values[row, column] = bad
+            body["discs"] = values.tobytes()
+            with pytest.raises(ProtocolError, match="non-finite|heading"):
+                PosesMsg.decode(pack(body))
     body = raw(make_poses())
     body["t"] = bad
     with pytest.raises(ProtocolError, match="non-finite"):
@@ -349,32 +381,46 @@ def test_rejects_non_finite(bad) -> None:
 
 
 def test_poses_rejects_array_length_mismatch() -> None:
-    for group, column in (("robots", "theta"), ("robots", "radius"), ("obstacles", "y")):
+    for cut in (8, 32, 33):  # a value, a disc, and not a whole number of float64
         body = raw(make_poses())
-        body[group][column] = body[group][column][:-8]
+        body["discs"] = body["discs"][:-cut]
         with pytest.raises(ProtocolError, match="expected"):
             PosesMsg.decode(pack(body))
     body = raw(make_poses())
-    body["robots"]["x"] = body["robots"]["x"][:-3]  # not a whole number of float64
+    body["discs"] += bytes(32)  # a disc too many
+    with pytest.raises(ProtocolError, match="expected"):
+        PosesMsg.decode(pack(body))
+    body = raw(make_poses())
+    body["ids"] = body["ids"][:-3]  # not a whole number of int32
     with pytest.raises(ProtocolError, match="multiple"):
         PosesMsg.decode(pack(body))
 
 
 def test_poses_rejects_columns_as_lists() -> None:
+    for key, value in (("discs", [0.0, 1.0, 2.0]), ("ids", [0, 1, 2])):
+        body = raw(make_poses())
+        body[key] = value
+        with pytest.raises(ProtocolError, match="bin"):
+            PosesMsg.decode(pack(body))
+
+
+def test_poses_rejects_robots_after_obstacles_and_obstacles_that_turn() -> None:
+    body = raw(make_poses())  # ids 0, 1, 2, -1, -2
+    body["ids"] = np.array([0, 1, -1, 2, -2], dtype="<i4").tobytes()
+    with pytest.raises(ProtocolError, match="first"):
+        PosesMsg.decode(pack(body))
     body = raw(make_poses())
-    body["robots"]["x"] = [0.0, 1.0, 2.0]
-    with pytest.raises(ProtocolError, match="bin"):
+    values = discs(body)
+    values[3, 2] = 0.5  # an obstacle with a heading
+    body["discs"] = values.tobytes()
+    with pytest.raises(ProtocolError, match="heading"):
         PosesMsg.decode(pack(body))
 
 
 def test_poses_rejects_huge_array() -> None:
     n = MAX_ROBOTS + 1
-    zeros = np.zeros(n).tobytes()
-    body = raw(make_poses())
-    body["robots"] = {"id": np.arange(n, dtype="<i4").tobytes(), "x": zeros, "y": zeros,
-                      "theta": zeros, "radius": np.ones(n).tobytes()}
-    with pytest.raises(ProtocolError, match="exceeds"):
-        PosesMsg.decode(pack(body))
+    with pytest.raises(ProtocolError, match="exceed"):
+        PosesMsg.decode(pack(poses_body(list(range(n)))))
     with pytest.raises(ProtocolError, match="cap"):
         make_poses(n=MAX_ROBOTS + 1, m=0)
 
@@ -421,10 +467,15 @@ def test_poses_rejects_bad_ids_and_radii() -> None:
         with pytest.raises(ProtocolError):
             PosesMsg(**fields)
             pytest.fail(name)
-    body = raw(base)
-    body["robots"]["radius"] = np.array([0.5, -1.0, 0.5]).tobytes()
-    with pytest.raises(ProtocolError, match="radius"):
-        PosesMsg.decode(pack(body))
+    for row, column, value, name in ((1, 3, -1.0, "radius"), (4, 3, 0.0, "radius"),
+                                     (0, 0, 2e6, "x"), (3, 1, -2e6, "y"),
+                                     (2, 2, 1e4, "theta")):
+        body = raw(base)
+        values = discs(body)
+        values[row, column] = value
+        body["discs"] = values.tobytes()
+        with pytest.raises(ProtocolError, match=f"discs.{name}"):
+            PosesMsg.decode(pack(body))
 
 
 @pytest.mark.parametrize("version", [0, SCHEMA_VERSION + 1, "1", 1.0, None, True])
@@ -701,13 +752,10 @@ def test_fuzz_mutated_valid_messages(kind: str, pick: int, action: str, value: o
 
 
 @FUZZ
-@given(n=st.integers(0, 5), columns=st.lists(st.binary(max_size=48), min_size=9, max_size=9))
-def test_fuzz_pose_columns(n: int, columns: list[bytes]) -> None:
+@given(ids=st.binary(max_size=48), values=st.binary(max_size=320))
+def test_fuzz_pose_blocks(ids: bytes, values: bytes) -> None:
     body = raw(make_poses())
-    keys = [("robots", k) for k in ("id", "x", "y", "theta", "radius")] + [
-        ("obstacles", k) for k in ("id", "x", "y", "radius")]
-    for (group, key), col in zip(keys, columns):
-        body[group][key] = col
+    body["ids"], body["discs"] = ids, values
     decode_or_protocol_error(PosesMsg.decode, pack(body))
 
 
@@ -721,13 +769,7 @@ KNOWN = frozenset({0, 1, 2, -1, -2})
        obstacle_ids=st.lists(st.integers(-(2**31), 2**31 - 1), max_size=4))
 def test_fuzz_pose_ids_against_known_ids(robot_ids: list[int], obstacle_ids: list[int]) -> None:
     n, m = len(robot_ids), len(obstacle_ids)
-    body = raw(make_poses())
-    body["robots"] = {"id": np.array(robot_ids, "<i4").tobytes(),
-                      **{k: np.zeros(n).tobytes() for k in ("x", "y", "theta")},
-                      "radius": np.ones(n).tobytes()}
-    body["obstacles"] = {"id": np.array(obstacle_ids, "<i4").tobytes(),
-                         "x": np.zeros(m).tobytes(), "y": np.zeros(m).tobytes(),
-                         "radius": np.ones(m).tobytes()}
+    body = poses_body(robot_ids + obstacle_ids)
     try:
         msg = PosesMsg.decode(pack(body), known_ids=KNOWN)
     except ProtocolError:
@@ -764,10 +806,8 @@ def test_fuzz_command_fields_with_hostile_values(field: str, value: object,
 @settings(max_examples=25, deadline=None, database=None)
 @given(n=st.integers(MAX_ROBOTS - 2, MAX_ROBOTS + 40), short=st.integers(0, 2))
 def test_fuzz_huge_pose_arrays(n: int, short: int) -> None:
-    body = raw(make_poses())
-    body["robots"] = {"id": np.arange(n, dtype="<i4").tobytes(),
-                      "x": np.zeros(n - short).tobytes(), "y": np.zeros(n).tobytes(),
-                      "theta": np.zeros(n).tobytes(), "radius": np.ones(n).tobytes()}
+    body = poses_body(list(range(n)))
+    body["discs"] = body["discs"][:len(body["discs"]) - 8 * short]
     try:
         msg = PosesMsg.decode(pack(body))
     except ProtocolError:
@@ -806,6 +846,76 @@ def test_poses_carry_their_publish_stamp_and_clock():
     body["clock"] = 2**40
     with pytest.raises(protocol.ProtocolError, match="poses.clock"):
         protocol.PosesMsg.decode(msgpack.packb(body))
+
+
+# --- PoseDecoder: a receiver's stream, each id block checked once ----------------------------
+
+
+def test_pose_decoder_hands_out_one_id_array_while_the_ids_repeat() -> None:
+    decoder = protocol.PoseDecoder(KNOWN)
+    first = decoder.decode(make_poses(tick=62).encode())
+    second = decoder.decode(make_poses(tick=67).encode())
+    ids, _ = first.discs()
+    assert second.discs()[0] is ids and not ids.flags.writeable
+    assert second.tick == 67
+    snap = second.to_snapshot()
+    assert snap.ids is ids
+    np.testing.assert_array_equal(snap.pose, PosesMsg.decode(make_poses().encode()).to_snapshot()
+                                  .pose)
+
+
+def test_pose_decoder_checks_every_message_after_a_good_one() -> None:
+    """The id cache only skips re-checking an id block that passed; every other check runs on
+    every message, and a rejected block is never remembered as good."""
+    decoder = protocol.PoseDecoder(KNOWN)
+    good = make_poses()
+    decoder.decode(good.encode())
+    body = raw(good)
+    values = discs(body)
+    values[0, 0] = math.nan
+    bad_values = {**body, "discs": values.tobytes()}
+    duplicate = {**body, "ids": np.array([0, 1, 1, -1, -2], dtype="<i4").tobytes()}
+    stranger = {**body, "ids": np.array([0, 1, 7, -1, -2], dtype="<i4").tobytes()}
+    for bad in (bad_values, duplicate, stranger, duplicate, {**body, "t": -1.0},
+                {**body, "discs": body["discs"][:-32]}):
+        with pytest.raises(ProtocolError):
+            decoder.decode(pack(bad))
+    assert decoder.decode(good.encode()).n_robots == 3
+    with pytest.raises(ProtocolError, match="unknown"):
+        decoder.decode(pack(stranger))
+
+
+@FUZZ
+@given(steps=st.lists(st.tuples(st.sampled_from(["good", "ids", "discs", "both"]),
+                                 st.integers(0, 4), st.sampled_from([-3, 0, 1, 9, 2**31 - 1]),
+                                 st.sampled_from([0.0, -0.5, math.nan, 3e6, 0.7])),
+                       min_size=1, max_size=12))
+def test_fuzz_pose_decoder_agrees_with_a_fresh_decode(steps: list) -> None:
+    """A long-lived decoder accepts exactly what `PosesMsg.decode` accepts, message by
+    message, with the same arrays."""
+    decoder = protocol.PoseDecoder(KNOWN)
+    base = raw(make_poses())
+    for kind, index, new_id, new_value in steps:
+        body = dict(base)
+        if kind in ("ids", "both"):
+            ids = np.frombuffer(base["ids"], dtype="<i4").copy()
+            ids[index] = new_id
+            body["ids"] = ids.tobytes()
+        if kind in ("discs", "both"):
+            values = discs(base)
+            values[index, index % 4] = new_value
+            body["discs"] = values.tobytes()
+        data = pack(body)
+        try:
+            expected = PosesMsg.decode(data, known_ids=KNOWN)
+        except ProtocolError:
+            with pytest.raises(ProtocolError):
+                decoder.decode(data)
+            continue
+        got = decoder.decode(data)
+        for name in ("robot_ids", "robot_pose", "robot_radius_m", "obstacle_ids",
+                     "obstacle_xy_m", "obstacle_radius_m"):
+            np.testing.assert_array_equal(getattr(got, name), getattr(expected, name))
 
 
 # --- PlanDebugMsg (robot -> viewers) ---------------------------------------------------------

@@ -40,3 +40,16 @@ def test_with_others_swaps_only_the_others_and_leaves_the_original_alone():
     for name in ("robot_id", "ego", "goal_m", "radius_m", "limits", "goal_tolerance_m",
                  "pose_age_s"):
         assert getattr(narrowed, name) is getattr(obs, name)
+
+
+def test_plan_debug_trusted_holds_what_the_checked_constructor_holds() -> None:
+    from agent.core.types import PlanDebug
+
+    fields = dict(ego=np.array([1.0, 2.0, 0.5]), threat_ids=(np.int64(3), -1),
+                  via_points_m=np.zeros((1, 2)), reference_m=np.ones((21, 2)),
+                  predicted_m=np.full((21, 2), 2.0))
+    checked, trusted = PlanDebug(**fields), PlanDebug.trusted(**fields)
+    assert trusted.threat_ids == checked.threat_ids == (3, -1)
+    assert all(type(i) is int for i in trusted.threat_ids)
+    for name in ("ego", "via_points_m", "reference_m", "predicted_m"):
+        np.testing.assert_array_equal(getattr(trusted, name), getattr(checked, name))

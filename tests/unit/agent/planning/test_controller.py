@@ -299,3 +299,18 @@ def test_a_robot_away_from_its_goal_plans_on_the_full_observation(planner: str) 
     assert seen.others.ids.tolist() == full.others.ids.tolist() == [1]
     for field in ("position_m", "velocity_mps", "linearity", "track_start_m", "radius_m"):
         np.testing.assert_array_equal(getattr(seen.others, field), getattr(full.others, field))
+
+
+def test_observe_finds_its_row_again_when_the_read_only_ids_repeat() -> None:
+    """A decoded stream hands out one read-only id array while the ids repeat: the robot's
+    row is looked up once, and again for a new array (the robot moved in the order)."""
+    ctrl = RobotController(RobotSpec(3, (0.0, 0.0, 0.0), (5.0, 0.0)), PlannerConfig(), 0.25)
+    first = np.array([1, 3, 2], dtype=np.int64)
+    first.flags.writeable = False
+    second = np.array([3, 1, 2], dtype=np.int64)
+    second.flags.writeable = False
+    pose = np.array([[0.0, 1.0, 0.0], [7.0, 8.0, 0.5], [4.0, 4.0, 0.0]])
+    for tick, ids in enumerate((first, first, second, second), start=1):
+        snap = PoseSnapshot.trusted(0.1 * tick, tick, ids, pose, np.full(3, 0.5))
+        assert ctrl.observe(snap)
+        assert ctrl.observation(0.1 * tick).ego.x_m == (7.0 if ids is first else 0.0)

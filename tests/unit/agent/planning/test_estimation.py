@@ -228,3 +228,32 @@ def test_the_default_window_spans_about_the_same_at_10_and_50_hz(rate_hz):
         assert reach_s == pytest.approx(0.7, abs=1e-9)
     else:
         assert window_s - window_s / 6.0 < reach_s <= window_s + 1e-9, reach_s
+
+
+def _read_only(arr: list[int]) -> np.ndarray:
+    arr = np.array(arr, dtype=np.int64)
+    arr.flags.writeable = False
+    return arr
+
+
+@pytest.mark.parametrize("ids", [[0, 1, 2, 3, -1], [2, 0, 3, 1, -1], [1, 2, 3, -1]])
+def test_a_repeated_read_only_id_array_gives_the_same_estimates(ids: list[int]) -> None:
+    """The shortcut for the same read-only id array (a robot's `PoseDecoder`) leaves the
+    tracker exactly as fresh arrays do, discs joining and leaving in between."""
+    rng = np.random.default_rng(5)
+    shared = _read_only(ids)
+    joined = _read_only([*ids, 9])
+    fast, slow = NeighborTracker(own_id=0), NeighborTracker(own_id=0)
+    for k in range(30):
+        use = shared if k % 7 else joined  # a disc joins now and then, and leaves
+        pose = rng.uniform(-5, 5, (use.shape[0], 3))
+        radius = rng.uniform(0.2, 0.6, use.shape[0])
+        fast.update(PoseSnapshot.trusted(stamp_s=0.1 * k, tick=k, ids=use, pose=pose,
+                                         radius_m=radius))
+        slow.update(PoseSnapshot(stamp_s=0.1 * k, tick=k, ids=np.array(use), pose=pose,
+                                 radius_m=radius))
+        a, b = fast.others(), slow.others()
+        for name in ("ids", "position_m", "velocity_mps", "radius_m", "linearity",
+                     "heading_rad", "recent_speed_mps"):
+            np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+    assert fast._same_ids is shared  # the shortcut was taken

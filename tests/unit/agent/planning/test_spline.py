@@ -354,3 +354,17 @@ def test_line_arc_reference_without_via_points_is_the_straight_line():
     np.testing.assert_array_equal(a.heading_rad, b.heading_rad)
     with pytest.raises(ValueError, match="radii"):
         build_reference(two, 0.0, V_MAX, ACCEL, DT, N, lines_arcs=True, corner_radius_m=-1.0)
+
+
+@settings(max_examples=300, deadline=None)
+@given(steps=st.lists(st.floats(-20.0, 20.0) | st.sampled_from([math.pi, -math.pi,
+                                                                  2 * math.pi, 0.0]),
+                      min_size=0, max_size=30),
+       start=st.floats(-100.0, 100.0))
+def test_unwrap_is_numpys_bit_for_bit(steps: list[float], start: float) -> None:
+    """The spline's own unwrap (`spline._unwrap`) gives exactly numpy's floats, steps of
+    exactly +-pi included."""
+    from agent.planning.spline import _unwrap
+
+    heading = np.cumsum([start, *steps])
+    assert _unwrap(heading).tobytes() == np.unwrap(heading).tobytes()

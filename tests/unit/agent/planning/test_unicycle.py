@@ -185,3 +185,14 @@ def test_track_reference_converges_onto_a_line_in_closed_loop():
         x = step(x, cmd, 0.1)
     assert abs(x[1]) < 0.02
     assert abs(wrap_angle(x[2])) < 0.05
+
+
+def test_rollout_with_trig_gives_the_rollout_and_its_headings_trig() -> None:
+    from agent.planning.unicycle import rollout_with_trig
+
+    rng = np.random.default_rng(4)
+    controls = rng.uniform(-1.0, 1.0, (20, 2))
+    states, cos, sin = rollout_with_trig(np.array([1.0, -2.0, 0.3]), controls, 0.1)
+    assert states.tobytes() == rollout(np.array([1.0, -2.0, 0.3]), controls, 0.1).tobytes()
+    np.testing.assert_array_equal(cos, np.cos(states[:-1, 2]))
+    np.testing.assert_array_equal(sin, np.sin(states[:-1, 2]))

@@ -27,9 +27,11 @@ def check_row(row: dict, planner: str, robots: int, cycles: int) -> None:
     for key in REQUIRED:
         assert key in row, key
     assert (row["planner"], row["robots"], row["cycles"]) == (planner, robots, cycles)
-    for q in ("p50", "p99", "max"):
-        assert math.isfinite(row[f"plan_ms_{q}"]) and row[f"plan_ms_{q}"] > 0.0
-    assert row["plan_ms_p50"] <= row["plan_ms_p99"] <= row["plan_ms_max"]
+    for name in ("plan", "cpu"):  # wall and thread CPU time of the cycle
+        for q in ("p50", "p99", "max"):
+            assert math.isfinite(row[f"{name}_ms_{q}"]) and row[f"{name}_ms_{q}"] >= 0.0
+        assert row[f"{name}_ms_p50"] <= row[f"{name}_ms_p99"] <= row[f"{name}_ms_max"]
+    assert row["plan_ms_p50"] > 0.0 and math.isfinite(row["cpu_ms_mean"])
     for stage in ("threats", "viapoints", "spline", "control", "obs"):
         p50, p99 = row[f"{stage}_ms_p50"], row[f"{stage}_ms_p99"]
         assert math.isfinite(p50) and math.isfinite(p99) and 0.0 <= p50 <= p99
@@ -56,6 +58,7 @@ def test_bench_one_row_json_is_the_last_line(capsys):
     check_row(row, "eifp-mpc", 4, 40)
     assert row["circle_radius_m"] == pytest.approx(5.0)  # half the 10 m sensing radius
     assert "cycle ms p50/p99/max" in out and "eifp-mpc" in out.splitlines()[2]
+    assert "cycle CPU ms p50/p99/max" in out
 
 
 def test_bench_all_planners_and_several_sizes_make_one_table(capsys):
@@ -135,3 +138,28 @@ def test_crowded_circle_keeps_osqps_iteration_tail_short():
 def test_bad_arguments_exit_2(argv, capsys):
     assert main(["bench", *argv]) == 2
     assert "orchestrator bench" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("argv", [
+    ["bench", "--robots", "4"],  # no planner, no --process
+    ["bench", "--process", "--planner", "orca", "--robots", "4"],
+    ["bench", "--planner", "orca", "--robots", "4", "--seconds", "3"],
+])
+def test_bench_refuses_options_of_the_other_mode(argv, capsys):
+    assert main(argv) == 2
+    assert "bench" in capsys.readouterr().err
+
+
+def test_process_figures_are_printed_by_part():
+    from orchestrator.experiments.scale import format_process_row
+
+    row = {"agents": 64, "sim_time_s": 20.0, "transport": "TLS", "cpu_pct_per_robot": 0.5,
+           "cpu_ms_per_plan_sense": 0.1, "cpu_ms_per_plan_plan": 0.02,
+           "cpu_ms_per_plan_send": 0.05, "cpu_ms_per_plan_loop": 0.06,
+           "cpu_ms_per_plan_threads": 0.12, "cpu_ms_per_plan_total": 0.35,
+           "sense_to_act_ms_p50": 4.0, "sense_to_act_ms_p99": 12.0, "threads_per_robot": 3,
+           "robots_lost": 0}
+    text = format_process_row(row)
+    for figure in ("sense 0.100", "brake 0.020", "send 0.050", "loop 0.060",
+                   "Zenoh threads 0.120", "= 0.350", "64 robots", "0.500 ms per 100 ms"):
+        assert figure in text, figure
