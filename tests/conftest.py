@@ -2,6 +2,7 @@
 
 - ``tests/unit``: pure functions and classes, in-process, fast (mirrors the modules);
 - ``tests/integration``: lockstep runs, the CLI in-process, loopback Zenoh sessions;
+- ``tests/scenarios``: whole lockstep scenarios under faults, tens of seconds each;
 - ``tests/system``: real world and robot processes over Zenoh;
 - ``tests/docker``: the docker-compose demo.
 
@@ -17,7 +18,7 @@ from pathlib import Path
 import pytest
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
-LAYERS = ("unit", "integration", "system", "docker")
+LAYERS = ("unit", "integration", "scenarios", "system", "docker")
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:

@@ -123,9 +123,18 @@ def test_robots_behind_the_relay_reach_the_world_and_back(hosts: Hosts) -> None:
 
     until(got_pose, "the world's poses at robot 2")
     # Configuration: the world's queryable answers through both routers, with its own id.
+    # The queryable's declaration reaches the relay asynchronously: ask until it answers, as a
+    # robot does at start-up.
     hosts.world.declare_queryable(k.config_all, lambda q: q.reply(q.key_expr, b"cfg"))
-    replies = list(robot2.get(k.config(2), timeout=5.0))
-    assert [str(r.replier_id.zid) for r in replies if r.ok] == [WORLD_ZID]
+    repliers: list[str] = []
+
+    def answered() -> bool:
+        nonlocal repliers
+        repliers = [str(r.replier_id.zid) for r in robot2.get(k.config(2), timeout=1.0) if r.ok]
+        return bool(repliers)
+
+    until(answered, "the world's configuration at robot 2")
+    assert repliers == [WORLD_ZID]
     # Liveliness: robot 2's token is seen at the world.
     alive = hosts.world.liveliness().declare_subscriber(f"{k.prefix}/alive/**", history=True)
     robot2.liveliness().declare_token(k.alive_robot(2))
