@@ -132,7 +132,7 @@ def run(args: argparse.Namespace) -> int:
             table = (bm.format_readme_summary(rows) + "\nEvery case, seed and column: "
                      "[docs/results.md](docs/results.md) (`benchmark.md` of the run).\n")
             args.readme.write_text(bm.replace_results(
-                text, table, "orchestrator " + " ".join(getattr(args, "argv", []))),
+                text, table, bm.portable_command(getattr(args, "argv", []))),
                 encoding="utf-8")
         except (OSError, ValueError) as exc:
             raise BadInput(f"--readme: {args.readme}: {exc}") from None

@@ -33,6 +33,27 @@ RUN_ENDINGS = frozenset({ExitCode.OK, ExitCode.CONTACT, ExitCode.INCOMPLETE, Exi
 """World exit statuses of a run that ended normally (anything else: the world was lost)."""
 
 
+LAUNCHERS = ("auto", "spawn", "fork")
+FORK_ABOVE_ROBOTS = 64
+"""With more robots than this on one machine, 'auto' forks them from one warmed-up parent: N
+interpreters importing numpy, scipy, osqp and zenoh and opening TLS sessions all at once
+outlast any start-up deadline (128 spawned robots on 2 cores are not all connected after
+64 s), while the fork launcher starts them a few at a time from a parent that imported once."""
+
+
+def choose_launcher(requested: str, robots: int, faults: Any) -> str:
+    """The robot launcher of a distributed run (see `FORK_ABOVE_ROBOTS`).
+
+    Raises:
+        BadInput: 'fork' with injected faults (only spawned robots can be faulted).
+    """
+    if requested == "fork" and faults is not None:
+        raise BadInput("--launcher fork: faults are injected per robot process; use spawn")
+    if requested != "auto":
+        return requested
+    return "fork" if robots > FORK_ABOVE_ROBOTS and faults is None else "spawn"
+
+
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("run", help="run one scenario")
     p.add_argument("--profile", choices=PROFILES, default=None,
@@ -51,6 +72,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--time-scale", type=float, default=None,
                    help="sim seconds per wall second (distributed mode, and lockstep with "
                         "--live; default 1)")
+    p.add_argument("--launcher", choices=LAUNCHERS, default="auto",
+                   help="distributed mode: 'spawn' starts one python -m agent per robot, "
+                        "'fork' one python -m agent.fleet that imports once and forks every "
+                        "robot, a few at a time; 'auto' (default): fork above "
+                        f"{FORK_ABOVE_ROBOTS} robots when no fault is injected, else spawn")
     p.add_argument("--out", help="run directory (default runs/<setup>-<planner>-<seed>-<time>)")
     p.add_argument("--gif", action="store_true", help="also write trajectory.gif")
     p.add_argument("--mp4", action="store_true",
@@ -88,6 +114,7 @@ def run(args: argparse.Namespace) -> int:
         if (why := mp4_available()) is not None:
             raise BadInput(f"--mp4: {why}")
     faults = fault_plan(args, scenario)
+    launcher = choose_launcher(args.launcher, len(scenario.robots), faults)
     planner = planner_label(scenario)
     out_dir = Path(args.out) if args.out else default_out_dir(scenario, planner, args.seed)
     if (out_dir / "trajectory.csv").exists() or (out_dir / "metrics.json").exists():
@@ -99,6 +126,7 @@ def run(args: argparse.Namespace) -> int:
         "seed": args.seed, "mode": args.mode, "profile": args.profile,
         "agents": len(scenario.robots),
         "start_jitter_m": args.start_jitter_m, "time_scale": args.time_scale,
+        "launcher": launcher if args.mode == "distributed" else None,
         "faults": faults.to_json() if faults is not None else None,
         "started": dt.datetime.now().isoformat(timespec="seconds"),
         "argv": list(args.argv),
@@ -118,7 +146,7 @@ def run(args: argparse.Namespace) -> int:
                                    ).metrics
         else:
             metrics, world_status = _run_distributed(scenario, out_dir, args, progress, faults,
-                                                     live)
+                                                     live, launcher)
     except KeyboardInterrupt:
         interrupted = True
         metrics = _partial_metrics(out_dir)
@@ -188,11 +216,12 @@ def _start_live(args: argparse.Namespace, scenario: Scenario) -> Any:
 
 def _run_distributed(scenario: Scenario, out_dir: Path, args: argparse.Namespace,
                      progress: ProgressLine, faults: Any = None,
-                     live: Any = None) -> tuple[Any, int]:
+                     live: Any = None, launcher: str = "spawn") -> tuple[Any, int]:
     """Run the real processes; (metrics or None, the world's exit status)."""
     from orchestrator.experiments.distributed import run_scenario_distributed
 
     return run_scenario_distributed(scenario, out_dir, args.seed,
                                     time_scale=args.time_scale or 1.0,
                                     on_progress=progress, faults=faults, live=live,
-                                    tls=not args.insecure, tls_ca=tls_ca(args))
+                                    tls=not args.insecure, tls_ca=tls_ca(args),
+                                    robot_launcher=launcher)

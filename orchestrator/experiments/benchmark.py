@@ -446,6 +446,26 @@ def replace_results(text: str, table_md: str, command: str) -> str:
     return text[:start] + body + text[end:]
 
 
+LOCAL_OPTIONS = ("--out", "--readme")
+"""Options whose values name places on the machine that ran the benchmark, not the suite."""
+
+
+def portable_command(argv: Sequence[str]) -> str:
+    """The ``orchestrator`` command line of `argv` without `LOCAL_OPTIONS` (given as
+    ``--out DIR`` or ``--out=DIR``), so the README names what was run, not where it was
+    written."""
+    kept: list[str] = []
+    skip = False
+    for arg in argv:
+        if skip:
+            skip = False
+        elif arg in LOCAL_OPTIONS:
+            skip = True
+        elif not arg.startswith(tuple(f"{o}=" for o in LOCAL_OPTIONS)):
+            kept.append(arg)
+    return " ".join(["orchestrator", *kept])
+
+
 README_GROUPS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("antipodal circles (8-48)", ("circle",)),
     ("circles, mixed radii and speeds", ("circle_mixed",)),

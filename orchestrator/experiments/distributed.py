@@ -63,6 +63,11 @@ ROBOT_TERM_GRACE_S = 3.0
 EXIT_MARGIN_S = 60.0
 """Slack on the world's expected wall duration before the launcher gives up on it."""
 POLL_S = 0.2
+STARTUP_S_MIN = 30.0
+STARTUP_S_PER_ROBOT = 0.5
+"""The default start-up deadline is the larger of `STARTUP_S_MIN` and this per robot: every
+spawned robot imports numpy, scipy, osqp and zenoh and opens a TLS session, so with more
+robots than cores start-up grows with N (128 robots on 2 cores are not all alive after 30 s)."""
 FAULT_POLL_S = 0.02
 """Wall period of the launcher's loop while process faults are pending."""
 TLS_DIR = "tls"
@@ -383,7 +388,7 @@ def run_distributed(
     rate_hz: float = 50.0,
     time_scale: float = 1.0,
     endpoint: str | None = None,
-    startup_timeout_s: float = 30.0,
+    startup_timeout_s: float | None = None,
     extra_world_args: Sequence[str] = (),
     on_progress: Callable[[DistributedProgress], None] | None = None,
     faults: FaultPlan | None = None,
@@ -406,7 +411,8 @@ def run_distributed(
         rate_hz: world tick rate in sim time.
         time_scale: sim seconds per wall second.
         endpoint: the world's router endpoint; default: a free TCP port on 127.0.0.1.
-        startup_timeout_s: deadline for robots to connect and for all of them to be alive.
+        startup_timeout_s: deadline for robots to connect and for all of them to be alive;
+            default `default_startup_timeout_s` of the scenario's robot count.
         extra_world_args: appended to the world's command line.
         on_progress: called with a `DistributedProgress` about every `POLL_S`.
         faults: link, timing and process faults to inject (see the module docstring).
@@ -441,6 +447,8 @@ def run_distributed(
     out_dir.mkdir(parents=True, exist_ok=True)
     endpoint = endpoint or free_tcp_endpoint()
     robot_ids = [spec.id for spec in scenario.robots]
+    if startup_timeout_s is None:
+        startup_timeout_s = default_startup_timeout_s(len(robot_ids))
     tls_dir: Path | None = None
     if tls:
         endpoint = tls_endpoint(endpoint)
@@ -562,18 +570,24 @@ def _record_transport(out_dir: Path, info: dict) -> None:
     write_json(path, {**read_json(path), "zenoh": info})
 
 
+def default_startup_timeout_s(n_robots: int) -> float:
+    """The start-up deadline of a run of `n_robots` robot processes (see `STARTUP_S_PER_ROBOT`)."""
+    return max(STARTUP_S_MIN, STARTUP_S_PER_ROBOT * n_robots)
+
+
 def run_scenario_distributed(scenario: Scenario, out_dir: Path, seed: int, *,
                              time_scale: float = 1.0,
                              on_progress: Callable[[DistributedProgress], None] | None = None,
                              faults: FaultPlan | None = None,
                              live: LiveView | None = None, tls: bool = True,
-                             tls_ca: Path | None = None
+                             tls_ca: Path | None = None, robot_launcher: str = "spawn"
                              ) -> tuple[RunMetrics | None, int]:
     """One resolved scenario as real processes, with its metrics: `orchestrator run`'s path.
 
     Writes `scenario.input.yaml` into out_dir, runs `run_distributed` (50 Hz world, a run
     id from the scenario name, the seed and a random token) and, when the world left a
-    trajectory, computes and writes `metrics.json`. `tls`, `tls_ca`: as `run_distributed`.
+    trajectory, computes and writes `metrics.json`. `tls`, `tls_ca`, `robot_launcher`: as
+    `run_distributed`.
 
     Returns:
         (the metrics, or None when the run left no readable trajectory; the world's exit
@@ -596,7 +610,8 @@ def run_scenario_distributed(scenario: Scenario, out_dir: Path, seed: int, *,
     run_id = f"{safe_name(scenario.name)[:24]}-{seed}-{secrets.token_hex(4)}"
     status = run_distributed(scenario_path, out_dir, run_id, rate_hz=50.0,
                              time_scale=time_scale, on_progress=on_progress, faults=faults,
-                             live=live, tls=tls, tls_ca=tls_ca)
+                             live=live, tls=tls, tls_ca=tls_ca,
+                             robot_launcher=robot_launcher)
     if not (out_dir / "trajectory.csv").exists():
         return None, status
     try:

@@ -113,9 +113,10 @@ def test_distributed_mode_calls_run_distributed_and_computes_metrics(tmp_path, m
     calls = {}
 
     def fake(scenario_path, out_dir, run_id, *, rate_hz, time_scale, on_progress, faults,
-             live, tls, tls_ca):
+             live, tls, tls_ca, robot_launcher):
         calls.update(path=Path(scenario_path), run_id=run_id, rate_hz=rate_hz,
-                     time_scale=time_scale, faults=faults, live=live, tls=tls, tls_ca=tls_ca)
+                     time_scale=time_scale, faults=faults, live=live, tls=tls, tls_ca=tls_ca,
+                     launcher=robot_launcher)
         run_lockstep(load_scenario(scenario_path), out_dir, on_progress=on_progress)
         (Path(out_dir) / "metrics.json").unlink()  # the world does not write metrics
         return 0
@@ -127,9 +128,11 @@ def test_distributed_mode_calls_run_distributed_and_computes_metrics(tmp_path, m
     assert calls["tls"] is True and calls["tls_ca"] is None  # secure by default
     assert calls["time_scale"] == 4.0 and calls["rate_hz"] == 50.0
     assert calls["faults"] is None and calls["live"] is None  # no fault flag, no --live
+    assert calls["launcher"] == "spawn"  # two robots: one process each
     assert calls["path"].parent == out and calls["run_id"].startswith("setup_a-0-")
     assert json.loads((out / "metrics.json").read_text())["robots"] == 2
-    assert json.loads((out / "run.json").read_text())["mode"] == "distributed"
+    run_json = json.loads((out / "run.json").read_text())
+    assert run_json["mode"] == "distributed" and run_json["launcher"] == "spawn"
 
 
 def test_distributed_world_crash_without_files_exits_world_lost(tmp_path, monkeypatch, capsys):
@@ -418,8 +421,9 @@ def test_benchmark_distributed_mode_takes_the_path_of_orchestrator_run(tmp_path,
     calls = []
 
     def fake(scenario_path, out_dir, run_id, *, rate_hz, time_scale, on_progress, faults,
-             live=None, tls=True, tls_ca=None):
+             live=None, tls=True, tls_ca=None, robot_launcher="spawn"):
         assert tls is True and tls_ca is None  # secure by default, as orchestrator run
+        assert robot_launcher == "spawn"
         calls.append((Path(scenario_path), run_id, time_scale))
         run_lockstep(load_scenario(scenario_path), out_dir)
         (Path(out_dir) / "metrics.json").unlink()  # the world does not write metrics

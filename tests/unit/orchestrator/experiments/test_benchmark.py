@@ -195,6 +195,14 @@ def test_the_readme_results_section_is_replaced_between_its_markers() -> None:
         replace_results("no markers", "| a |", "cmd")
 
 
+def test_the_readme_command_leaves_out_where_the_run_was_written() -> None:
+    from orchestrator.experiments.benchmark import portable_command
+
+    argv = ["benchmark", "--planners", "eifp-mpc,orca", "--out", "/tmp/x", "--jobs", "2",
+            "--readme=README.md"]
+    assert portable_command(argv) == "orchestrator benchmark --planners eifp-mpc,orca --jobs 2"
+
+
 def test_the_readme_summary_groups_families_and_puts_planners_side_by_side() -> None:
     from orchestrator.experiments.benchmark import format_readme_summary
 

@@ -118,3 +118,15 @@ def test_robot_args_reach_every_robot_through_the_fleet(tmp_path: Path) -> None:
     argv = robot_argv("r1", 1, "tcp/127.0.0.1:9", "30.0", fleet_args.robot_arg)
     assert parse_args(argv).plan is False
     assert parse_args(robot_argv("r1", 1, "tcp/127.0.0.1:9", "30.0")).plan is True
+
+
+def test_the_default_startup_deadline_grows_with_the_robot_count() -> None:
+    from orchestrator.experiments.distributed import (
+        STARTUP_S_MIN,
+        STARTUP_S_PER_ROBOT,
+        default_startup_timeout_s,
+    )
+
+    assert default_startup_timeout_s(4) == STARTUP_S_MIN
+    assert default_startup_timeout_s(128) == 128 * STARTUP_S_PER_ROBOT > STARTUP_S_MIN
+    assert default_startup_timeout_s(256) > default_startup_timeout_s(128)
