@@ -35,6 +35,7 @@ import dataclasses
 import functools
 import math
 import re
+import sys
 import types
 import typing
 from collections.abc import Collection, Iterable, Mapping
@@ -584,6 +585,13 @@ def _no_duplicate_keys(pairs: list[tuple[Any, Any]]) -> dict[Any, Any]:
 
 
 _BUFFER_TYPES = (memoryview, bytearray)
+_UNPACK_FLAT: dict[str, Any] = {
+    "raw": False, "strict_map_key": True, "max_str_len": MAX_MESSAGE_BYTES,
+    "max_bin_len": MAX_MESSAGE_BYTES, "max_array_len": 2 * (MAX_ROBOTS + MAX_OBSTACLES),
+    "max_map_len": 256, "max_ext_len": 0}
+"""`msgpack.unpackb` options: strings are UTF-8, bounded sizes, no extension types."""
+_UNPACK_CHECKED: dict[str, Any] = {**_UNPACK_FLAT, "object_pairs_hook": _no_duplicate_keys}
+"""The same, every map checked for duplicate keys on the way."""
 
 
 def _unpack(data: object, *, flat: bool = False) -> Any:
@@ -600,17 +608,7 @@ def _unpack(data: object, *, flat: bool = False) -> Any:
     if len(data) > MAX_MESSAGE_BYTES:
         raise ProtocolError(f"payload of {len(data)} bytes exceeds {MAX_MESSAGE_BYTES}")
     try:
-        obj = msgpack.unpackb(
-            data,
-            raw=False,
-            strict_map_key=True,
-            object_pairs_hook=None if flat else _no_duplicate_keys,
-            max_str_len=MAX_MESSAGE_BYTES,
-            max_bin_len=MAX_MESSAGE_BYTES,
-            max_array_len=2 * (MAX_ROBOTS + MAX_OBSTACLES),
-            max_map_len=256,
-            max_ext_len=0,
-        )
+        obj = msgpack.unpackb(data, **(_UNPACK_FLAT if flat else _UNPACK_CHECKED))
     except ProtocolError:
         raise
     except Exception as exc:  # msgpack raises many kinds (FormatError, StackError, ...)
@@ -781,6 +779,9 @@ _DISC_NEAR = min(_DISC_HI)
 """Discs whose every value is within +-this (and radius > 0) pass every range at once."""
 _DISC_NAMES = ("x", "y", "theta", "radius")
 _POSES_KEYS = ("t", "tick", "pub_ns", "clock", "ids", "discs")
+_POSES_MAP_KEYS = frozenset(("schema", "type", *_POSES_KEYS))
+_POSES_MAP_HEAD = bytes([0x80 | len(_POSES_MAP_KEYS)])
+"""A `PosesMsg` payload starts with this fixmap header (its count of entries)."""
 _POSES_VIEWS = frozenset(("robot_ids", "robot_pose", "robot_radius_m", "obstacle_ids",
                           "obstacle_xy_m", "obstacle_radius_m"))
 
@@ -971,9 +972,56 @@ class PoseDecoder:
         self._ids_bin: bytes | None = None
         self._ids = np.zeros(0, dtype=np.int64)
         self._n_robots = 0
+        self._discs_bytes = 0
+        self._discs_shape = (0, _DISC_FIELDS)
 
     def decode(self, data: object) -> PosesMsg:
-        """Parse and validate one payload (`PosesMsg.decode`); raises `ProtocolError`."""
+        """Parse and validate one payload (`PosesMsg.decode`); raises `ProtocolError`.
+
+        A message like the previous one (the same id block, every field of the usual type
+        and in range) is accepted by one chain of comparisons (`_decode_usual`); anything
+        else goes through the field-by-field checks, which name what is wrong."""
+        if type(data) is bytes and self._ids_bin is not None:
+            msg = self._decode_usual(data)
+            if msg is not None:
+                return msg
+        return self._decode_checked(data)
+
+    def _decode_usual(self, data: bytes) -> PosesMsg | None:
+        """The message if it passes every check of `_decode_checked` with the previous id
+        block, else None (then `_decode_checked` finds what is wrong)."""
+        if len(data) > MAX_MESSAGE_BYTES or data[:1] != _POSES_MAP_HEAD:
+            return None
+        try:
+            obj = msgpack.unpackb(data, **_UNPACK_FLAT)
+        except Exception:  # noqa: BLE001 - the checked path reports it
+            return None
+        # A fixmap of 8 entries with these 8 keys has no duplicate key.
+        if type(obj) is not dict or obj.keys() != _POSES_MAP_KEYS:
+            return None
+        schema, t_s, tick, pub_ns, clock_id = (obj["schema"], obj["t"], obj["tick"],
+                                               obj["pub_ns"], obj["clock"])
+        discs_bin = obj["discs"]
+        if not (type(schema) is int and schema == SCHEMA_VERSION and obj["type"] == "poses"
+                and type(t_s) is float and 0.0 <= t_s <= MAX_TIME_S
+                and type(tick) is int and 0 <= tick <= MAX_SEQ
+                and type(pub_ns) is int and 0 <= pub_ns <= MAX_SEQ
+                and type(clock_id) is int and 0 <= clock_id <= MAX_CLOCK_ID
+                and obj["ids"] == self._ids_bin
+                and type(discs_bin) is bytes and len(discs_bin) == self._discs_bytes):
+            return None
+        ids, n = self._ids, self._n_robots
+        values = np.ndarray(self._discs_shape, _F8, discs_bin)  # read-only view of the bytes
+        if ids.shape[0] and not (float(np.abs(values).max()) <= _DISC_NEAR
+                                 and float(values[:, 3].min()) > _DISC_LO[3]
+                                 and (n == ids.shape[0] or not values[n:, 2].any())):
+            return None
+        msg = object.__new__(PosesMsg)  # the per-kind views come on first use (__getattr__)
+        msg.__dict__.update(t_s=t_s, tick=tick, pub_ns=pub_ns, clock_id=clock_id,
+                            _discs=(ids, values), _n_robots=n)
+        return msg
+
+    def _decode_checked(self, data: object) -> PosesMsg:
         body = _open_envelope(data, PosesMsg.TYPE, _POSES_KEYS, flat=True)
         t_s = _float(body["t"], "poses.t", 0.0, MAX_TIME_S)
         tick = _int(body["tick"], "poses.tick", 0, MAX_SEQ)
@@ -983,6 +1031,8 @@ class PoseDecoder:
         if type(ids_bin) is not bytes or ids_bin != self._ids_bin:
             self._ids, self._n_robots = self._check_ids(ids_bin)
             self._ids_bin = ids_bin
+            k = self._ids.shape[0]
+            self._discs_bytes, self._discs_shape = 8 * _DISC_FIELDS * k, (k, _DISC_FIELDS)
         ids, n = self._ids, self._n_robots
         k = ids.shape[0]
         if type(discs_bin) is not bytes:
@@ -1195,6 +1245,43 @@ class CommandMsg:
                 f"cmd.robot: id {msg.robot_id} sent on the key of robot {expected_robot_id}"
             )
         return msg
+
+
+def encode_command(robot_id: int, seq: int, pose_stamp_s: float, v_mps: float,
+                   omega_radps: float, plan_ms: float, status: str, side: int,
+                   resolved_id: int | None, hold_s: float | None, wall: list[int]) -> bytes:
+    """``CommandMsg(...).encode()`` of these fields (`wall`: `WallStamps.as_list`), byte
+    for byte, without building the message objects.
+
+    A robot sends one command per control cycle. Values of the usual types in range are
+    checked by one chain of comparisons and packed; anything else is built as a
+    `CommandMsg`, whose checks raise `ProtocolError` naming the field.
+    """
+    if (type(robot_id) is int and 0 <= robot_id <= MAX_ROBOT_ID
+            and type(seq) is int and 0 <= seq <= MAX_SEQ
+            and type(pose_stamp_s) is float and 0.0 <= pose_stamp_s <= MAX_TIME_S
+            and type(v_mps) is float and -MAX_SPEED <= v_mps <= MAX_SPEED
+            and type(omega_radps) is float and -MAX_SPEED <= omega_radps <= MAX_SPEED
+            and type(plan_ms) is float and 0.0 <= plan_ms <= _MAX_FLOAT
+            and status in _STATUS_VALUES and type(side) is int and _SIDE_MIN <= side <= _SIDE_MAX
+            and (resolved_id is None
+                 or type(resolved_id) is int and MIN_OBSTACLE_ID <= resolved_id <= MAX_ROBOT_ID)
+            and (hold_s is None or type(hold_s) is float and 0.0 < hold_s <= MAX_HOLD_S)
+            and type(wall) is list and len(wall) == len(WallStamps.FIELDS)
+            and all(type(x) is int and 0 <= x <= MAX_SEQ for x in wall)
+            and wall[0] <= MAX_CLOCK_ID and wall[1] <= MAX_CLOCK_ID):
+        return msgpack.packb({
+            "schema": SCHEMA_VERSION, "type": CommandMsg.TYPE, "robot": robot_id, "seq": seq,
+            "pose_stamp": pose_stamp_s, "v": v_mps, "omega": omega_radps, "plan_ms": plan_ms,
+            "status": str(status), "side": side, "resolved": resolved_id, "hold": hold_s,
+            "wall": wall}, use_bin_type=True)
+    return CommandMsg(robot_id=robot_id, seq=seq, pose_stamp_s=pose_stamp_s, v_mps=v_mps,
+                      omega_radps=omega_radps, plan_ms=plan_ms, status=status, side=side,
+                      resolved_id=resolved_id, hold_s=hold_s,
+                      wall=WallStamps.from_list(wall)).encode()
+
+
+_MAX_FLOAT = sys.float_info.max
 
 
 def _points(value: object, where: str, max_n: int) -> np.ndarray:

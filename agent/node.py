@@ -10,12 +10,13 @@ explicit endpoint). It knows nothing but what arrives on the wire (see `protocol
    the newest pose, never a backlog), the control subscriber, the world-liveliness subscriber, the
    command publisher (DROP, express), the debug publisher (its plans' internals for
    viewers, `PlanDebugMsg`, DROP, express) and, last, its own liveliness token.
-3. Loop: drain control and liveliness, decode the ring (a `protocol.PoseDecoder`; the
-   newest valid snapshot goes to `RobotController.observe`, which drops stale or
-   out-of-order ones), and plan at the control rate in SIM time: when the newest pose's
-   stamp reaches the next scheduled plan time, plan and publish one `CommandMsg`; the
-   schedule advances by one period (slots already passed are skipped and counted as
-   overruns, never planned as a backlog).
+3. Loop: drain control and liveliness (their callbacks fill an `Inbox` each), decode the
+   ring (a `protocol.PoseDecoder`; the newest valid snapshot goes to
+   `RobotController.observe`, which drops stale or out-of-order ones), and plan at the
+   control rate in SIM time: when the newest pose's stamp reaches the next scheduled plan
+   time, plan and publish one `CommandMsg` (`protocol.encode_command`); the schedule
+   advances by one period (slots already passed are skipped and counted as overruns, never
+   planned as a backlog).
 
 Faults: a malformed pose or control message raises `ProtocolError`; it is counted, logged
 to stderr (the first few, then every 100th) and the robot keeps running. The robot stops
@@ -95,7 +96,6 @@ from agent.process import (
     use_one_zenoh_thread,
 )
 from protocol import (
-    CommandMsg,
     ControlMsg,
     PlanDebugMsg,
     PoseDecoder,
@@ -104,8 +104,8 @@ from protocol import (
     RunConfigMsg,
     RunKeys,
     TlsFiles,
-    WallStamps,
     check_pose_time,
+    encode_command,
     plan_pose_slot,
     pose_slot_count,
     robot_cn,
@@ -432,6 +432,20 @@ def warm_up(config: RunConfigMsg, period_s: float) -> None:
         log.exception("robot %d: warm-up plan failed", spec.id)
 
 
+class Inbox:
+    """Samples a subscriber's Zenoh thread puts here (`enqueue_on_receive`): the loop sees
+    whether any came with `empty`, a C call, instead of calling into Zenoh every cycle."""
+
+    def __init__(self) -> None:
+        self._queue: queue.SimpleQueue[zenoh.Sample] = queue.SimpleQueue()
+        self.put = self._queue.put
+        self.empty = self._queue.empty
+
+    def try_recv(self) -> zenoh.Sample | None:
+        """The oldest sample not read yet, or None."""
+        return None if self._queue.empty() else self._queue.get_nowait()
+
+
 class RobotNode:
     """One robot's Zenoh edge: declarations, the sense-plan-act loop and its counters.
 
@@ -506,9 +520,13 @@ class RobotNode:
         self.pose_sub = session.declare_subscriber(pose_key,
                                                    enqueue_on_receive(self.pose_queue.put))
         log.info("robot %d: poses from %s", self.robot_id, pose_key)
-        self.control_sub = session.declare_subscriber(self.keys.control)
-        self.world_sub = session.liveliness().declare_subscriber(self.keys.alive_world,
-                                                                 history=True)
+        # Control and the world's liveliness land in inboxes the loop checks with a C call.
+        self.control_sub = Inbox()
+        self.world_sub = Inbox()
+        self._subscribers = (
+            session.declare_subscriber(self.keys.control, enqueue_on_receive(self.control_sub.put)),
+            session.liveliness().declare_subscriber(
+                self.keys.alive_world, enqueue_on_receive(self.world_sub.put), history=True))
         self.cmd_pub = session.declare_publisher(
             self.keys.cmd(self.robot_id), congestion_control=zenoh.CongestionControl.DROP,
             express=True)
@@ -683,16 +701,14 @@ class RobotNode:
         if self.options.plan_delay_ms > 0.0:  # a CPU-starved robot: the command leaves late
             time.sleep(self.options.plan_delay_ms * 1e-3 / self.config.time_scale)
             cpu1 = time.thread_time()
-        self.cmd_pub.put(CommandMsg(
-            robot_id=self.robot_id, seq=self.seq, pose_stamp_s=msg.t_s, v_mps=result.v_mps,
-            omega_radps=result.omega_radps, plan_ms=max(0.0, result.times.total_ms),
-            status=result.status, side=int(result.side), resolved_id=result.resolved_id,
-            hold_s=self.controller.command_hold_s,
-            wall=WallStamps(clock_id=self.clock_id, pose_clock_id=msg.clock_id,
-                            pose_pub_ns=msg.pub_ns, pose_rx_ns=self.newest_rx_ns,
-                            plan_start_ns=plan_start_ns, plan_end_ns=plan_end_ns,
-                            pub_ns=time.monotonic_ns()),
-        ).encode())
+        # The fields of a `CommandMsg`, its `WallStamps` in their wire order.
+        self.cmd_pub.put(encode_command(
+            self.robot_id, self.seq, msg.t_s, float(result.v_mps), float(result.omega_radps),
+            max(0.0, float(result.times.total_ms)), result.status, int(result.side),
+            None if result.resolved_id is None else int(result.resolved_id),
+            self.controller.command_hold_s,
+            [self.clock_id, msg.clock_id, msg.pub_ns, self.newest_rx_ns, plan_start_ns,
+             plan_end_ns, time.monotonic_ns()]))
         debug = PlanDebugMsg.from_result(self.robot_id, self.seq, now_s, result)
         if debug is not None:
             self.debug_pub.put(debug.encode())
@@ -786,8 +802,10 @@ class RobotNode:
                     log.warning("robot %d: resumed after %.2f s without running (suspended?)",
                                 self.robot_id, now - self.loop_wall)
                 self.loop_wall = now
-                self.poll_control()
-                self.poll_world()
+                if not self.control_sub.empty():
+                    self.poll_control()
+                if not self.world_sub.empty() or self.world_gone_wall is not None:
+                    self.poll_world()
                 if not self.world_seen and time.monotonic() > startup_deadline:
                     raise _Exit("world not seen before the startup deadline", ExitCode.WORLD_LOST)
                 if (not self.sense_and_plan() and self.last_rx_wall is not None

@@ -7,6 +7,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
+import re
 
 import msgpack
 import numpy as np
@@ -916,6 +917,83 @@ def test_fuzz_pose_decoder_agrees_with_a_fresh_decode(steps: list) -> None:
         for name in ("robot_ids", "robot_pose", "robot_radius_m", "obstacle_ids",
                      "obstacle_xy_m", "obstacle_radius_m"):
             np.testing.assert_array_equal(getattr(got, name), getattr(expected, name))
+
+
+@FUZZ
+@given(field=st.sampled_from(["schema", "type", "t", "tick", "pub_ns", "clock", "extra"]),
+       value=st.one_of(st.sampled_from([True, 4, 4.0, "poses", "cmd", -1, 2**63, 2**31,
+                                        math.inf, 1.5, None, b"x"]),
+                       st.integers(-5, 10**8), st.floats(allow_nan=True)))
+def test_fuzz_pose_decoder_checks_the_envelope_of_every_message(field: str,
+                                                                value: object) -> None:
+    """After a good message (the id block remembered), a message with one envelope or time
+    field changed is accepted exactly when `PosesMsg.decode` accepts it, and alike."""
+    decoder = protocol.PoseDecoder(KNOWN)
+    decoder.decode(make_poses().encode())
+    body = raw(make_poses(tick=63, t_s=1.26))
+    body[field] = value
+    data = pack(body)
+    try:
+        expected = PosesMsg.decode(data, known_ids=KNOWN)
+    except ProtocolError as exc:
+        with pytest.raises(ProtocolError, match=re.escape(str(exc))):
+            decoder.decode(data)
+        return
+    got = decoder.decode(data)
+    assert (got.t_s, got.tick, got.pub_ns, got.clock_id) == (
+        expected.t_s, expected.tick, expected.pub_ns, expected.clock_id)
+    np.testing.assert_array_equal(got.to_snapshot().pose, expected.to_snapshot().pose)
+
+
+def test_pose_decoder_refuses_a_repeated_key_after_a_good_message() -> None:
+    decoder = protocol.PoseDecoder(KNOWN)
+    data = make_poses().encode()
+    decoder.decode(data)
+    head = data[0]
+    assert head == 0x88  # a fixmap of 8 entries; one more entry, a second "t"
+    repeated = bytes([head + 1]) + data[1:] + pack("t") + pack(9.0)
+    with pytest.raises(ProtocolError, match="duplicate map key"):
+        decoder.decode(repeated)
+
+
+# --- encode_command: a robot's command, packed without building a CommandMsg ----------------
+
+
+def _command_fields(msg: CommandMsg) -> dict:
+    return dict(robot_id=msg.robot_id, seq=msg.seq, pose_stamp_s=msg.pose_stamp_s,
+                v_mps=msg.v_mps, omega_radps=msg.omega_radps, plan_ms=msg.plan_ms,
+                status=msg.status, side=msg.side, resolved_id=msg.resolved_id,
+                hold_s=msg.hold_s, wall=msg.wall.as_list())
+
+
+@pytest.mark.parametrize("overrides", [
+    {}, {"resolved_id": None, "hold_s": None}, {"status": PlanStatus.ESCAPE, "side": -1},
+    {"wall": protocol.WallStamps(3, 4, 5, 6, 7, 8, 2**62)}, {"v_mps": -0.0, "seq": 0},
+])
+def test_encode_command_gives_the_bytes_of_command_msg(overrides: dict) -> None:
+    msg = make_command(**overrides)
+    assert protocol.encode_command(**_command_fields(msg)) == msg.encode()
+
+
+def test_encode_command_takes_numpy_numbers_as_command_msg_does() -> None:
+    msg = make_command()
+    fields = {**_command_fields(msg), "v_mps": np.float64(0.9), "resolved_id": np.int64(5)}
+    assert protocol.encode_command(**fields) == msg.encode()
+
+
+@pytest.mark.parametrize(("field", "value", "where"), [
+    ("v_mps", math.nan, "cmd.v"), ("omega_radps", 2e3, "cmd.omega"),
+    ("plan_ms", math.inf, "cmd.plan_ms"), ("status", "bogus", "cmd.status"),
+    ("side", 2, "cmd.side"), ("seq", -1, "cmd.seq"), ("hold_s", 0.0, "cmd.hold"),
+    ("seq", True, "cmd.seq"), ("wall", [1, 2, 3], "cmd.wall"),
+    ("wall", [2**31, 0, 0, 0, 0, 0, 0], "cmd.wall.clock_id"),
+    ("wall", [0, 0, 0, 0, 0, 0, 1.5], "cmd.wall.pub_ns"),
+])
+def test_encode_command_refuses_what_command_msg_refuses(field: str, value: object,
+                                                          where: str) -> None:
+    fields = {**_command_fields(make_command()), field: value}
+    with pytest.raises(ProtocolError, match=re.escape(where)):
+        protocol.encode_command(**fields)
 
 
 # --- PlanDebugMsg (robot -> viewers) ---------------------------------------------------------
