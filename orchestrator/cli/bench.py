@@ -39,7 +39,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         description="Wall and CPU time of the planning cycle (RobotController.plan) per "
                     "planner and crowd size: N robots converging on the centre of a circle. "
                     "With --process: N real robot processes that sense and command a stop "
-                    "without planning, and the CPU each spends per cycle, by part.")
+                    "without planning, and the CPU each spends per cycle, by part. With "
+                    "--floor: the same for N clients that only receive the poses and send "
+                    "a command (the transport's floor).")
     parser.add_argument("--planner", type=_planners, default=None,
                         help="a planner, a comma-separated list, or 'all' (required unless "
                              "--process)")
@@ -48,8 +50,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--process", action="store_true",
                         help="run N robot processes and a world for real (orchestrator scale "
                              "--no-plan) and print the CPU a robot process spends per cycle")
+    parser.add_argument("--floor", action="store_true",
+                        help="the transport's floor: N Zenoh clients that do a robot's I/O "
+                             "and nothing else, and the CPU each spends per cycle "
+                             "(compare with --process)")
     parser.add_argument("--seconds", type=positive, default=None,
-                        help="with --process: length of each run [s] (default 20)")
+                        help="with --process or --floor: length of each run [s] (default 20)")
     parser.add_argument("--out", type=Path, default=None,
                         help="with --process: run directory (default: a new temporary one)")
     parser.add_argument("--insecure", action="store_true",
@@ -71,6 +77,8 @@ def _json_safe(row: dict) -> dict:
 
 def run(args: argparse.Namespace) -> int:
     """Entry point of `orchestrator bench`; returns the exit status."""
+    if args.floor:
+        return run_floor_bench(args)
     if args.process:
         return run_process(args)
     if args.planner is None:
@@ -97,6 +105,29 @@ def run(args: argparse.Namespace) -> int:
             print(json.dumps(row))
         if len(safe) > 1:
             print(json.dumps({"rows": safe}))
+    return 0
+
+
+def run_floor_bench(args: argparse.Namespace) -> int:
+    """`orchestrator bench --floor`: the CPU per cycle of a Zenoh client that does a robot's
+    I/O and nothing else (`orchestrator.experiments.transport_floor`), per robot count."""
+    from dataclasses import asdict
+
+    from orchestrator.experiments.scale import PROCESS_BENCH_SECONDS
+    from orchestrator.experiments.transport_floor import format_floor_row, run_floor
+
+    if args.process or args.planner is not None or args.out is not None or args.insecure:
+        raise BadInput("orchestrator bench --floor: goes with --robots and --seconds only "
+                       "(no --process, --planner, --out or --insecure)")
+    seconds = args.seconds or PROCESS_BENCH_SECONDS
+    rows = []
+    for n in args.robots:
+        print(f"bench --floor: {n} clients, {seconds:g} s ...", file=sys.stderr, flush=True)
+        row = run_floor(n, seconds)
+        rows.append(asdict(row))
+        print(format_floor_row(row))
+    if args.json:
+        print(json.dumps(rows[0] if len(rows) == 1 else {"rows": rows}))
     return 0
 
 

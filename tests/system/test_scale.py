@@ -138,3 +138,16 @@ def test_bench_process_prints_a_robots_cpu_per_cycle_by_part(tmp_path: Path, cap
         log = (out / "circles_3" / f"robot_{rid}.log").read_text()
         assert "exit: reason='end (time_limit)' code=0" in log, log
         assert re.search(r" plans=[1-9]\d* ", log), log
+
+
+def test_bench_floor_prints_the_cpu_of_a_client_that_only_does_a_robots_io(capsys) -> None:
+    """`orchestrator bench --floor`: every client received poses and reported its CPU per
+    cycle, split in two parts that add up (figures printed, never compared with a budget)."""
+    assert cli_main(["bench", "--floor", "--robots", "3", "--seconds", "2", "--json"]) == 0
+    text = capsys.readouterr().out
+    row = json.loads(text.strip().splitlines()[-1])
+    assert "transport floor, 3 clients" in text and "Zenoh and the rest" in text
+    assert row["robots"] == 3 and row["cycles"] >= 5  # 10 poses a second each
+    assert row["handler_ms"] > 0.0 and row["zenoh_ms"] > 0.0
+    assert abs(row["handler_ms"] + row["zenoh_ms"] - row["total_ms"]) < 1e-9
+    assert row["pose_bytes"] > 3 * 32  # three discs of four float64 each, and the envelope

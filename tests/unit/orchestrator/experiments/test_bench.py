@@ -144,6 +144,9 @@ def test_bad_arguments_exit_2(argv, capsys):
     ["bench", "--robots", "4"],  # no planner, no --process
     ["bench", "--process", "--planner", "orca", "--robots", "4"],
     ["bench", "--planner", "orca", "--robots", "4", "--seconds", "3"],
+    ["bench", "--floor", "--process", "--robots", "4"],
+    ["bench", "--floor", "--planner", "orca", "--robots", "4"],
+    ["bench", "--floor", "--insecure", "--robots", "4"],
 ])
 def test_bench_refuses_options_of_the_other_mode(argv, capsys):
     assert main(argv) == 2
