@@ -128,7 +128,7 @@ QUERY_TIMEOUT_S = 1.0
 STAMP_EPS_S = 1e-6
 """Tolerance on sim-time comparisons (stamps are sums of float ticks)."""
 SUSPEND_GAP_S = 0.5
-"""A loop iteration this much later than the previous one means the process was suspended."""
+"""The loop running this much later than its nap's end means the process was suspended."""
 REJOIN_GRACE_S = 5.0
 """After a suspension, how long the robot waits for the world's token to come back."""
 WORLD_BLIP_GRACE_S = 0.5
@@ -503,7 +503,7 @@ class RobotNode:
         self.world_seen = False
         self.world_gone_wall: float | None = None
         self.world_grace_s = WORLD_BLIP_GRACE_S
-        self.loop_wall: float | None = None
+        self.loop_due: float | None = None  # when the loop meant to run again
         self.resumed_wall = -math.inf
         # The sim clock: the newest pose's stamp as it arrived from the world (before any
         # injected fault), advanced by wall time x time_scale. It stands for the clock
@@ -854,12 +854,11 @@ class RobotNode:
         try:
             while not self.stop:
                 now = time.monotonic()
-                if self.loop_wall is not None and now - self.loop_wall > SUSPEND_GAP_S:
+                if self.loop_due is not None and now - self.loop_due > SUSPEND_GAP_S:
                     self.resumed_wall = now
                     self.counts["suspended"] += 1
-                    log.warning("robot %d: resumed after %.2f s without running (suspended?)",
-                                self.robot_id, now - self.loop_wall)
-                self.loop_wall = now
+                    log.warning("robot %d: the loop ran %.2f s late (suspended?)",
+                                self.robot_id, now - self.loop_due)
                 with self.lock:
                     if self.failure is not None:
                         raise self.failure
@@ -880,6 +879,7 @@ class RobotNode:
                         raise _Exit(f"no poses for {self.options.pose_timeout_s:.1f} s",
                                     ExitCode.WORLD_LOST)
                     wait_s = self.nap_s()
+                self.loop_due = time.monotonic() + wait_s
                 self.nap(wait_s)
             return "signal", ExitCode.OK
         except _Exit as stop:
