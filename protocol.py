@@ -541,16 +541,22 @@ def tls_settings(mode: Literal["router", "client"], tls: TlsFiles) -> dict[str, 
     return out
 
 
-def check_seq(seq: int, last_seq: int | None) -> str | None:
+def check_seq(seq: int, last_seq: int | None, *, before_loss: int | None = None) -> str | None:
     """Why a command's `seq` is refused given the last accepted one (None: it is not).
 
     ``stale``: not above `last_seq`; ``seq_jump``: more than `MAX_SEQ_JUMP` above it (or,
-    for a robot's first command, above `MAX_SEQ_JUMP`).
+    for a robot's first command, above `MAX_SEQ_JUMP`). `before_loss`: for the first
+    command of a robot the world lost and saw rejoin, the last seq accepted before the
+    loss: a robot whose link the lease closed is the same process and numbers on from
+    there, so a seq up to `MAX_SEQ_JUMP` above it passes too (a restarted one numbers from
+    0 again).
     """
     last = -1 if last_seq is None else last_seq
     if seq <= last:
         return "stale"
     if seq - last > MAX_SEQ_JUMP + (1 if last_seq is None else 0):
+        if last_seq is None and before_loss is not None and 0 < seq - before_loss <= MAX_SEQ_JUMP:
+            return None
         return "seq_jump"
     return None
 

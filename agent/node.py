@@ -5,20 +5,18 @@ explicit endpoint). It knows nothing but what arrives on the wire (see `protocol
 
 1. Connect (retrying until ``--startup-timeout-s``), fetch this robot's `RunConfigMsg` from
    the world's queryable (retrying with the same deadline), build the controller.
-2. Declare the pose subscriber, the control and world-liveliness subscribers (each fills an
-   `Inbox` and wakes the loop), the command publisher (DROP, express), the debug publisher
-   (its plans' internals for viewers, `PlanDebugMsg`, DROP, express) and, last, its own
-   liveliness token.
-3. The cycle (`RobotNode.on_pose`), on the Zenoh thread that received the pose: keep the
-   sample in a ring of the newest `POSE_RING` (the robot always acts on the newest pose,
-   never a backlog), decode it (a `protocol.PoseDecoder`; the newest valid snapshot goes to
+2. Declare the pose subscriber (Zenoh's receiving thread puts each sample on a queue the
+   loop blocks on; the loop keeps the newest `POSE_RING` of them: the robot always acts on
+   the newest pose, never a backlog), the control subscriber, the world-liveliness subscriber, the
+   command publisher (DROP, express), the debug publisher (its plans' internals for
+   viewers, `PlanDebugMsg`, DROP, express) and, last, its own liveliness token.
+3. Loop: drain control and liveliness (their callbacks fill an `Inbox` each), decode the
+   ring (a `protocol.PoseDecoder`; the newest valid snapshot goes to
    `RobotController.observe`, which drops stale or out-of-order ones), and plan at the
    control rate in SIM time: when the newest pose's stamp reaches the next scheduled plan
    time, plan and publish one `CommandMsg` (`protocol.encode_command`); the schedule
    advances by one period (slots already passed are skipped and counted as overruns, never
-   planned as a backlog). No other thread is woken for it.
-4. The loop (`RobotNode.run`, the main thread): control and liveliness, the deadlines, and,
-   with injected faults, the cycle itself (the pose link releases in sim time).
+   planned as a backlog).
 
 Faults: a malformed pose or control message raises `ProtocolError`; it is counted, logged
 to stderr (the first few, then every 100th) and the robot keeps running. The robot stops
@@ -59,10 +57,10 @@ and a robot subscribes to the one slot its plans fall on (`protocol.plan_pose_sl
 receives and decodes 10 poses per second instead of 50, and the router sends a fifth of the
 bytes. A robot whose plan slots are not on one pose slot (``--control-phase-s`` between
 ticks, ``--control-rate-hz`` 20 ...) subscribes to every slot (``poses/*``).
-The loop sleeps until a control or liveliness sample wakes it, at most `MAX_NAP_S`. Zenoh
-runs on one thread of the process (`agent.process.use_one_zenoh_thread`), which keeps its
-Python thread state (`agent.process.keep_thread_state`). A robot's cost per cycle is in
-docs/scale.md (`orchestrator bench --process`).
+Between poses the loop blocks on the pose queue (woken by the pose itself: no polling while
+the world runs late), at most `MAX_NAP_S`. Zenoh runs on one thread of the process
+(`agent.process.use_one_zenoh_thread`). A robot's cost per cycle is in docs/scale.md
+(`orchestrator bench --process`).
 """
 
 from __future__ import annotations
@@ -73,7 +71,6 @@ import math
 import os
 import queue
 import sys
-import threading
 import time
 from collections import deque
 from collections.abc import Callable
@@ -89,11 +86,10 @@ from agent.process import (
     ExitCode,
     SessionError,
     StopFlag,
-    call_on_receive,
     check_tls_files,
     close_session,
     die_with_launcher,
-    keep_thread_state,
+    enqueue_on_receive,
     monotonic_clock_id,
     open_session,
     stop_on_signals,
@@ -128,7 +124,7 @@ QUERY_TIMEOUT_S = 1.0
 STAMP_EPS_S = 1e-6
 """Tolerance on sim-time comparisons (stamps are sums of float ticks)."""
 SUSPEND_GAP_S = 0.5
-"""The loop running this much later than its nap's end means the process was suspended."""
+"""A loop iteration this much later than the previous one means the process was suspended."""
 REJOIN_GRACE_S = 5.0
 """After a suspension, how long the robot waits for the world's token to come back."""
 WORLD_BLIP_GRACE_S = 0.5
@@ -140,8 +136,9 @@ of the run (`orchestrator scale --agents 128`, 23 contacts)."""
 STALE_PLAN_S = 1.0
 """Poses older than this [sim s] when planning: brake instead (compensation is capped there)."""
 MAX_NAP_S = 0.25
-"""Longest sleep of the loop [s]: it checks the deadlines (pose time-out, the world's grace,
-a suspension) at least this often; control and liveliness samples wake it sooner."""
+"""Longest wait for a pose: without poses, control and liveliness messages are read at least
+this often. Longer than the control period, so a robot receiving its poses wakes for them
+only (a wait as long as the period ran out just before every other pose)."""
 CPU_TOKEN_WAIT_S = 0.05
 """Longest wait for a CPU token (`RobotNode.sense_and_plan`) before planning without one."""
 
@@ -436,20 +433,13 @@ def warm_up(config: RunConfigMsg, period_s: float) -> None:
 
 
 class Inbox:
-    """Samples a subscriber's Zenoh thread puts here (`call_on_receive`), each waking the
-    loop with `wake(None)`; the loop sees whether any came with `empty`, a C call, instead
-    of calling into Zenoh every time it runs."""
+    """Samples a subscriber's Zenoh thread puts here (`enqueue_on_receive`): the loop sees
+    whether any came with `empty`, a C call, instead of calling into Zenoh every cycle."""
 
-    def __init__(self, wake: Callable[[None], object] | None = None) -> None:
+    def __init__(self) -> None:
         self._queue: queue.SimpleQueue[zenoh.Sample] = queue.SimpleQueue()
+        self.put = self._queue.put
         self.empty = self._queue.empty
-        self._wake = wake
-
-    def put(self, sample: zenoh.Sample) -> None:
-        """Keep `sample` and wake the loop."""
-        self._queue.put(sample)
-        if self._wake is not None:
-            self._wake(None)
 
     def try_recv(self) -> zenoh.Sample | None:
         """The oldest sample not read yet, or None."""
@@ -503,7 +493,7 @@ class RobotNode:
         self.world_seen = False
         self.world_gone_wall: float | None = None
         self.world_grace_s = WORLD_BLIP_GRACE_S
-        self.loop_due: float | None = None  # when the loop meant to run again
+        self.loop_wall: float | None = None
         self.resumed_wall = -math.inf
         # The sim clock: the newest pose's stamp as it arrived from the world (before any
         # injected fault), advanced by wall time x time_scale. It stands for the clock
@@ -521,32 +511,22 @@ class RobotNode:
             pose_slot_count(config.world_rate_hz, config.control_rate_hz))
         pose_key = (self.keys.poses_all if self.pose_slot is None
                     else self.keys.poses_slot(self.pose_slot))
-        # The cycle runs where the pose arrives: Zenoh's receiving thread calls `on_pose`,
-        # which senses, plans and publishes at once, under `lock`. No other thread is woken
-        # for it, and the command leaves from the thread that sends it. The loop (`run`, the
-        # main thread) reads control and liveliness, watches the deadlines and releases the
-        # poses an injected link holds back.
-        self.lock = threading.Lock()
-        self.wake: queue.SimpleQueue[zenoh.Sample | None] = queue.SimpleQueue()
-        self.running = False  # set by `run`: a pose before it is kept, not acted on
-        self.stopping = False  # set when the loop ends: nothing is sent after it
-        self.failure: BaseException | None = None  # raised in `on_pose`; `run` re-raises it
+        # Zenoh's receiving thread puts each sample on a queue (a C call, no Python frame
+        # and no thread of ours in between); the loop blocks on the queue, so it wakes when
+        # a pose arrives, and then drains it into the ring (`wait_for_poses`).
+        self.pose_queue: queue.SimpleQueue[zenoh.Sample] = queue.SimpleQueue()
         self.pose_ring: deque[zenoh.Sample] = deque(maxlen=POSE_RING)
-        self.pose_rx_wall = 0.0  # when the newest sample of the ring arrived
-        self.cpu_main_s = 0.0  # the parts of `cpu_s` spent on the main thread
-        # With injected faults the loop runs the cycle: the pose link releases in sim time
-        # and a starved robot's delay must not hold Zenoh's thread.
-        self.cycle_in_loop = options.link.active or options.plan_delay_ms > 0.0
-        self.pose_sub = session.declare_subscriber(
-            pose_key, call_on_receive(self.wake.put if self.cycle_in_loop else self.on_pose))
+        self.pose_rx_wall = 0.0  # when the loop took the ring's samples off the queue
+        self.pose_sub = session.declare_subscriber(pose_key,
+                                                   enqueue_on_receive(self.pose_queue.put))
         log.info("robot %d: poses from %s", self.robot_id, pose_key)
-        # Control and the world's liveliness land in inboxes that wake the loop.
-        self.control_sub = Inbox(self.wake.put)
-        self.world_sub = Inbox(self.wake.put)
+        # Control and the world's liveliness land in inboxes the loop checks with a C call.
+        self.control_sub = Inbox()
+        self.world_sub = Inbox()
         self._subscribers = (
-            session.declare_subscriber(self.keys.control, call_on_receive(self.control_sub.put)),
+            session.declare_subscriber(self.keys.control, enqueue_on_receive(self.control_sub.put)),
             session.liveliness().declare_subscriber(
-                self.keys.alive_world, call_on_receive(self.world_sub.put), history=True))
+                self.keys.alive_world, enqueue_on_receive(self.world_sub.put), history=True))
         self.cmd_pub = session.declare_publisher(
             self.keys.cmd(self.robot_id), congestion_control=zenoh.CongestionControl.DROP,
             express=True)
@@ -737,7 +717,7 @@ class RobotNode:
         self.counts["plans"] += 1
         self.counts["overruns"] += self.schedule.planned(msg.t_s)
 
-    def sense_and_plan(self, cpu_start_s: float | None = None) -> bool:
+    def sense_and_plan(self) -> bool:
         """`poll_poses`, then `plan_and_send` if a fresh pose came (and the world is seen),
         holding one of the host's CPU tokens meanwhile if the robot has them.
 
@@ -749,9 +729,6 @@ class RobotNode:
         without one (counted as ``token_timeouts``): a lost token costs throughput, never
         a stop.
 
-        `cpu_start_s`: this thread's CPU clock when sensing began (the caller's share of it
-        is counted as sensing); None: read it here.
-
         Returns:
             True if a pose newer than any observed before was released.
         """
@@ -762,7 +739,7 @@ class RobotNode:
             if not held:
                 self.counts["token_timeouts"] += 1
         try:
-            cpu0 = time.thread_time() if cpu_start_s is None else cpu_start_s
+            cpu0 = time.thread_time()
             fresh = self.poll_poses()
             cpu1 = time.thread_time()
             self.cpu_s["sense"] += cpu1 - cpu0
@@ -773,73 +750,40 @@ class RobotNode:
             if held and tokens is not None:
                 tokens.release()
 
-    def on_pose(self, sample: zenoh.Sample) -> None:
-        """A pose sample arrived (on Zenoh's thread): keep it, and run the cycle.
+    def wait_for_poses(self) -> None:
+        """Block until a pose arrives, the pose link releases one, or `MAX_NAP_S` passed;
+        then move every queued sample from the world into the ring.
 
-        A sample that is not from the world's session never enters the ring (counted in
+        The loop wakes once per pose and is asleep otherwise: no polling, and nothing
+        runs between the pose's arrival and the loop but Zenoh's own thread. A sample that
+        is not from the world's session never enters the ring (counted in
         ``refused_poses``): a flood of forged poses must not push the world's out of it.
-        Once the loop runs (`running`) and until it ends (`stopping`), `sense_and_plan`
-        follows at once; its time from this call's start counts as sensing. An exception
-        it lets through (the planner's own are caught there) is kept in `failure` for the
-        loop to raise: the robot exits rather than go on without its cycle. (With injected
-        faults, `cycle_in_loop`, the samples go to the loop instead: `nap`.)
         """
-        arrived = time.monotonic()
-        cpu0 = time.thread_time()
-        keep_thread_state()  # Zenoh's thread keeps its Python thread state from now on
-        with self.lock:
-            if self.stopping or not self._from_world(sample):
-                return
-            self.pose_ring.append(sample)
-            self.pose_rx_wall = arrived
-            if not self.running:
-                return
-            try:
-                self.sense_and_plan(cpu0)
-            except BaseException as exc:  # noqa: BLE001 - handed to the loop, which raises it
-                self.failure = exc
-                self.wake.put(None)
-
-    def _from_world(self, sample: zenoh.Sample) -> bool:
-        """True if `sample` came from the world's session (always, if its id is unknown);
-        else counts and logs it as a refused pose."""
-        world_zid = self.world_zid
-        if world_zid is None:
-            return True
-        info = sample.source_info
-        if info is not None and str(info.source_id.zid) == world_zid:
-            return True
-        self._refuse("pose message", "refused_poses",
-                     f"from {info.source_id.zid if info else 'an unnamed source'}")
-        return False
-
-    def nap_s(self) -> float:
-        """How long the loop may sleep: `MAX_NAP_S`, or less until the pose link's next
-        release (wall seconds)."""
+        wait_s = MAX_NAP_S
         link_due_s = self.pose_link.next_due_s
-        if link_due_s is None:
-            return MAX_NAP_S
-        return min(MAX_NAP_S, max(0.0, (link_due_s - self.sim_now()) / self.config.time_scale))
-
-    def nap(self, wait_s: float) -> None:
-        """Sleep `wait_s` at most; a control or liveliness sample, or the pose handler, wakes
-        the loop sooner (`wake`).
-
-        With `cycle_in_loop`, Zenoh's thread puts the pose samples themselves on `wake` (a C
-        call, no Python frame on its thread): the ones from the world's session go to the
-        ring, stamped with the time the loop woke for them."""
+        if link_due_s is not None:
+            wait_s = min(wait_s,
+                         max(0.0, (link_due_s - self.sim_now()) / self.config.time_scale))
+        pending = self.pose_queue
         try:
-            item = self.wake.get(timeout=wait_s)
+            sample = pending.get(timeout=wait_s)
         except queue.Empty:
             return
-        arrived = time.monotonic()
+        self.pose_rx_wall = time.monotonic()
+        world_zid = self.world_zid
         while True:
-            if item is not None and self._from_world(item):
-                self.pose_ring.append(item)
-                self.pose_rx_wall = arrived
-            if self.wake.empty():
+            if world_zid is None:
+                self.pose_ring.append(sample)
+            else:
+                info = sample.source_info
+                if info is not None and str(info.source_id.zid) == world_zid:
+                    self.pose_ring.append(sample)
+                else:
+                    self._refuse("pose message", "refused_poses",
+                                 f"from {info.source_id.zid if info else 'an unnamed source'}")
+            if pending.empty():
                 return
-            item = self.wake.get_nowait()
+            sample = pending.get_nowait()
 
     def run(self, startup_deadline: float) -> tuple[str, int]:
         """The robot's loop; returns (reason, exit status).
@@ -849,67 +793,53 @@ class RobotNode:
                 (after that, the world owns the start: it ends the run if robots are missing).
         """
         self.cpu_start = (time.thread_time(), time.process_time())
-        with self.lock:
-            self.running = True
         try:
             while not self.stop:
                 now = time.monotonic()
-                if self.loop_due is not None and now - self.loop_due > SUSPEND_GAP_S:
+                if self.loop_wall is not None and now - self.loop_wall > SUSPEND_GAP_S:
                     self.resumed_wall = now
                     self.counts["suspended"] += 1
-                    log.warning("robot %d: the loop ran %.2f s late (suspended?)",
-                                self.robot_id, now - self.loop_due)
-                with self.lock:
-                    if self.failure is not None:
-                        raise self.failure
-                    if not self.control_sub.empty():
-                        self.poll_control()
-                    if not self.world_sub.empty() or self.world_gone_wall is not None:
-                        self.poll_world()
-                    if not self.world_seen and time.monotonic() > startup_deadline:
-                        raise _Exit("world not seen before the startup deadline",
-                                    ExitCode.WORLD_LOST)
-                    if self.cycle_in_loop:
-                        cpu0 = time.thread_time()
-                        self.sense_and_plan(cpu0)
-                        self.cpu_main_s += time.thread_time() - cpu0
-                    last_rx = self.last_rx_wall
-                    if (last_rx is not None and time.monotonic() - max(last_rx, self.resumed_wall)
-                            > self.options.pose_timeout_s):
-                        raise _Exit(f"no poses for {self.options.pose_timeout_s:.1f} s",
-                                    ExitCode.WORLD_LOST)
-                    wait_s = self.nap_s()
-                self.loop_due = time.monotonic() + wait_s
-                self.nap(wait_s)
+                    log.warning("robot %d: resumed after %.2f s without running (suspended?)",
+                                self.robot_id, now - self.loop_wall)
+                self.loop_wall = now
+                if not self.control_sub.empty():
+                    self.poll_control()
+                if not self.world_sub.empty() or self.world_gone_wall is not None:
+                    self.poll_world()
+                if not self.world_seen and time.monotonic() > startup_deadline:
+                    raise _Exit("world not seen before the startup deadline", ExitCode.WORLD_LOST)
+                if (not self.sense_and_plan() and self.last_rx_wall is not None
+                        and time.monotonic() - max(self.last_rx_wall, self.resumed_wall)
+                        > self.options.pose_timeout_s):
+                    raise _Exit(f"no poses for {self.options.pose_timeout_s:.1f} s",
+                                ExitCode.WORLD_LOST)
+                self.wait_for_poses()
             return "signal", ExitCode.OK
         except _Exit as stop:
             return stop.reason, stop.code
         finally:
-            with self.lock:  # no cycle is under way once it is held: stop commanding
-                self.stopping = True
+            # Stop commanding before anything else.
             self.cmd_pub.undeclare()
             self.debug_pub.undeclare()
 
     def cpu_summary(self) -> dict[str, int]:
         """CPU time the loop took since it started, by part, in whole microseconds.
 
-        ``cpu_sense_us``: the pose handler's source check, decoding the ring, the pose
-        link, observing (`on_pose`, `poll_poses`); ``cpu_plan_us``: `RobotController.plan`
-        (estimates, planner, MPC); ``cpu_send_us``: encoding and publishing the command;
-        ``cpu_loop_us``: the rest of the main thread (control and liveliness, deadlines,
-        sleeping); ``cpu_threads_us``: the rest of the process, Zenoh's runtime (receiving,
-        routing each sample to its handler, sending, the lease).
-        Thread and process CPU clocks (`time.thread_time`, `time.process_time`), read by
-        the main thread; empty before the loop started. `orchestrator scale` divides them by
-        the plans.
+        ``cpu_sense_us``: draining the pose ring, decoding, the pose link, observing
+        (`poll_poses`); ``cpu_plan_us``: `RobotController.plan` (estimates, planner, MPC);
+        ``cpu_send_us``: encoding and publishing the command; ``cpu_loop_us``: the rest of
+        the main thread (control and liveliness polls, waiting, taking samples off the
+        queue); ``cpu_threads_us``: every other thread of the process (Zenoh's runtime:
+        receiving, putting the pose samples on the queue, sending, the lease).
+        Thread and process CPU clocks (`time.thread_time`, `time.process_time`); empty
+        before the loop started. `orchestrator scale` divides them by the plans.
         """
         if self.cpu_start is None:
             return {}
         main_s = time.thread_time() - self.cpu_start[0]
         process_s = time.process_time() - self.cpu_start[1]
-        parts_s = sum(self.cpu_s.values())
-        parts = {**self.cpu_s, "loop": main_s - self.cpu_main_s,
-                 "threads": process_s - main_s - (parts_s - self.cpu_main_s)}
+        parts = {**self.cpu_s, "loop": main_s - sum(self.cpu_s.values()),
+                 "threads": process_s - main_s}
         return {f"cpu_{k}_us": max(0, round(v * 1e6)) for k, v in parts.items()}
 
     def summary(self) -> str:

@@ -123,38 +123,19 @@ def use_one_zenoh_thread() -> None:
     os.environ.setdefault("ZENOH_RUNTIME", ONE_THREAD_RUNTIME)
 
 
-_THREAD_STATE_KEPT = threading.local()
+def enqueue_on_receive(put: Callable[[Any], Any]) -> Any:
+    """A subscriber handler that calls `put(sample)` on the Zenoh thread that received it.
 
-
-def keep_thread_state() -> None:
-    """Keep the calling thread's Python thread state until the process ends.
-
-    Zenoh's runtime thread enters Python for every sample it hands to a Python callback
-    (``PyGILState_Ensure`` ... ``Release``); with no thread state of its own it creates one
-    each time and frees it after, and the callback's frames start cold. One more
-    ``PyGILState_Ensure``, never released, keeps it: ``Release`` then only lets the GIL
-    go. Call it from the callback (the GIL is held there); later calls on the same thread
-    do nothing. Measured with 64 robot processes on 2 cores: the robot's cycle run in its
-    pose callback cost about 10 % less CPU with the thread state kept than without.
-    """
-    if getattr(_THREAD_STATE_KEPT, "kept", False):
-        return
-    ctypes.pythonapi.PyGILState_Ensure()
-    _THREAD_STATE_KEPT.kept = True
-
-
-def call_on_receive(fn: Callable[[Any], Any]) -> Any:
-    """A subscriber handler that calls `fn(sample)` on the Zenoh thread that received it.
-
-    Zenoh's default for a Python callable runs it on a thread of its own, which a sample
-    wakes before `fn` runs (zenoh-python's ``Callback(indirect=False)``, marked unstable:
-    without it, that default). `fn` holds Zenoh's thread while it runs: a robot runs its
-    whole cycle there (`agent.node.RobotNode.on_pose`), other handlers only queue the sample.
+    `put` should be a C-level call that never blocks (``queue.SimpleQueue.put``): it then
+    runs no Python frame, and no thread of the process is woken but the one waiting on the
+    queue. Zenoh's default for a Python callable runs it on a thread of its own, which a
+    sample wakes before it wakes the reader (zenoh-python's ``Callback(indirect=False)``,
+    marked unstable: without it, that default).
     """
     try:
-        return zenoh.handlers.Callback(fn, indirect=False)
+        return zenoh.handlers.Callback(put, indirect=False)
     except TypeError:
-        return fn
+        return put
 
 
 class SessionError(RuntimeError):

@@ -259,6 +259,8 @@ class WorldNode:
         self.lost: set[int] = set()
         self.last_seq: dict[int, int] = {}
         self.rx_seq: dict[int, int] = {}  # newest seq passed into each robot's command link
+        # Robots that rejoined, until their first command: the newest seq before the loss.
+        self.rejoined_seq: dict[int, int] = {}
         self.ended = False
         self.counts = {"commands": 0, "rejected": 0, "stale": 0, "queries": 0,
                        "bad_queries": 0, "overruns": 0, "plans": 0, "seq_jumps": 0,
@@ -333,8 +335,12 @@ class WorldNode:
                 self.alive.add(rid)
                 if rid in self.lost:
                     self.lost.discard(rid)
-                    self.last_seq.pop(rid, None)  # a new process numbers from 0 again
-                    self.rx_seq.pop(rid, None)
+                    # A new process numbers from 0 again; the same one, whose link the lease
+                    # closed, goes on from where it was (`protocol.check_seq`).
+                    self.last_seq.pop(rid, None)
+                    old = self.rx_seq.pop(rid, None)
+                    if old is not None:
+                        self.rejoined_seq[rid] = old
                     self.cmd_links[rid].clear()
                     self.sim.set_offline(rid, False)
                     self._event("robot_rejoined", robot=rid, wall=time.time())
@@ -396,7 +402,8 @@ class WorldNode:
                 continue
             # Bounds a forged but well-formed command cannot pass: a seq far above the
             # robot's (which would make its genuine commands stale), a plan from the future.
-            if check_seq(msg.seq, self.rx_seq.get(rid)) == "seq_jump":
+            if check_seq(msg.seq, self.rx_seq.get(rid),
+                         before_loss=self.rejoined_seq.get(rid)) == "seq_jump":
                 self.counts["seq_jumps"] += 1
                 self._reject(f"cmd.seq: {msg.seq} jumps more than the bound above "
                              f"{self.rx_seq.get(rid)}", key)
@@ -407,6 +414,7 @@ class WorldNode:
                              f"world's {self.sim.t_s:.3f} s", key)
                 continue
             self.rx_seq[rid] = max(msg.seq, self.rx_seq.get(rid, -1))
+            self.rejoined_seq.pop(rid, None)
             self.cmd_links[rid].send(self.sim.t_s, (rx_ns, msg))
         for rid, link in self.cmd_links.items():
             for rx_ns, msg in link.receive(self.sim.t_s):

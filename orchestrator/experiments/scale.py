@@ -624,11 +624,10 @@ def format_process_row(row: dict[str, Any]) -> str:
         f"robot process without planning, {row['agents']} robots, "
         f"{_fmt(row.get('sim_time_s'), 0)} s ({row.get('transport', '')}):",
         f"  CPU ms per cycle: {split} = {_fmt(row.get('cpu_ms_per_plan_total'), 3)}",
-        "    (each robot's own thread and process CPU clocks: sense = take the pose, "
-        "decode and observe it, brake = the stop command, send = encode and publish (these "
-        "three on Zenoh's thread, where the pose arrived), loop = the main thread: control, "
-        "liveliness, deadlines; Zenoh threads = the rest: Zenoh's runtime. Compare with "
-        "orchestrator bench --floor)",
+        "    (each robot's own thread and process CPU clocks over its loop: sense = decode "
+        "and observe the pose, brake = the stop command, send = encode and publish, loop = "
+        "the rest of the main thread: waiting, control and liveliness; Zenoh threads = "
+        "every other thread. Compare with orchestrator bench --floor)",
         f"  robot process CPU sampled from outside (psutil): {_fmt(sampled, 2)} % of a core "
         f"= {_fmt(sampled, 3)} ms per 100 ms cycle",
         f"  sense -> act wall ms p50 / p99: {_fmt(row.get('sense_to_act_ms_p50'), 1)} / "

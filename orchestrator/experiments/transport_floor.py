@@ -3,12 +3,12 @@
 `orchestrator bench --floor --robots N` runs one router that publishes a `protocol.PosesMsg`
 of N discs every world tick (50 Hz) on the pose slots, as the world does, and N client
 processes that do a robot's I/O and nothing else: each subscribes to one pose slot, takes
-every pose out of Zenoh on Zenoh's thread (``payload.to_bytes()``, as `agent.node.RobotNode`
-does) and publishes a command-sized payload, with Zenoh on one thread and its Python thread
-state kept, as a robot. No decoding, sensing, planning or encoding. Each client reports its
-process CPU per cycle, split into the Python handler (taking the payload, publishing) and
-the rest (Zenoh's runtime receiving, sending and keeping the lease; the main thread's
-naps). `orchestrator bench --process` minus this is what the robot's own code costs.
+every pose off the queue Zenoh's thread puts it on, copies its payload out
+(``payload.to_bytes()``) and publishes a command-sized payload, with Zenoh on one thread:
+the loop of `agent.node.RobotNode` with nothing in it. No decoding, sensing, planning or
+encoding. Each client reports its CPU per cycle: its main thread (waking, taking the pose,
+publishing) and Zenoh's threads (receiving, queueing, sending, the lease).
+`orchestrator bench --process` minus this is what the robot's own code costs.
 
 Plain TCP on loopback (TLS made no measurable difference to `bench --process`).
 """
@@ -31,6 +31,8 @@ POSE_SLOTS = 5
 COMMAND_BYTES = 200
 """About the size of an encoded `protocol.CommandMsg`."""
 STARTUP_TIMEOUT_S = 60.0
+NAP_S = 0.25
+"""The longest wait for a pose, as a robot's (`agent.node.MAX_NAP_S`)."""
 _KEY = "eifp-floor"
 
 
@@ -41,17 +43,16 @@ class FloorRow:
     Args:
         robots: client processes (and discs in each pose message).
         cycles: mean poses a client received (one cycle each).
-        handler_ms: the Python handler on Zenoh's thread: the payload taken out, the
-            command put.
-        zenoh_ms: the rest of the process: Zenoh's runtime (receiving, entering Python,
-            sending, the lease) and the main thread's naps.
+        main_ms: the main thread: woken by the pose, its payload copied out, the command
+            put.
+        zenoh_ms: Zenoh's threads: receiving, queueing, sending, the lease.
         total_ms: their sum.
         pose_bytes: size of one pose message.
     """
 
     robots: int
     cycles: float
-    handler_ms: float
+    main_ms: float
     zenoh_ms: float
     total_ms: float
     pose_bytes: int
@@ -105,10 +106,10 @@ def run_floor(n: int, seconds: float) -> FloorRow:
                 proc.kill()
                 proc.wait()
     pose_bytes = json.loads(out.splitlines()[-1])["pose_bytes"]
-    handler = statistics.fmean(r["handler_ms"] for r in reports)
-    rest = statistics.fmean(r["zenoh_ms"] for r in reports)
+    main = statistics.fmean(r["main_ms"] for r in reports)
+    zenoh_ = statistics.fmean(r["zenoh_ms"] for r in reports)
     return FloorRow(robots=n, cycles=statistics.fmean(r["cycles"] for r in reports),
-                    handler_ms=handler, zenoh_ms=rest, total_ms=handler + rest,
+                    main_ms=main, zenoh_ms=zenoh_, total_ms=main + zenoh_,
                     pose_bytes=pose_bytes)
 
 
@@ -116,8 +117,8 @@ def format_floor_row(row: FloorRow) -> str:
     """The row as the benchmark prints it."""
     return (f"transport floor, {row.robots} clients, {row.cycles:.0f} cycles each, "
             f"{row.pose_bytes}-byte poses (plain TCP):\n"
-            f"  CPU ms per cycle: handler (take the pose, put the command) "
-            f"{row.handler_ms:.3f}  Zenoh and the rest {row.zenoh_ms:.3f} = {row.total_ms:.3f}")
+            f"  CPU ms per cycle: main thread (take the pose, put the command) "
+            f"{row.main_ms:.3f}  Zenoh threads {row.zenoh_ms:.3f} = {row.total_ms:.3f}")
 
 
 def _settings(mode: str, endpoint: str) -> dict[str, str]:
@@ -166,14 +167,11 @@ def _router(endpoint: str, n: int, seconds: float) -> int:
 
 
 def _client(endpoint: str, index: int) -> int:
-    import threading
-
     import zenoh
 
     from agent.process import (
-        call_on_receive,
         close_session,
-        keep_thread_state,
+        enqueue_on_receive,
         open_session,
         use_one_zenoh_thread,
     )
@@ -183,37 +181,36 @@ def _client(endpoint: str, index: int) -> int:
                            deadline=time.monotonic() + STARTUP_TIMEOUT_S)
     assert session is not None
     command = bytes(COMMAND_BYTES)
-    state = {"cycles": 0, "cpu_s": 0.0, "start": None}
-    done = threading.Event()
     try:
         pub = session.declare_publisher(f"{_KEY}/cmd/{index}",
                                         congestion_control=zenoh.CongestionControl.DROP,
                                         express=True)
-
-        def on_pose(sample: zenoh.Sample) -> None:  # a robot's cycle without its work
-            cpu0 = time.thread_time()
-            keep_thread_state()
-            if state["start"] is None:
-                state["start"] = time.process_time()
+        # As a robot: Zenoh's thread puts each pose sample on a queue the main thread
+        # blocks on, at most a nap at a time.
+        poses: queue.SimpleQueue = queue.SimpleQueue()
+        pose_sub = session.declare_subscriber(f"{_KEY}/poses/{index % POSE_SLOTS}",
+                                              enqueue_on_receive(poses.put))
+        end = session.declare_subscriber(f"{_KEY}/end")
+        token = session.liveliness().declare_token(f"{_KEY}/alive/{index}")
+        cycles, start, main_start = 0, 0.0, 0.0
+        while end.try_recv() is None:
+            try:
+                sample = poses.get(timeout=NAP_S)
+            except queue.Empty:
+                continue
+            if not cycles:
+                start, main_start = time.process_time(), time.thread_time()
             sample.payload.to_bytes()
             pub.put(command)
-            state["cycles"] += 1
-            state["cpu_s"] += time.thread_time() - cpu0
-
-        poses = session.declare_subscriber(f"{_KEY}/poses/{index % POSE_SLOTS}",
-                                           call_on_receive(on_pose))
-        end = session.declare_subscriber(f"{_KEY}/end", call_on_receive(lambda s: done.set()))
-        token = session.liveliness().declare_token(f"{_KEY}/alive/{index}")
-        while not done.wait(0.25):  # the robot's loop naps as long
-            pass
-        if not state["cycles"]:
+            cycles += 1
+        if not cycles:
             raise RuntimeError(f"floor client {index}: no pose arrived")
-        process_s = time.process_time() - state["start"]
-        cycles = state["cycles"]
-        print(json.dumps({"cycles": cycles, "handler_ms": state["cpu_s"] * 1e3 / cycles,
-                          "zenoh_ms": max(0.0, process_s - state["cpu_s"]) * 1e3 / cycles}))
+        main_s = time.thread_time() - main_start
+        process_s = time.process_time() - start
+        print(json.dumps({"cycles": cycles, "main_ms": main_s * 1e3 / cycles,
+                          "zenoh_ms": max(0.0, process_s - main_s) * 1e3 / cycles}))
         token.undeclare()
-        poses.undeclare()
+        pose_sub.undeclare()
         end.undeclare()
     finally:
         close_session(session)

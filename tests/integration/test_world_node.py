@@ -139,6 +139,36 @@ def test_liveliness_join_loss_and_rejoin(rig: Rig) -> None:
     stray.undeclare()
 
 
+def test_a_robot_back_on_a_new_link_numbers_on_from_before_its_loss(rig: Rig) -> None:
+    """The lease closed a robot's link and it came back: the world takes its next seq (far
+    above the first-command bound) as the same process's, and refuses a jump from there."""
+    node = rig.node
+    pub0 = rig.client.declare_publisher(rig.keys.cmd(0))
+    token = rig.client.liveliness().declare_token(rig.keys.alive_robot(0))
+    until(lambda: 0 in node.alive and pub0.matching_status.matching, node.poll_liveliness,
+          "robot 0 to join")
+
+    def cmd(seq: int, v: float) -> bytes:
+        return CommandMsg(0, seq, 0.0, v, 0.0, 2.0, "ok").encode()
+
+    for seq in range(0, 10 * MAX_SEQ_JUMP, MAX_SEQ_JUMP // 2):  # up to seq 608
+        pub0.put(cmd(seq, 0.2))
+    until(lambda: node.counts["commands"] == 20, node.apply_commands, "twenty commands")
+    token.undeclare()
+    until(lambda: 0 in node.lost, node.poll_liveliness, "robot 0 to be lost")
+    token = rig.client.liveliness().declare_token(rig.keys.alive_robot(0))
+    until(lambda: 0 in node.alive, node.poll_liveliness, "robot 0 to rejoin")
+    pub0.put(cmd(608 + 2 * MAX_SEQ_JUMP, 0.9))  # too far even for the same process
+    pub0.put(cmd(612, 0.5))  # the same process, four plans on
+    pub0.put(cmd(613, 0.6))
+    until(lambda: node.counts["commands"] + node.counts["rejected"] == 23,
+          node.apply_commands, "three more commands")
+    assert node.counts["seq_jumps"] == 1 and node.counts["commands"] == 22
+    assert node.last_seq[0] == 613 and not node.rejoined_seq
+    assert node.sim.command[node.sim.index_of(0)][0] == pytest.approx(0.6)
+    token.undeclare()
+
+
 def test_commands_applied_stale_dropped_garbage_rejected(rig: Rig) -> None:
     node = rig.node
     pub0 = rig.client.declare_publisher(rig.keys.cmd(0))
@@ -277,19 +307,19 @@ def test_relays_and_a_fixed_id_go_into_the_worlds_router_settings(tmp_path: Path
                        scenario)
 
 
-def test_a_pose_subscriber_calls_the_handler_on_zenohs_thread(rig: Rig) -> None:
-    """The robot's pose handler (`agent.process.call_on_receive`): Zenoh's receiving thread
-    calls it with every sample, on no thread of its own."""
+def test_a_pose_subscriber_puts_each_sample_on_the_robots_queue(rig: Rig) -> None:
+    """The robot's pose handler (`agent.process.enqueue_on_receive`): Zenoh's receiving
+    thread puts every sample on a queue the robot's loop blocks on; nothing else runs."""
     import queue
 
-    from agent.process import call_on_receive
+    from agent.process import enqueue_on_receive
     from protocol import PoseDecoder
 
-    handler = call_on_receive(queue.SimpleQueue().put)
+    handler = enqueue_on_receive(queue.SimpleQueue().put)
     if isinstance(handler, zenoh.handlers.Callback):
         assert handler.indirect is False  # on Zenoh's thread: no thread of its own
     samples: queue.SimpleQueue = queue.SimpleQueue()
-    sub = rig.client.declare_subscriber(rig.keys.poses_slot(0), call_on_receive(samples.put))
+    sub = rig.client.declare_subscriber(rig.keys.poses_slot(0), enqueue_on_receive(samples.put))
     try:
         pub = rig.node.poses_pubs[0]
         until(lambda: pub.matching_status.matching, lambda: None, "pose subscriber")
@@ -298,40 +328,6 @@ def test_a_pose_subscriber_calls_the_handler_on_zenohs_thread(rig: Rig) -> None:
         assert PoseDecoder().decode(sample.payload.to_bytes()).tick == 0
     finally:
         sub.undeclare()
-
-
-def test_zenohs_thread_keeps_its_python_thread_state_once_asked(rig: Rig) -> None:
-    """`agent.process.keep_thread_state` in a callback: Python state bound to the thread
-    (a `threading.local`) is still there on the next sample, so the thread state was not
-    freed and made anew in between."""
-    import queue
-    import threading
-
-    from agent.process import call_on_receive, keep_thread_state
-
-    local = threading.local()
-    seen: queue.SimpleQueue = queue.SimpleQueue()
-
-    def handler(sample: zenoh.Sample) -> None:
-        seen.put((threading.get_ident(), getattr(local, "mark", None)))
-        keep_thread_state()
-        local.mark = "kept"
-
-    sub = rig.client.declare_subscriber(rig.keys.poses_slot(0), call_on_receive(handler))
-    try:
-        pub = rig.node.poses_pubs[0]
-        until(lambda: pub.matching_status.matching, lambda: None, "pose subscriber")
-        rig.node.publish_poses()  # tick 0: slot 0
-        first = seen.get(timeout=DEADLINE_S)
-        for _ in range(5):  # to tick 5 (ticks 1..4 go to the other slots)
-            rig.node.sim.step(0.02)
-        rig.node.publish_poses()  # tick 5: slot 0 again
-        second = seen.get(timeout=DEADLINE_S)
-    finally:
-        sub.undeclare()
-    assert first == (first[0], None)
-    assert first[0] != threading.get_ident()  # Zenoh's thread, not this one
-    assert second == (first[0], "kept")
 
 
 def test_one_zenoh_thread_unless_the_environment_says_otherwise(monkeypatch) -> None:

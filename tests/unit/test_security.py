@@ -37,6 +37,18 @@ def test_a_robots_first_command_may_start_anywhere_up_to_the_jump_bound() -> Non
     assert check_seq(2**63 - 1, None) == "seq_jump"
 
 
+def test_after_a_rejoin_the_first_command_may_go_on_from_before_the_loss() -> None:
+    """The same process back (its link closed by the lease) numbers on; a restarted one
+    from 0; anything else is still a jump."""
+    assert check_seq(1017, None, before_loss=1000) is None
+    assert check_seq(1000 + MAX_SEQ_JUMP, None, before_loss=1000) is None
+    assert check_seq(3, None, before_loss=1000) is None  # a new process
+    assert check_seq(1001 + MAX_SEQ_JUMP, None, before_loss=1000) == "seq_jump"
+    assert check_seq(1000, None, before_loss=1000) == "seq_jump"  # not above it
+    assert check_seq(2**63 - 1, None, before_loss=1000) == "seq_jump"
+    assert check_seq(1017, 5, before_loss=1000) == "seq_jump"  # only for the first command
+
+
 def test_a_seq_must_increase_by_at_most_the_bound() -> None:
     assert check_seq(11, 10) is None
     assert check_seq(10 + MAX_SEQ_JUMP, 10) is None
