@@ -31,8 +31,6 @@ POSE_SLOTS = 5
 COMMAND_BYTES = 200
 """About the size of an encoded `protocol.CommandMsg`."""
 STARTUP_TIMEOUT_S = 60.0
-NAP_S = 0.25
-"""The longest wait for a pose, as a robot's (`agent.node.MAX_NAP_S`)."""
 _KEY = "eifp-floor"
 
 
@@ -169,6 +167,7 @@ def _router(endpoint: str, n: int, seconds: float) -> int:
 def _client(endpoint: str, index: int) -> int:
     import zenoh
 
+    from agent.node import MAX_NAP_S
     from agent.process import (
         close_session,
         enqueue_on_receive,
@@ -195,7 +194,7 @@ def _client(endpoint: str, index: int) -> int:
         cycles, start, main_start = 0, 0.0, 0.0
         while end.try_recv() is None:
             try:
-                sample = poses.get(timeout=NAP_S)
+                sample = poses.get(timeout=MAX_NAP_S)
             except queue.Empty:
                 continue
             if not cycles:
