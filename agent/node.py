@@ -23,7 +23,8 @@ to stderr (the first few, then every 100th) and the robot keeps running. The rob
 commanding and exits with `ExitCode.WORLD_LOST` if the world's liveliness token disappears
 before the end message and is not back within `WORLD_BLIP_GRACE_S` (0.5 s), or no pose
 arrives for ``--pose-timeout-s`` while running. If the process itself was suspended
-(SIGSTOP: a loop iteration more than `SUSPEND_GAP_S` late), its link has been closed by the
+(SIGSTOP: more than `SUSPEND_GAP_S` of wall time between two loop iterations that neither
+its CPU time nor its waits explain), its link has been closed by the
 lease and the world's token vanishes from its view; it then sends nothing and waits up to
 `REJOIN_GRACE_S` for the token to return (the client reconnects by itself) before giving up.
 
@@ -85,6 +86,7 @@ from agent import flags as argtypes
 from agent.process import (
     ExitCode,
     SessionError,
+    StallWatch,
     StopFlag,
     check_tls_files,
     close_session,
@@ -124,7 +126,8 @@ QUERY_TIMEOUT_S = 1.0
 STAMP_EPS_S = 1e-6
 """Tolerance on sim-time comparisons (stamps are sums of float ticks)."""
 SUSPEND_GAP_S = 0.5
-"""A loop iteration this much later than the previous one means the process was suspended."""
+"""A loop stall this long (wall time between two iterations that the loop's CPU time and its
+waits do not explain, `agent.process.StallWatch`) means the process was suspended."""
 REJOIN_GRACE_S = 5.0
 """After a suspension, how long the robot waits for the world's token to come back."""
 WORLD_BLIP_GRACE_S = 0.5
@@ -493,7 +496,7 @@ class RobotNode:
         self.world_seen = False
         self.world_gone_wall: float | None = None
         self.world_grace_s = WORLD_BLIP_GRACE_S
-        self.loop_wall: float | None = None
+        self.stalls = StallWatch()
         self.resumed_wall = -math.inf
         # The sim clock: the newest pose's stamp as it arrived from the world (before any
         # injected fault), advanced by wall time x time_scale. It stands for the clock
@@ -699,7 +702,10 @@ class RobotNode:
         cpu1 = time.thread_time()
         self.cpu_s["plan"] += cpu1 - cpu0
         if self.options.plan_delay_ms > 0.0:  # a CPU-starved robot: the command leaves late
-            time.sleep(self.options.plan_delay_ms * 1e-3 / self.config.time_scale)
+            delay_s = self.options.plan_delay_ms * 1e-3 / self.config.time_scale
+            slept = time.monotonic()
+            time.sleep(delay_s)
+            self.stalls.waited(time.monotonic() - slept, delay_s)
             cpu1 = time.thread_time()
         # The fields of a `CommandMsg`, its `WallStamps` in their wire order.
         self.cmd_pub.put(encode_command(
@@ -735,7 +741,9 @@ class RobotNode:
         tokens = self.cpu_tokens
         held = False
         if tokens is not None and self.pose_ring:
+            asked = time.monotonic()
             held = tokens.acquire(timeout=CPU_TOKEN_WAIT_S)
+            self.stalls.waited(time.monotonic() - asked, CPU_TOKEN_WAIT_S)
             if not held:
                 self.counts["token_timeouts"] += 1
         try:
@@ -765,11 +773,14 @@ class RobotNode:
             wait_s = min(wait_s,
                          max(0.0, (link_due_s - self.sim_now()) / self.config.time_scale))
         pending = self.pose_queue
+        napped = time.monotonic()
         try:
             sample = pending.get(timeout=wait_s)
         except queue.Empty:
+            self.stalls.waited(time.monotonic() - napped, wait_s)
             return
         self.pose_rx_wall = time.monotonic()
+        self.stalls.waited(self.pose_rx_wall - napped, wait_s)
         world_zid = self.world_zid
         while True:
             if world_zid is None:
@@ -795,13 +806,12 @@ class RobotNode:
         self.cpu_start = (time.thread_time(), time.process_time())
         try:
             while not self.stop:
-                now = time.monotonic()
-                if self.loop_wall is not None and now - self.loop_wall > SUSPEND_GAP_S:
-                    self.resumed_wall = now
+                stall_s = self.stalls.tick()
+                if stall_s > SUSPEND_GAP_S:
+                    self.resumed_wall = time.monotonic()
                     self.counts["suspended"] += 1
                     log.warning("robot %d: resumed after %.2f s without running (suspended?)",
-                                self.robot_id, now - self.loop_wall)
-                self.loop_wall = now
+                                self.robot_id, stall_s)
                 if not self.control_sub.empty():
                     self.poll_control()
                 if not self.world_sub.empty() or self.world_gone_wall is not None:

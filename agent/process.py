@@ -138,6 +138,42 @@ def enqueue_on_receive(put: Callable[[Any], Any]) -> Any:
         return put
 
 
+class StallWatch:
+    """Finds the loop's stalls: wall time in which its thread neither ran nor knowingly waited.
+
+    A process that was stopped (SIGSTOP) or not scheduled at all for a while shows a wall
+    gap between two loop iterations that its thread's CPU time and its waits do not explain;
+    a long plan (CPU time) or a long nap (a wait) does not. Each wait is counted up to what
+    was asked for (`waited`): a nap that a stop stretched past its time-out counts as the
+    time-out, the rest as a stall.
+
+    Args:
+        wall: the wall clock [s] (`time.monotonic`).
+        cpu: this thread's CPU clock [s] (`time.thread_time`).
+    """
+
+    def __init__(self, wall: Callable[[], float] = time.monotonic,
+                 cpu: Callable[[], float] = time.thread_time) -> None:
+        self._wall = wall
+        self._cpu = cpu
+        self._last: tuple[float, float] | None = None
+        self._waited_s = 0.0
+
+    def waited(self, seconds: float, asked_s: float) -> None:
+        """The loop blocked `seconds` of wall time on a wait with time-out `asked_s`."""
+        self._waited_s += min(max(seconds, 0.0), asked_s)
+
+    def tick(self) -> float:
+        """Call at the top of each loop iteration; returns the stall since the previous call
+        [s] (wall time minus this thread's CPU time minus the waits; 0 on the first call)."""
+        wall, cpu = self._wall(), self._cpu()
+        last, waited = self._last, self._waited_s
+        self._last, self._waited_s = (wall, cpu), 0.0
+        if last is None:
+            return 0.0
+        return max(0.0, (wall - last[0]) - (cpu - last[1]) - waited)
+
+
 class SessionError(RuntimeError):
     """No Zenoh session could be opened before the deadline (the message says why)."""
 

@@ -20,7 +20,7 @@ from agent.node import (
     parse_args,
     plan_phase_s,
 )
-from agent.process import ExitCode, StopFlag
+from agent.process import ExitCode, StallWatch, StopFlag
 from protocol import RunConfigMsg
 
 
@@ -233,6 +233,7 @@ def _node_with(tokens: _Tokens, *, ring: bool, fresh: bool = True) -> RobotNode:
     node.counts = {"token_timeouts": 0}
     node.cpu_s = {"sense": 0.0, "plan": 0.0, "send": 0.0}
     node.world_alive = True
+    node.stalls = StallWatch()
 
     def poll_poses() -> bool:
         tokens.log.append(f"poll held={tokens.held}")
@@ -313,11 +314,43 @@ def test_without_poses_the_robot_waits_at_most_its_nap() -> None:
 
     node = _pose_node(None)
     node.pose_link = type(node.pose_link)(node.pose_link.faults, None)
+    node.stalls.tick()
     t0 = time.monotonic()
     node.wait_for_poses()
     waited = time.monotonic() - t0
     assert not node.pose_ring
     assert waited >= agent_node.MAX_NAP_S * 0.9  # no poll: one wait for the whole nap
+    # The nap is a wait the loop asked for, not a stall (only what it overran by is).
+    assert node.stalls.tick() <= max(0.0, waited - agent_node.MAX_NAP_S) + 0.05
+
+
+def test_a_stall_is_counted_as_a_suspension_and_a_nap_is_not() -> None:
+    """The loop counts ``suspended`` when `StallWatch` reports more than SUSPEND_GAP_S."""
+    from types import SimpleNamespace
+
+    node = _pose_node(None)
+    node.stop = StopFlag()
+    node.counts["suspended"] = 0
+    node.control_sub = node.world_sub = SimpleNamespace(empty=lambda: True)
+    node.world_seen, node.world_gone_wall, node.last_rx_wall = True, None, None
+    node.resumed_wall = -float("inf")
+    node.cmd_pub = node.debug_pub = SimpleNamespace(undeclare=lambda: None)
+    node.cpu_s = {"sense": 0.0, "plan": 0.0, "send": 0.0}
+    stalls = iter([0.0, agent_node.SUSPEND_GAP_S * 0.9, agent_node.SUSPEND_GAP_S + 0.1, 0.0])
+    node.stalls = SimpleNamespace(tick=lambda: next(stalls))
+    passes = []
+
+    def sense_and_plan() -> bool:
+        passes.append(node.counts["suspended"])
+        if len(passes) == 4:
+            node.stop(15)  # as SIGTERM would
+        return False
+
+    node.sense_and_plan = sense_and_plan
+    node.wait_for_poses = lambda: None
+    assert node.run(startup_deadline=float("inf")) == ("signal", ExitCode.OK)
+    assert passes == [0, 0, 1, 1]
+    assert node.resumed_wall > 0.0
 
 
 def _source(zid: str):
@@ -339,6 +372,7 @@ def _pose_node(world_zid: str | None):
     node.pose_queue = queue.SimpleQueue()
     node.pose_ring = deque(maxlen=2)
     node.pose_rx_wall = 0.0
+    node.stalls = StallWatch()
     node.decoder = PoseDecoder({0, 1})
     node.counts = {k: 0 for k in ("rejected", "skipped", "stale", "link_dropped",
                                   "refused_poses", "refused_control")}
