@@ -44,8 +44,10 @@ plan_errors=N stale_plans=N link_dropped=N suspended=N seq=N`` to stderr (``reje
 malformed messages; ``stale``: poses the controller dropped as old or out of order;
 ``skipped``: valid poses not observed because a newer one was waiting in the ring;
 ``overruns``: plan slots skipped; ``stale_plans``: brakes on too-old poses;
-``link_dropped``: poses the injected link lost; ``suspended``: times it found itself
-resumed after a stop). The launcher collects these lines into ``robots.json``.
+``link_dropped``: poses the injected link lost; ``suspended``: times it found it had not
+run for more than `SUSPEND_GAP_S`, stopped or not scheduled: a machine so loaded that a
+process waits that long for a core is counted too, since its link may have lapsed as
+well). The launcher collects these lines into ``robots.json``.
 
 Exit status (`agent.process.ExitCode`): OK (end of run, or a signal), TRANSPORT (cannot
 connect before the startup deadline), BAD_INPUT (no valid configuration), WORLD_LOST (the
@@ -127,7 +129,9 @@ STAMP_EPS_S = 1e-6
 """Tolerance on sim-time comparisons (stamps are sums of float ticks)."""
 SUSPEND_GAP_S = 0.5
 """A loop stall this long (wall time between two iterations that the loop's CPU time and its
-waits do not explain, `agent.process.StallWatch`) means the process was suspended."""
+waits do not explain, `agent.process.StallWatch`) means the process was suspended (stopped,
+or not scheduled for that long: the fork launcher's start-up of 64 robots on 2 cores gives
+some robots 0.5-0.6 s of such a wait)."""
 REJOIN_GRACE_S = 5.0
 """After a suspension, how long the robot waits for the world's token to come back."""
 WORLD_BLIP_GRACE_S = 0.5
