@@ -35,15 +35,19 @@ The robot's sim clock is the newest pose's stamp *as it arrived from the world*,
 injected fault, advanced by wall time x time_scale: it stands for the synchronised clock
 of a real fleet, so the planner measures the true age of the poses it plans on and
 forward-predicts by it (``--no-latency-compensation`` turns that off). A pose older than
-`STALE_PLAN_S` when its slot comes gives a brake command instead of a plan.
+`STALE_PLAN_S` when its slot comes gives a brake command instead of a plan. The robot plans
+for when its command will leave (the sim clock plus `RobotNode.compute_s`, its recent plan
+times), and sends a brake for a plan that took longer than that plus the command hold.
 ``--plan-delay-ms`` holds every command back that long (a CPU-starved robot),
 ``--control-phase-s`` shifts the planning slots. It
 exits 0 on the ``end`` `ControlMsg` and on SIGTERM/SIGINT. On exit it logs one line
 ``robot <id> exit: reason='...' code=N rejected=N stale=N skipped=N plans=N overruns=N
-plan_errors=N stale_plans=N link_dropped=N suspended=N seq=N`` to stderr (``rejected``:
-malformed messages; ``stale``: poses the controller dropped as old or out of order;
+plan_errors=N stale_plans=N late_plans=N link_dropped=N suspended=N seq=N`` to stderr
+(``rejected``: malformed messages; ``stale``: poses the controller dropped as old or out of order;
 ``skipped``: valid poses not observed because a newer one was waiting in the ring;
 ``overruns``: plan slots skipped; ``stale_plans``: brakes on too-old poses;
+``late_plans``: plans sent as a brake because they took longer than allowed for plus the
+command hold;
 ``link_dropped``: poses the injected link lost; ``suspended``: times it found it had not
 run for more than `SUSPEND_GAP_S`, stopped or not scheduled: a machine so loaded that a
 process waits that long for a core is counted too, since its link may have lapsed as
@@ -85,6 +89,7 @@ import numpy as np
 import zenoh
 
 from agent import flags as argtypes
+from agent.core.types import PlanStatus
 from agent.process import (
     ExitCode,
     SessionError,
@@ -140,6 +145,9 @@ for a lost world. At 128 robots on 2 cores a start-up stall let the transport le
 every robot's link at once; 119 of 123 robots rejoined within 0.35 s (they had seen their
 own loop stall and waited), the other 4 exited at once and stood in the way for the rest
 of the run (`orchestrator scale --agents 128`, 23 contacts)."""
+COMPUTE_DECAY = 0.9
+"""Per plan, how much of the longest recent plan time the robot still expects (see
+`RobotNode.compute_s`): a spike is forgotten by half in about 7 plans."""
 STALE_PLAN_S = 1.0
 """Poses older than this [sim s] when planning: brake instead (compensation is capped there)."""
 MAX_NAP_S = 0.25
@@ -483,11 +491,16 @@ class RobotNode:
         self.schedule = PlanSchedule(period_s, phase_s)
         self.decoder = PoseDecoder(config.known_ids)
         self.counts = {"rejected": 0, "stale": 0, "skipped": 0, "plans": 0, "overruns": 0,
-                       "plan_errors": 0, "stale_plans": 0, "link_dropped": 0, "suspended": 0,
+                       "plan_errors": 0, "stale_plans": 0, "late_plans": 0, "link_dropped": 0,
+                       "suspended": 0,
                        "token_timeouts": 0, "refused_poses": 0, "refused_control": 0,
                        "refused_config": refused_config}
         self.world_zid = world_zid
         self.seq = 0
+        # How long [sim s] the robot expects its next plan to take, from sensing to sending:
+        # the longest recent plan time, decaying by COMPUTE_DECAY per plan. The robot plans
+        # for the time its command will leave (`plan_and_send`).
+        self.compute_s = 0.0
         # CPU time of the loop by part (thread CPU clock of this, the main, thread) and the
         # process's CPU clock at the loop's start: see `cpu_summary`.
         self.cpu_s = {"sense": 0.0, "plan": 0.0, "send": 0.0}
@@ -695,8 +708,8 @@ class RobotNode:
             elif now_s - msg.t_s > STALE_PLAN_S:
                 self.counts["stale_plans"] += 1
                 result = self.controller.brake()
-            else:
-                result = self.controller.plan(now_s)
+            else:  # planned for when the command will leave, as far as the robot can tell
+                result = self.controller.plan(now_s + self.compute_s)
         except Exception:  # a planner bug must not leave the robot driving blind
             self.counts["plan_errors"] += 1
             if self.counts["plan_errors"] <= 3:
@@ -711,6 +724,14 @@ class RobotNode:
             time.sleep(delay_s)
             self.stalls.waited(time.monotonic() - slept, delay_s)
             cpu1 = time.thread_time()
+        took_s = self.sim_now() - now_s
+        if (result.status is not PlanStatus.STALE
+                and took_s > self.compute_s + self.controller.command_hold_s):
+            # Later than it allowed for by more than the hold: the world stopped holding the
+            # previous command and braked the robot while this plan assumed it still applied.
+            self.counts["late_plans"] += 1
+            result = self.controller.brake()
+        self.compute_s = max(took_s, COMPUTE_DECAY * self.compute_s)
         # The fields of a `CommandMsg`, its `WallStamps` in their wire order.
         self.cmd_pub.put(encode_command(
             self.robot_id, self.seq, msg.t_s, float(result.v_mps), float(result.omega_radps),

@@ -12,6 +12,7 @@ import pytest
 from agent import node as agent_node
 from agent.core.config import PlannerConfig
 from agent.core.scenario import RobotSpec
+from agent.core.types import PlanResult, PlanStatus
 from agent.node import (
     AgentOptions,
     PlanSchedule,
@@ -21,7 +22,7 @@ from agent.node import (
     plan_phase_s,
 )
 from agent.process import ExitCode, StallWatch, StopFlag
-from protocol import RunConfigMsg
+from protocol import CommandMsg, RunConfigMsg
 
 
 def test_schedule_plans_on_first_pose_then_every_period() -> None:
@@ -622,3 +623,80 @@ def test_cpu_summary_splits_the_main_thread_and_charges_the_other_threads() -> N
     assert 29_000 <= got["cpu_loop_us"] < 1_000_000
     assert 49_000 <= got["cpu_threads_us"] < 1_000_000
     assert "plans=3 seq=3 cpu_sense_us=0 cpu_plan_us=20000 cpu_send_us=0" in node.summary()
+
+
+class _Controller:
+    """Plans (1, 0.5), recording the time it plans for; each plan lets the next of `plans_s`
+    of sim time pass. Brakes to (0, 0)."""
+
+    command_hold_s = 0.15
+
+    def __init__(self, clock: list[float], plans_s: list[float]) -> None:
+        self.clock, self.plans_s = clock, list(plans_s)
+        self.planned_for: list[float] = []
+
+    def plan(self, now_s: float) -> PlanResult:
+        self.planned_for.append(now_s)
+        self.clock[0] += self.plans_s.pop(0)
+        return PlanResult(v_mps=1.0, omega_radps=0.5, status=PlanStatus.OK,
+                          waypoints_m=np.zeros((2, 2)))
+
+    def brake(self) -> PlanResult:
+        return PlanResult(v_mps=0.0, omega_radps=0.0, status=PlanStatus.STALE,
+                          waypoints_m=np.zeros((2, 2)))
+
+
+def _planning_node(plans_s: list[float]) -> tuple[RobotNode, list[float], list[CommandMsg]]:
+    """A RobotNode without a session whose plans take `plans_s` of sim time, one by one;
+    returns it, its sim clock and the commands it sends."""
+    from types import SimpleNamespace
+
+    clock = [10.0]
+    sent: list[CommandMsg] = []
+    node = object.__new__(RobotNode)
+    node.robot_id, node.seq, node.clock_id, node.newest_rx_ns = 0, 0, 1, 0
+    node.newest = SimpleNamespace(t_s=9.98, clock_id=1, pub_ns=0)
+    node.schedule = SimpleNamespace(due=lambda t_s: True, planned=lambda t_s: 0)
+    node.options = SimpleNamespace(plan=True, plan_delay_ms=0.0)
+    node.config = SimpleNamespace(time_scale=1.0)
+    node.controller = _Controller(clock, plans_s)
+    node.sim_now = lambda: clock[0]  # type: ignore[method-assign]
+    node.counts = {"plans": 0, "overruns": 0, "stale_plans": 0, "late_plans": 0,
+                   "plan_errors": 0}
+    node.cpu_s = {"sense": 0.0, "plan": 0.0, "send": 0.0}
+    node.stalls = StallWatch()
+    node.compute_s = 0.0
+    node.cmd_pub = SimpleNamespace(put=lambda payload: sent.append(CommandMsg.decode(payload)))
+    node.debug_pub = SimpleNamespace(put=lambda payload: None)
+    return node, clock, sent
+
+
+@pytest.mark.parametrize(("plan_s", "late"), [(0.002, False), (0.14, False), (0.16, True),
+                                              (0.4, True)])
+def test_a_plan_later_than_the_hold_is_sent_as_a_brake(plan_s: float, late: bool) -> None:
+    """With no slow plan before it, a plan that took longer than the command hold is sent as a
+    stop, and counted."""
+    node, _, sent = _planning_node([plan_s])
+    node.plan_and_send()
+    msg = sent[0]
+    assert (msg.v_mps, msg.omega_radps) == ((0.0, 0.0) if late else (1.0, 0.5))
+    assert msg.status == ("stale" if late else "ok")
+    assert node.counts["late_plans"] == int(late) and node.counts["plans"] == 1
+
+
+def test_the_robot_plans_for_when_its_command_will_leave() -> None:
+    """After a slow plan, the next is planned that much ahead and is not late for taking as
+    long; the expectation decays by COMPUTE_DECAY per plan."""
+    node, clock, sent = _planning_node([0.2, 0.3, 0.01, 0.01])
+    times = []
+    for _ in range(4):
+        times.append(clock[0])
+        node.plan_and_send()
+    planned_for = node.controller.planned_for
+    assert planned_for[0] == pytest.approx(times[0])  # nothing expected yet
+    assert planned_for[1] == pytest.approx(times[1] + 0.2)
+    assert planned_for[2] == pytest.approx(times[2] + 0.3)
+    assert planned_for[3] == pytest.approx(times[3] + 0.3 * agent_node.COMPUTE_DECAY)
+    # 0.2 > 0 + 0.15: late; 0.3 <= 0.2 + 0.15: allowed for; the quick ones are on time.
+    assert [m.status for m in sent] == ["stale", "ok", "ok", "ok"]
+    assert node.counts["late_plans"] == 1
