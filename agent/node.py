@@ -147,7 +147,9 @@ own loop stall and waited), the other 4 exited at once and stood in the way for 
 of the run (`orchestrator scale --agents 128`, 23 contacts)."""
 COMPUTE_DECAY = 0.9
 """Per plan, how much of the longest recent plan time the robot still expects (see
-`RobotNode.compute_s`): a spike is forgotten by half in about 7 plans."""
+`RobotNode.compute_s`, at most `STALE_PLAN_S`): a spike is forgotten by half in about 7
+plans. Chosen, not fitted: a tenth per control period forgets a start-up or crowd spike
+within a few seconds while still covering the next few plans of a sustained overload."""
 STALE_PLAN_S = 1.0
 """Poses older than this [sim s] when planning: brake instead (compensation is capped there)."""
 MAX_NAP_S = 0.25
@@ -731,7 +733,9 @@ class RobotNode:
             # previous command and braked the robot while this plan assumed it still applied.
             self.counts["late_plans"] += 1
             result = self.controller.brake()
-        self.compute_s = max(took_s, COMPUTE_DECAY * self.compute_s)
+        # Capped at STALE_PLAN_S: a plan a stop (SIGSTOP) stretched must not make the robot
+        # plan seconds ahead for the rest of the run (the controller caps the age there too).
+        self.compute_s = min(max(took_s, COMPUTE_DECAY * self.compute_s), STALE_PLAN_S)
         # The fields of a `CommandMsg`, its `WallStamps` in their wire order.
         self.cmd_pub.put(encode_command(
             self.robot_id, self.seq, msg.t_s, float(result.v_mps), float(result.omega_radps),

@@ -700,3 +700,15 @@ def test_the_robot_plans_for_when_its_command_will_leave() -> None:
     # 0.2 > 0 + 0.15: late; 0.3 <= 0.2 + 0.15: allowed for; the quick ones are on time.
     assert [m.status for m in sent] == ["stale", "ok", "ok", "ok"]
     assert node.counts["late_plans"] == 1
+
+
+def test_a_plan_stretched_by_a_stop_does_not_make_the_robot_plan_seconds_ahead() -> None:
+    """A plan that took 3 s (the process stopped mid-plan) is late; what the robot expects
+    of its next plans is capped at STALE_PLAN_S."""
+    node, clock, sent = _planning_node([3.0, 0.01])
+    node.plan_and_send()
+    assert sent[0].status == "stale" and node.compute_s == agent_node.STALE_PLAN_S
+    before = clock[0]
+    node.newest.t_s = before - 0.02  # a fresh pose after the stop
+    node.plan_and_send()
+    assert node.controller.planned_for[1] == pytest.approx(before + agent_node.STALE_PLAN_S)
