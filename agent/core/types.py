@@ -41,6 +41,7 @@ class PlanStatus(enum.StrEnum):
     SOLVER_INACCURATE = "solver_inaccurate"  # OSQP stopped short (cap, first command settled)
     SOLVER_FAILED = "solver_failed"  # OSQP failed: safe braking command
     STALE = "stale"  # set by the robot node when it brakes for lack of fresh poses
+    YIELD = "yield"  # stuck: standing so a robot with a lower id can pass (liveness rule 2)
 
 
 def _as_array(name: str, value: object, shape: tuple[int | None, ...]) -> np.ndarray:
@@ -254,6 +255,8 @@ class Observation:
             or not: planners apply `ThreatConfig.sensing_radius_m` and `max_neighbors`).
         pose_age_s: how old the poses were when the robot planned, after it predicted them
             forward to now (0: fresh poses, as in an undisturbed lockstep run) [s].
+        goal_distance_m: how far the robot still has to go when `goal_m` is an intermediate
+            goal on a route (`with_goal`); None: straight to `goal_m` [m].
     """
 
     robot_id: int
@@ -264,6 +267,7 @@ class Observation:
     goal_tolerance_m: float = 0.25
     others: Others = field(default_factory=Others.empty)
     pose_age_s: float = 0.0
+    goal_distance_m: float | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "goal_m", _as_array("goal_m", self.goal_m, (2,)))
@@ -279,6 +283,15 @@ class Observation:
         if tol <= 0.0:
             raise ValueError("goal_tolerance_m: must be positive")
         object.__setattr__(self, "goal_tolerance_m", tol)
+
+    def with_goal(self, goal_m: np.ndarray, goal_distance_m: float) -> Observation:
+        """The same observation heading for `goal_m` (a route's intermediate goal) with
+        `goal_distance_m` still to go along the route, skipping validation: the planner
+        computed both (a finite (2,) point and a finite distance)."""
+        obj = copy.copy(self)
+        object.__setattr__(obj, "goal_m", goal_m)
+        object.__setattr__(obj, "goal_distance_m", float(goal_distance_m))
+        return obj
 
     def with_others(self, others: Others) -> Observation:
         """The same observation with `others` replaced, skipping validation: for the hot

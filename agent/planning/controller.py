@@ -24,6 +24,7 @@ from agent.core.scenario import RobotSpec
 from agent.core.types import EgoState, Observation, Others, PlanResult, PlanStatus, PoseSnapshot
 from agent.planning.estimation import ESTIMATION_WINDOW_S, NeighborTracker
 from agent.planning.planners import CONTROL_PERIOD_S, at_goal, make_planner
+from agent.planning.routing import StaticMap
 
 MAX_COMPENSATED_AGE_S = 1.0
 """Poses older than this are not extrapolated further (the prediction would be fiction)."""
@@ -47,6 +48,8 @@ class RobotController:
         compensate_latency: forward-predict by the snapshot's age before planning.
         control_period_s: the robot's planning period; the planner's rate limits (and
             ORCA's time step) use it.
+        static_map: the scenario's static obstacles, known in advance
+            (`agent.planning.routing`); None: no map.
 
     Attributes:
         command_hold_s: how long the world may apply one of this robot's commands before
@@ -55,7 +58,8 @@ class RobotController:
 
     def __init__(self, spec: RobotSpec, config: PlannerConfig, goal_tolerance_m: float,
                  *, compensate_latency: bool = True,
-                 control_period_s: float = CONTROL_PERIOD_S) -> None:
+                 control_period_s: float = CONTROL_PERIOD_S,
+                 static_map: StaticMap | None = None) -> None:
         if not (np.isfinite(control_period_s) and control_period_s > 0.0):
             raise ValueError(f"control_period_s must be positive, got {control_period_s!r}")
         self.spec = spec
@@ -64,7 +68,8 @@ class RobotController:
         self.compensate_latency = compensate_latency
         self.control_period_s = float(control_period_s)
         self.command_hold_s = COMMAND_HOLD_PERIODS * self.control_period_s
-        self.planner = make_planner(spec.planner, config, control_period_s=self.control_period_s)
+        self.planner = make_planner(spec.planner, config, control_period_s=self.control_period_s,
+                                    static_map=static_map)
         self.tracker = NeighborTracker(spec.id, ESTIMATION_WINDOW_S)
         self.snapshot: PoseSnapshot | None = None
         self.command = (0.0, 0.0)

@@ -181,6 +181,11 @@ class Mechanisms:
             ranking of nearly simultaneous threats reorders; a plan that still holds is
             the same decision made again, so only a failing or clearly worse plan is
             replaced.
+        routing: the robot routes round the scenario's static obstacles, known in
+            advance (`agent.planning.routing`), and eIFP plans towards the farthest route
+            waypoint it can see (`agent.planning.guidance`).
+        liveness: the robot monitors its progress and, when stuck, re-routes round the
+            knot or yields to lower ids (`agent.planning.liveness`).
     """
 
     direct_leg_check: bool = False
@@ -195,6 +200,8 @@ class Mechanisms:
     clamp_heading: bool = False
     braking_guard: bool = False
     keep_plan: bool = False
+    routing: bool = False
+    liveness: bool = False
 
 
 PAPER_MECHANISMS = Mechanisms()
@@ -210,7 +217,7 @@ the corners of a lines-and-arcs reference, so it keeps the spline and the paper'
 EIFP_MPC_MECHANISMS = dataclasses.replace(
     EIFP_MECHANISMS, inflated_threats=True, commitment=True, via_margin_m=ARC_VIA_MARGIN_M,
     escape_band_m=ESCAPE_BAND_M, horizon_via_points=True, lines_arcs=True,
-    clamp_heading=False, braking_guard=True, keep_plan=True)
+    clamp_heading=False, braking_guard=True, keep_plan=True, routing=True, liveness=True)
 """eifp-mpc in the default profile: every mechanism."""
 
 
@@ -417,8 +424,10 @@ def plan_via_points(
     # goal, an overshoot would otherwise point the measured velocity at someone beyond it
     # and send the robot round the goal. The leg to the goal is still checked below.
     if mech.goal_tcpa_filter:
-        to_goal_s = (math.hypot(goal[0] - p[0], goal[1] - p[1])
-                     / float(observation.limits.v_max_mps))
+        to_goal_m = observation.goal_distance_m
+        if to_goal_m is None:
+            to_goal_m = math.hypot(goal[0] - p[0], goal[1] - p[1])
+        to_goal_s = to_goal_m / float(observation.limits.v_max_mps)
         index = index[tcpa[index] <= to_goal_s + GOAL_TCPA_MARGIN_S]
     ignored = np.zeros(len(others), dtype=bool)
     if ignored_ids and len(others):

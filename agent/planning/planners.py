@@ -41,6 +41,9 @@ import numpy as np
 from agent.core.config import PLANNER_NAMES, PlannerConfig
 from agent.core.types import Observation, PlanDebug, PlanResult, PlanStatus, Side, StageTimes
 from agent.planning.estimation import ESTIMATION_WINDOW_S
+from agent.planning.guidance import RouteGuide
+from agent.planning.liveness import Strategy
+from agent.planning.routing import StaticMap
 from agent.planning.safety import (
     braking_speed_limit,
     heading_sweep_rad,
@@ -114,6 +117,27 @@ def arrived_result(observation: Observation) -> PlanResult | None:
                                       reference_m=here))
 
 
+def _inside_any(observation: Observation, config: PlannerConfig) -> bool:
+    """Whether the robot is inside some other's inflated disc (Eq. 7): then it escapes
+    instead of yielding."""
+    others = observation.others
+    if len(others) == 0:
+        return False
+    gap = np.hypot(*(others.position_m - (observation.ego.x_m, observation.ego.y_m)).T)
+    return bool((gap <= others.radius_m + observation.radius_m
+                 + config.safety.d_safety_m).any())
+
+
+def _yield_result(observation: Observation, elapsed_s: float) -> PlanResult:
+    """A stop while yielding (`agent.planning.liveness`, rule 2)."""
+    ego = observation.ego
+    here = np.array([[ego.x_m, ego.y_m], observation.goal_m])
+    return PlanResult(v_mps=0.0, omega_radps=0.0, status=PlanStatus.YIELD, waypoints_m=here,
+                      times=StageTimes(total_ms=elapsed_s * 1e3),
+                      debug=PlanDebug(ego=np.array([ego.x_m, ego.y_m, ego.heading_rad]),
+                                      reference_m=here))
+
+
 class ViaPointPlanner:
     """IFP, eIFP and eIFP-MPC: via-points -> cubic spline -> tracker.
 
@@ -126,7 +150,8 @@ class ViaPointPlanner:
 
     def __init__(self, name: str, config: PlannerConfig, *,
                  control_period_s: float = CONTROL_PERIOD_S,
-                 timer: Timer = time.perf_counter) -> None:
+                 timer: Timer = time.perf_counter,
+                 static_map: StaticMap | None = None) -> None:
         from agent.planning.eifp import EifpSelector
         from agent.planning.ifp import mechanisms, plan_ifp
 
@@ -140,11 +165,19 @@ class ViaPointPlanner:
         self._selector = EifpSelector(config, self.mech) if name != "ifp" else None
         self._plan_ifp = plan_ifp
         self._trackers: dict[object, object] = {}
+        self.guide: RouteGuide | None = None
+        if self.mech.routing or self.mech.liveness:
+            self.guide = RouteGuide(
+                static_map if static_map is not None else StaticMap.empty(),
+                config.safety.d_safety_m, routes=self.mech.routing,
+                liveness=config.liveness if self.mech.liveness else None)
 
     def reset(self) -> None:
-        """Forget side memory and MPC warm starts."""
+        """Forget side memory, MPC warm starts, the route and the liveness state."""
         if self._selector is not None:
             self._selector.reset()
+        if self.guide is not None:
+            self.guide.reset()
         for tracker in self._trackers.values():
             tracker.reset()  # type: ignore[attr-defined]
 
@@ -180,10 +213,21 @@ class ViaPointPlanner:
                              cfg.threats.sensing_radius_m, cfg.threats.max_neighbors)
         if near is not observation.others:
             observation = observation.with_others(near)
+        tail = None
+        if self.guide is not None:
+            guided = self.guide.guide(observation, now_s)
+            if guided.strategy is Strategy.YIELD and not _inside_any(observation, cfg):
+                return _yield_result(observation, clock() - t0)
+            if guided.tail_m.shape[0]:
+                observation = observation.with_goal(guided.goal_m, guided.left_m)
+                tail = guided.tail_m
         if self._selector is None:
             via = self._plan_ifp(observation, cfg, clock)
         else:
             via = self._selector.select(observation, clock)
+        if tail is not None:
+            # the route goes on past the intermediate goal: so does the reference
+            via = replace(via, waypoints_m=np.concatenate((via.waypoints_m, tail)))
         t1 = clock()
         mpc_cfg, mech = cfg.mpc, self.mech
         moving = ego.v_mps >= CLAMP_MIN_SPEED_MPS
@@ -373,10 +417,17 @@ class OrcaPlanner:
 
 def make_planner(name: str, config: PlannerConfig, *,
                  control_period_s: float = CONTROL_PERIOD_S,
-                 timer: Timer = time.perf_counter) -> Planner:
-    """The planner called `name` (one of `PLANNER_NAMES`)."""
+                 timer: Timer = time.perf_counter,
+                 static_map: StaticMap | None = None) -> Planner:
+    """The planner called `name` (one of `PLANNER_NAMES`).
+
+    Args:
+        static_map: the scenario's static obstacles, known in advance; eIFP-MPC routes
+            round them (`agent.planning.routing`). ORCA, IFP and eIFP ignore it.
+    """
     if name == "orca":
         return OrcaPlanner(config, control_period_s=control_period_s, timer=timer)
     if name in PLANNER_NAMES:
-        return ViaPointPlanner(name, config, control_period_s=control_period_s, timer=timer)
+        return ViaPointPlanner(name, config, control_period_s=control_period_s, timer=timer,
+                               static_map=static_map)
     raise ValueError(f"unknown planner {name!r}; expected one of {', '.join(PLANNER_NAMES)}")

@@ -33,6 +33,7 @@ from typing import Any, Protocol
 
 from agent.core.scenario import RobotSpec, Scenario
 from agent.planning.controller import RobotController
+from agent.planning.routing import StaticMap
 from world.sim.dynamics import WorldSim
 from world.sim.faults import FaultPlan
 from world.sim.link import LINK_COMMANDS, LINK_POSES, FaultyLink, link_rng
@@ -151,11 +152,14 @@ def run_lockstep(scenario: Scenario, sink: RunSink, *, world_rate_hz: float = 50
     dt_s = 1.0 / world_rate_hz
     slots = pose_slot_count(world_rate_hz, control_rate_hz)
 
+    static_map = StaticMap.from_discs((o.center, o.radius_m, o.velocity)
+                                      for o in scenario.obstacles)
+
     def controller(spec: RobotSpec) -> RobotController:
         rate_hz = plan.timing_of(spec.id).control_rate_hz or control_rate_hz
         return RobotController(spec, scenario.planner_config, scenario.goal_tolerance_m,
                                compensate_latency=plan.compensate_latency,
-                               control_period_s=1.0 / rate_hz)
+                               control_period_s=1.0 / rate_hz, static_map=static_map)
 
     robots = []
     for spec in scenario.robots:

@@ -1,0 +1,162 @@
+"""Progress monitoring and a deliberate change of strategy when a robot is stuck.
+
+Not in the paper (arXiv 2508.08264): eIFP and its MPC are local and reactive, so two
+robots (or a knot of them) can each keep choosing a plan that the other's plan undoes,
+and circle or stand for ever. Each robot therefore watches its own progress along its
+route (`ProgressMonitor`) and, when it has made none for `LivenessConfig.stuck_after_s`,
+changes strategy (`Liveness.decide`), in this order (thresholds:
+`agent.core.config.LivenessConfig`, the scenario file's `liveness` settings):
+
+1. **Route round the knot.** The sensed robots that are slow (below
+   `LivenessConfig.slow_mps`) within the sensing radius are added to the static map as
+   discs, and the robot re-routes (`agent.planning.routing`). A route that is at most
+   `LivenessConfig.detour_ratio` times the straight remainder is followed from now on
+   (until the next re-route); the knot is then left to the side instead of pushed
+   through.
+2. **Yield by id.** Otherwise (no such route, or nobody slow), the robot yields for up
+   to `LivenessConfig.yield_s` while a sensed robot with a lower id, moving (at least
+   `slow_mps`), is within `LivenessConfig.yield_radius_m`: it stands (status YIELD) and
+   the others plan round a still disc, which they do well. A robot with no such lower id
+   near it does not yield: standing helps only a robot that moves.
+
+Why this terminates (no two robots mirror each other for ever): robots sense each other's
+ids, and ids are unique, so in every knot of stuck robots the one with the lowest id never
+yields to any of them, while every other stuck one stands for `yield_s`. The lowest one then
+plans against still discs only, which the via-point planner resolves (or routes round, by
+rule 1); when it has left the yield radius the next-lowest is the lowest, and so on.
+Yielding is bounded in time, and a yield restarts the progress clock, so a robot that
+waits in vain (say, behind a robot parked on its own goal) tries rule 1 and 2 again
+after another `stuck_after_s`, never stands for good. Nothing here is random, so lockstep
+runs stay deterministic.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+
+import numpy as np
+
+from agent.core.config import LivenessConfig
+from agent.core.types import Others
+
+
+class ProgressMonitor:
+    """Whether a robot is making progress: the best remaining distance and when it last
+    shrank by `progress_m`.
+
+    Args:
+        config: thresholds.
+    """
+
+    def __init__(self, config: LivenessConfig) -> None:
+        self.config = config
+        self._best_m = math.inf
+        self._since_s = 0.0
+
+    def restart(self, now_s: float, left_m: float) -> None:
+        """Start the clock again from `left_m` at `now_s` (after a change of strategy)."""
+        self._best_m = left_m
+        self._since_s = now_s
+
+    def stuck(self, now_s: float, left_m: float) -> bool:
+        """Record `left_m` (distance still to go [m]) at `now_s`; True when stuck."""
+        if left_m <= self._best_m - self.config.progress_m or not math.isfinite(self._best_m):
+            self.restart(now_s, left_m)
+            return False
+        return now_s - self._since_s >= self.config.stuck_after_s
+
+
+class Strategy(enum.Enum):
+    """What `Liveness.decide` tells the planner to do this cycle."""
+
+    GO = "go"  # plan as usual
+    REROUTE = "reroute"  # re-route round the slow robots near, then go
+    YIELD = "yield"  # stand
+
+
+def knot(position_m: np.ndarray, others: Others, radius_m: float, slow_mps: float
+         ) -> np.ndarray:
+    """Indices of the sensed robots within `radius_m` moving slower than `slow_mps`."""
+    if len(others) == 0:
+        return np.zeros(0, dtype=int)
+    d = np.hypot(*(others.position_m - position_m).T)
+    speed = np.hypot(*others.velocity_mps.T)
+    return np.flatnonzero(others.is_robot & (d <= radius_m) & (speed < slow_mps))
+
+
+def lower_id_moving_near(robot_id: int, position_m: np.ndarray, others: Others,
+                         radius_m: float, moving_mps: float) -> bool:
+    """Whether a sensed robot with a lower id than `robot_id`, moving at least
+    `moving_mps`, is within `radius_m`. Standing ones are left out: yielding lets a robot
+    pass, and one that stands (parked on its goal, or stuck itself) passes nobody; the
+    re-route of rule 1 goes round those instead."""
+    if len(others) == 0:
+        return False
+    d = np.hypot(*(others.position_m - position_m).T)
+    speed = np.hypot(*others.velocity_mps.T)
+    return bool((others.is_robot & (others.ids < robot_id) & (d <= radius_m)
+                 & (speed >= moving_mps)).any())
+
+
+class Liveness:
+    """The strategy state of one robot: monitor, yield timer, and which rule comes next.
+
+    Args:
+        config: thresholds.
+    """
+
+    def __init__(self, config: LivenessConfig) -> None:
+        self.config = config
+        self.monitor = ProgressMonitor(config)
+        self._yield_until_s = -math.inf
+        self._tried_reroute = False
+        self.reroutes = 0
+        self.yields = 0
+
+    def reset(self) -> None:
+        """Forget everything (a new run)."""
+        self.__init__(self.config)  # type: ignore[misc]
+
+    def decide(self, now_s: float, robot_id: int, position_m: np.ndarray, left_m: float,
+               others: Others) -> Strategy:
+        """This cycle's strategy (module docstring).
+
+        Args:
+            now_s: sim time [s].
+            robot_id: this robot's id.
+            position_m: (2,) its position [m].
+            left_m: distance still to go along its route [m].
+            others: the sensed others.
+        """
+        cfg = self.config
+        if now_s < self._yield_until_s:
+            if lower_id_moving_near(robot_id, position_m, others, cfg.yield_radius_m,
+                                    cfg.slow_mps):
+                return Strategy.YIELD
+            self._yield_until_s = -math.inf  # nobody left to give way to
+            self.monitor.restart(now_s, left_m)
+        if not self.monitor.stuck(now_s, left_m):
+            self._tried_reroute = False
+            return Strategy.GO
+        self.monitor.restart(now_s, left_m)
+        if not self._tried_reroute:
+            self._tried_reroute = True
+            return Strategy.REROUTE
+        self._tried_reroute = False
+        return self.fallback(now_s, robot_id, position_m, others)
+
+    def fallback(self, now_s: float, robot_id: int, position_m: np.ndarray, others: Others
+                 ) -> Strategy:
+        """Rule 2 (yield by id), also when rule 1 found no route to take this cycle."""
+        if lower_id_moving_near(robot_id, position_m, others, self.config.yield_radius_m,
+                                self.config.slow_mps):
+            self._yield_until_s = now_s + self.config.yield_s
+            self.yields += 1
+            return Strategy.YIELD
+        return Strategy.GO
+
+    def rerouted(self, taken: bool) -> None:
+        """Count a re-route the planner took (`taken`) after `Strategy.REROUTE`."""
+        if taken:
+            self.reroutes += 1

@@ -1,0 +1,355 @@
+"""Global routes over the static map: a visibility graph round the inflated static discs.
+
+Not in the paper (arXiv 2508.08264, "Forecast-Driven MPC for Decentralized Multi-Robot
+Collision Avoidance"): eIFP is a local planner, and against a wall of discs its goal
+pulls a robot into the wall's local minimum. The scenario's static obstacles are a map
+every robot knows before it starts (moving obstacles and the other robots are still only
+sensed). Each robot routes over it once at the start (and again when a passage stays
+blocked, `agent.planning.liveness`), and eIFP plans towards the farthest route waypoint it
+can see (`RouteFollower.intermediate_goal`), so its legs never lead into the map.
+
+The graph (`plan_route`):
+
+- Nodes: the start, the goal, and `RING_NODES` points on a circle round every static
+  disc, of radius (r_j + clearance) / cos(pi / RING_NODES), so that the chord between two
+  neighbouring ring points still clears the inflated disc. Ring points inside another
+  inflated disc are dropped (a wall of overlapping discs keeps only its ends and its
+  doorways).
+- Edges: every pair of nodes whose segment clears every inflated disc
+  (`segment_clears`), weighted by its length. A start or goal already inside an inflated
+  disc (a robot parked next to a pillar) clears that disc by its own distance to it
+  instead, so it is never cut off by the margin alone.
+- Search: Dijkstra (`scipy.sparse.csgraph.dijkstra`) from the start; the route is the
+  shortest path to the goal, or None when the goal is not connected.
+
+The clearance is the inflated radius of Eq. (7) (robot radius + obstacle radius +
+d_safety) plus `ROUTE_MARGIN_M`. `route_or_tight` falls back to the robot's radius alone
+(plus `TIGHT_MARGIN_M`) when a passage admits the robot but not its safety margin: the
+robot is then routed through it and eIFP's via-points and the MPC keep what clearance
+the passage has. A goal that no route reaches even then is unreachable
+(`unreachable_reason`; scenario validation refuses it).
+
+Cost: the graph has n = 2 + RING_NODES x M nodes for M static discs and checks n^2/2
+segments against M discs, vectorised in chunks; M = 30 takes a few milliseconds. Maps of
+more than `MAX_ROUTED_OBSTACLES` discs are not routed (`StaticMap.routable`): robots
+then plan locally, as without a map, and validation does not check reachability.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import dijkstra
+
+RING_NODES = 8
+"""Graph nodes placed round every static disc."""
+
+ROUTE_MARGIN_M = 0.1
+"""Routes keep this much more than the inflated radius from a static disc [m]: a route
+corner exactly on the inflated disc would put eIFP's via-point on its boundary."""
+
+TIGHT_MARGIN_M = 0.02
+"""A tight route (`route_or_tight`) keeps the robot's radius plus this from a disc [m]."""
+
+MAX_ROUTED_OBSTACLES = 128
+"""Maps with more static discs than this are not routed (cost grows as M^3)."""
+
+LOOKAHEAD_TOLERANCE_M = 1.0e-6
+"""A sight line clears a disc when it keeps the clearance less this (rounding) [m]."""
+
+_EDGE_CHUNK = 4096
+"""Node pairs checked per vectorised block (bounds the temporary arrays)."""
+
+
+@dataclass(frozen=True)
+class StaticMap:
+    """The static discs every robot knows in advance.
+
+    Args:
+        center_m: (M, 2) disc centres [m].
+        radius_m: (M,) disc radii [m].
+    """
+
+    center_m: np.ndarray
+    radius_m: np.ndarray
+
+    def __post_init__(self) -> None:
+        c = np.asarray(self.center_m, dtype=float).reshape(-1, 2)
+        r = np.asarray(self.radius_m, dtype=float).reshape(-1)
+        if c.shape[0] != r.shape[0]:
+            raise ValueError(f"StaticMap: {c.shape[0]} centres but {r.shape[0]} radii")
+        if not (np.isfinite(c).all() and np.isfinite(r).all() and (r > 0.0).all()):
+            raise ValueError("StaticMap: centres must be finite and radii positive")
+        c.flags.writeable = False
+        r.flags.writeable = False
+        object.__setattr__(self, "center_m", c)
+        object.__setattr__(self, "radius_m", r)
+
+    @staticmethod
+    def empty() -> StaticMap:
+        """No static discs."""
+        return StaticMap(np.zeros((0, 2)), np.zeros(0))
+
+    @staticmethod
+    def from_discs(discs: Iterable[tuple[tuple[float, float], float, tuple[float, float]]]
+                   ) -> StaticMap:
+        """The static ones of (centre [m], radius [m], velocity [m/s]) discs: velocity 0."""
+        kept = [(c, r) for c, r, v in discs if v[0] == 0.0 and v[1] == 0.0]
+        if not kept:
+            return StaticMap.empty()
+        return StaticMap(np.array([c for c, _ in kept], dtype=float),
+                         np.array([r for _, r in kept], dtype=float))
+
+    def __len__(self) -> int:
+        return int(self.radius_m.shape[0])
+
+    @property
+    def routable(self) -> bool:
+        """Whether routes are planned on this map (1..`MAX_ROUTED_OBSTACLES` discs)."""
+        return 0 < len(self) <= MAX_ROUTED_OBSTACLES
+
+    def with_discs(self, center_m: np.ndarray, radius_m: np.ndarray) -> StaticMap:
+        """This map plus more discs (a re-route round robots that block a passage)."""
+        return StaticMap(np.concatenate((self.center_m, np.reshape(center_m, (-1, 2)))),
+                         np.concatenate((self.radius_m, np.reshape(radius_m, -1))))
+
+
+@dataclass(frozen=True)
+class Route:
+    """A route from a start to a goal round the static map.
+
+    Args:
+        waypoints_m: (K, 2) start first, goal last (K >= 2) [m].
+        clearance_m: how far from each disc's edge the route stays [m].
+        tight: True when only the robot's radius fits (`route_or_tight`).
+    """
+
+    waypoints_m: np.ndarray
+    clearance_m: float
+    tight: bool = False
+
+    @property
+    def length_m(self) -> float:
+        """Length of the polyline [m]."""
+        return float(np.hypot(*np.diff(self.waypoints_m, axis=0).T).sum())
+
+
+def segment_disc_distance(a_m: np.ndarray, b_m: np.ndarray, center_m: np.ndarray
+                          ) -> np.ndarray:
+    """Distance from each of E segments to each of M points.
+
+    Args:
+        a_m, b_m: (E, 2) segment ends [m] (a segment of zero length is a point).
+        center_m: (M, 2) points [m].
+
+    Returns:
+        (E, M) distances [m].
+    """
+    ax, ay = a_m[:, 0:1], a_m[:, 1:2]
+    sx, sy = b_m[:, 0:1] - ax, b_m[:, 1:2] - ay
+    seg_sq = sx * sx + sy * sy
+    rx, ry = center_m[None, :, 0] - ax, center_m[None, :, 1] - ay
+    t = np.clip(np.divide(rx * sx + ry * sy, seg_sq, out=np.zeros_like(rx),
+                          where=seg_sq > 0.0), 0.0, 1.0)
+    return np.hypot(rx - t * sx, ry - t * sy)
+
+
+def segment_clears(a_m: np.ndarray, b_m: np.ndarray, center_m: np.ndarray,
+                   keep_m: np.ndarray) -> np.ndarray:
+    """Whether each segment keeps at least keep_m[e, m] from every centre m.
+
+    Args:
+        a_m, b_m: (E, 2) segment ends [m].
+        center_m: (M, 2) disc centres [m].
+        keep_m: (E, M) or (M,) required distances [m].
+
+    Returns:
+        (E,) bool.
+    """
+    if center_m.shape[0] == 0:
+        return np.ones(a_m.shape[0], dtype=bool)
+    d = segment_disc_distance(a_m, b_m, center_m)
+    return (d >= keep_m - LOOKAHEAD_TOLERANCE_M).all(axis=1)
+
+
+def _endpoint_keep(point_m: np.ndarray, center_m: np.ndarray, keep_m: np.ndarray) -> np.ndarray:
+    """The distance a segment from `point_m` must keep from each disc: the clearance, or
+    less when the point itself is closer (a start inside a margin is not cut off)."""
+    here = np.hypot(*(center_m - point_m).T)
+    return np.minimum(keep_m, np.maximum(here - LOOKAHEAD_TOLERANCE_M, 0.0))
+
+
+def _ring_nodes(static: StaticMap, keep_m: np.ndarray) -> np.ndarray:
+    """(n, 2) ring points round every disc, outside every inflated disc."""
+    if len(static) == 0:
+        return np.zeros((0, 2))
+    angle = 2.0 * math.pi * np.arange(RING_NODES) / RING_NODES
+    ring = keep_m / math.cos(math.pi / RING_NODES)
+    pts = (static.center_m[:, None, :]
+           + ring[:, None, None] * np.stack((np.cos(angle), np.sin(angle)), axis=1)[None])
+    pts = pts.reshape(-1, 2)
+    d = np.hypot(*(pts[:, None, :] - static.center_m[None, :, :]).transpose(2, 0, 1))
+    return pts[(d >= keep_m[None, :] - LOOKAHEAD_TOLERANCE_M).all(axis=1)]
+
+
+@dataclass(frozen=True)
+class VisibilityGraph:
+    """The part of the route graph that depends on the map and the clearance only: the
+    ring nodes and the ring-to-ring edges (`plan_route` adds a start and a goal).
+
+    Args:
+        static: the map.
+        clearance_m: distance kept from each disc's edge [m].
+        nodes_m: (n, 2) ring nodes [m].
+        edges: (E, 2) node index pairs whose segment clears every inflated disc.
+    """
+
+    static: StaticMap
+    clearance_m: float
+    nodes_m: np.ndarray
+    edges: np.ndarray
+
+    @staticmethod
+    def build(static: StaticMap, clearance_m: float) -> VisibilityGraph:
+        """Ring nodes and the clear segments between them (n^2/2 segments x M discs)."""
+        keep = static.radius_m + clearance_m
+        nodes = _ring_nodes(static, keep)
+        i, j = np.triu_indices(nodes.shape[0], k=1)
+        ok = np.zeros(i.shape[0], dtype=bool)
+        for lo in range(0, i.shape[0], _EDGE_CHUNK):
+            ii, jj = i[lo:lo + _EDGE_CHUNK], j[lo:lo + _EDGE_CHUNK]
+            ok[lo:lo + _EDGE_CHUNK] = segment_clears(nodes[ii], nodes[jj], static.center_m,
+                                                     keep)
+        return VisibilityGraph(static, float(clearance_m), nodes,
+                               np.column_stack((i[ok], j[ok])))
+
+
+def plan_route(start_m: np.ndarray, goal_m: np.ndarray, static: StaticMap,
+               clearance_m: float, graph: VisibilityGraph | None = None) -> Route | None:
+    """The shortest route from start to goal keeping `clearance_m` from every disc's edge.
+
+    Args:
+        start_m, goal_m: (2,) [m].
+        static: the static map.
+        clearance_m: distance kept from each disc's edge (robot radius + d_safety + margin
+            for a normal route) [m].
+        graph: the map's `VisibilityGraph` for this clearance, if already built (robots
+            of one radius share it); built here otherwise.
+
+    Returns:
+        The route (start and goal included; [start, goal] when the straight line clears),
+        or None when the goal is not connected to the start.
+    """
+    start = np.asarray(start_m, dtype=float).reshape(2)
+    goal = np.asarray(goal_m, dtype=float).reshape(2)
+    keep = static.radius_m + clearance_m
+    centers = static.center_m
+    start_keep = _endpoint_keep(start, centers, keep)
+    goal_keep = _endpoint_keep(goal, centers, keep)
+    if segment_clears(start[None], goal[None], centers, np.minimum(start_keep, goal_keep))[0]:
+        return Route(np.stack((start, goal)), clearance_m)
+    if graph is None or graph.clearance_m != clearance_m or len(graph.static) != len(static):
+        graph = VisibilityGraph.build(static, clearance_m)
+    ring = graph.nodes_m
+    n = ring.shape[0] + 2  # node 0: start, node 1: goal, then the ring nodes
+    ends = []
+    for k, (point, need) in enumerate(((start, start_keep), (goal, goal_keep))):
+        seen = segment_clears(np.broadcast_to(point, ring.shape), ring, centers, need)
+        ends.append(np.column_stack((np.full(int(seen.sum()), k), np.flatnonzero(seen) + 2)))
+    pairs = np.concatenate((*ends, graph.edges + 2))
+    nodes = np.concatenate((start[None], goal[None], ring))
+    i, j = pairs[:, 0], pairs[:, 1]
+    w = np.hypot(*(nodes[i] - nodes[j]).T)
+    matrix = csr_matrix((np.concatenate((w, w)), (np.concatenate((i, j)),
+                                                  np.concatenate((j, i)))), shape=(n, n))
+    dist, pred = dijkstra(matrix, directed=True, indices=0, return_predecessors=True)
+    if not math.isfinite(float(dist[1])):
+        return None
+    path = [1]
+    while path[-1] != 0:
+        path.append(int(pred[path[-1]]))
+    return Route(nodes[path[::-1]], clearance_m)
+
+
+def route_or_tight(start_m: np.ndarray, goal_m: np.ndarray, static: StaticMap,
+                   robot_radius_m: float, d_safety_m: float) -> Route | None:
+    """A route with the full clearance (robot radius + d_safety + `ROUTE_MARGIN_M`), else
+    a tight one (robot radius + `TIGHT_MARGIN_M`), else None (unreachable)."""
+    full = plan_route(start_m, goal_m, static, robot_radius_m + d_safety_m + ROUTE_MARGIN_M)
+    if full is not None:
+        return full
+    tight = plan_route(start_m, goal_m, static, robot_radius_m + TIGHT_MARGIN_M)
+    if tight is None:
+        return None
+    return Route(tight.waypoints_m, tight.clearance_m, tight=True)
+
+
+def unreachable_reason(start_m: np.ndarray, goal_m: np.ndarray, static: StaticMap,
+                       robot_radius_m: float) -> str | None:
+    """Why no route reaches the goal from the start, or None when one does.
+
+    Only the robot's own radius counts here (a passage narrower than the robot is closed;
+    one narrower than its safety margin is not), and only static discs: a passage
+    blocked by other robots is theirs to clear, never a reason to refuse a scenario.
+    """
+    if not static.routable:
+        return None
+    if plan_route(start_m, goal_m, static, robot_radius_m) is not None:
+        return None
+    keep = static.radius_m + robot_radius_m
+    goal = np.asarray(goal_m, dtype=float)
+    if (np.hypot(*(static.center_m - goal).T) < keep).any():
+        return "its goal lies where the robot does not fit next to a static obstacle"
+    return ("no path round the static obstacles reaches its goal (enclosed, or behind "
+            f"gaps narrower than the robot's {2.0 * robot_radius_m:g} m diameter)")
+
+
+class RouteFollower:
+    """Where along its route a robot is, and the farthest route waypoint it can see.
+
+    The intermediate goal handed to eIFP is the farthest route waypoint (goal included)
+    whose sight line from the robot keeps the route's clearance from every static disc
+    (less what the robot already lacks of it, `_endpoint_keep`); waypoints before it are
+    passed and never looked at again, so the goal moves only forward along the route.
+    Cost per cycle: one sight-line check of the next few waypoints against the map.
+
+    Args:
+        route: the route to follow.
+        static: the map it was planned on.
+    """
+
+    def __init__(self, route: Route, static: StaticMap) -> None:
+        self.route = route
+        self.static = static
+        self._next = 1  # index of the first waypoint not yet reached
+
+    @property
+    def remaining_m(self) -> np.ndarray:
+        """(k, 2) the route waypoints not yet passed (goal last)."""
+        return self.route.waypoints_m[self._next:]
+
+    def intermediate_goal(self, position_m: np.ndarray) -> np.ndarray:
+        """The farthest visible route waypoint from `position_m` (advances the follower)."""
+        wps = self.route.waypoints_m
+        if self._next >= wps.shape[0] - 1:
+            return wps[-1]
+        keep = self.static.radius_m + self.route.clearance_m
+        here = np.asarray(position_m, dtype=float)
+        ahead = wps[self._next:]
+        need = _endpoint_keep(here, self.static.center_m, keep)
+        seen = segment_clears(np.broadcast_to(here, ahead.shape), ahead,
+                              self.static.center_m, need)
+        if seen.any():
+            self._next += int(np.flatnonzero(seen)[-1])
+        return wps[self._next]
+
+    def progress_left_m(self, position_m: np.ndarray) -> float:
+        """Route length still to go: to the next waypoint, then along the route [m]."""
+        wps = self.route.waypoints_m[self._next:]
+        here = np.asarray(position_m, dtype=float)
+        rest = float(np.hypot(*np.diff(wps, axis=0).T).sum()) if wps.shape[0] > 1 else 0.0
+        return float(math.hypot(*(wps[0] - here))) + rest
