@@ -33,10 +33,10 @@ from agent.core.scenario import Scenario
 from orchestrator.analysis.rundir import safe_name, write_json
 from orchestrator.experiments.families import SETUPS, ideal_time_s, resolve
 
-TUNING_SEEDS: tuple[int, ...] = (100, 101)
-"""Seeds to tune planners on (`--seeds tuning`); never reported by default."""
-EVALUATION_SEEDS: tuple[int, ...] = (0, 1, 2, 3, 4)
-"""Seeds the suite reports on (the default)."""
+TUNING_SEEDS: tuple[int, ...] = tuple(range(100, 106))
+"""Seeds to tune planners on (`--seeds tuning`, 100-105); never reported by default."""
+EVALUATION_SEEDS: tuple[int, ...] = tuple(range(10))
+"""Seeds the suite reports on (the default, 0-9)."""
 QUICK_SEEDS: tuple[int, ...] = (0,)
 """Seeds of `--quick` when `--seeds` is not given (the first evaluation seed)."""
 START_JITTER_M = 0.2
@@ -81,6 +81,14 @@ SUITE: tuple[Case, ...] = (
     *_cases("random_medium", (20,)),
     *_cases("random_dense", (20,)),
     *_cases("obstacles_circle", (12, 24)),
+    *_cases("wall_door", (12,)),
+    *_cases("wall_doors", (16,)),
+    *_cases("corridor", (8,)),
+    *_cases("grid_dense", (16, 25)),
+    *_cases("pillar_circle", (24, 40)),
+    *_cases("random_40", (40,)),
+    *_cases("platoons", (18,)),
+    *_cases("crossing_60_mixed", (16,)),
     *(Case("setups", name) for name in SETUPS),
 )
 """The full suite, in table order."""
@@ -94,13 +102,22 @@ QUICK_SUITE: tuple[Case, ...] = (
     *_cases("swap_grid", (4,)),
     *_cases("random_dense", (8,)),
     *_cases("obstacles_circle", (8,)),
+    *_cases("wall_door", (6,)),
+    *_cases("corridor", (4,)),
 )
 """`--quick`: small cases, for CI and a first look."""
 
+LIVENESS_FAMILIES: tuple[str, ...] = ("wall_door", "wall_doors", "corridor", "grid_dense",
+                                      "pillar_circle", "random_40", "platoons",
+                                      "crossing_60_mixed")
+"""The families of issue 39 (`liveness_families`)."""
+
 FAMILY_ALIASES: dict[str, tuple[str, ...]] = {
-    "crossing": ("crossing_45", "crossing_90", "crossing_135"),
-    "random": ("random_sparse", "random_medium", "random_dense"),
+    "crossing": ("crossing_45", "crossing_90", "crossing_135", "crossing_60_mixed"),
+    "random": ("random_sparse", "random_medium", "random_dense", "random_40"),
     "swap": ("swap_pairs", "swap_grid"),
+    "walls": ("wall_door", "wall_doors", "corridor"),
+    "liveness": LIVENESS_FAMILIES,
 }
 """`--families` names that stand for several families."""
 

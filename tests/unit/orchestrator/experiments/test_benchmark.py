@@ -8,12 +8,14 @@ from pathlib import Path
 import pytest
 
 from orchestrator.experiments import benchmark as bm
+from orchestrator.experiments import liveness_families
 from orchestrator.experiments.families import FAMILIES, SETUPS
 
 
 def test_tuning_and_evaluation_seeds_are_disjoint_and_enough():
     assert not set(bm.TUNING_SEEDS) & set(bm.EVALUATION_SEEDS)
-    assert len(bm.EVALUATION_SEEDS) >= 5 and len(bm.TUNING_SEEDS) >= 1
+    assert len(bm.EVALUATION_SEEDS) >= 10 and len(bm.TUNING_SEEDS) >= 6
+    assert len(set(bm.EVALUATION_SEEDS)) == len(bm.EVALUATION_SEEDS)
     assert set(bm.QUICK_SEEDS) <= set(bm.EVALUATION_SEEDS)
     # A count never reaches into the tuning seeds.
     assert not set(bm.parse_seeds(str(min(bm.TUNING_SEEDS)))) & set(bm.TUNING_SEEDS)
@@ -25,6 +27,8 @@ def test_parse_seeds():
     assert bm.parse_seeds("evaluation", quick=True) == bm.EVALUATION_SEEDS
     assert bm.parse_seeds("Tuning") == bm.TUNING_SEEDS
     assert bm.parse_seeds("3") == (0, 1, 2)
+    assert bm.parse_seeds("evaluation") == tuple(range(10))
+    assert bm.parse_seeds("tuning") == tuple(range(100, 106))
     for bad in ("0", "-1", "101", "some", ""):
         with pytest.raises(ValueError, match="--seeds"):
             bm.parse_seeds(bad)
@@ -34,7 +38,8 @@ def test_the_suite_covers_every_benchmark_family_and_the_setups():
     families = set(bm.family_names())
     assert families == {"circle", "circle_mixed", "crossing_45", "crossing_90", "crossing_135",
                         "swap_pairs", "swap_grid", "random_sparse", "random_medium",
-                        "random_dense", "obstacles_circle", "setups"}
+                        "random_dense", "obstacles_circle", "setups", *bm.LIVENESS_FAMILIES}
+    assert set(bm.LIVENESS_FAMILIES) == set(liveness_families.GENERATORS)
     assert {c.scenario for c in bm.SUITE if c.family == "setups"} == set(SETUPS)
     assert [c.agents for c in bm.SUITE if c.family == "circle"] == [8, 16, 24, 32, 48]
     labels = [c.label for c in bm.SUITE]
@@ -42,6 +47,10 @@ def test_the_suite_covers_every_benchmark_family_and_the_setups():
     assert all(c.scenario in FAMILIES or c.scenario in SETUPS for c in bm.SUITE)
     assert "circle_mixed_32" in labels and "crossing_90_16" in labels
     assert "swap_grid_16" in labels and "random_dense_20" in labels
+    for label in ("wall_door_12", "wall_doors_16", "corridor_8", "grid_dense_16",
+                  "grid_dense_25", "pillar_circle_24", "pillar_circle_40", "random_40_40",
+                  "platoons_18", "crossing_60_mixed_16"):
+        assert label in labels
 
 
 def test_every_case_resolves_with_the_jitter():
@@ -63,7 +72,11 @@ def test_select_cases_by_family_alias_setup_and_label():
     assert bm.select_cases(bm.SUITE, "all") == bm.SUITE
     crossing = bm.select_cases(bm.SUITE, ["crossing"])
     assert [c.label for c in crossing] == ["crossing_45_16", "crossing_90_16",
-                                           "crossing_135_16"]
+                                           "crossing_135_16", "crossing_60_mixed_16"]
+    liveness = bm.select_cases(bm.SUITE, ["liveness"])
+    assert {c.family for c in liveness} == set(bm.LIVENESS_FAMILIES) and len(liveness) == 10
+    assert [c.label for c in bm.select_cases(bm.SUITE, ["walls"])] == \
+        ["wall_door_12", "wall_doors_16", "corridor_8"]
     assert [c.label for c in bm.select_cases(bm.SUITE, ["circle"])] == \
         ["circle_8", "circle_16", "circle_24", "circle_32", "circle_48"]
     picked = bm.select_cases(bm.SUITE, ["setup_b", "circle_24"])
