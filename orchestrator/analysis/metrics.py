@@ -14,7 +14,8 @@ end of the trajectory if it never arrives):
   (e.g. between samples) are added as episodes too.
 - **success**: every robot arrived and there was no contact.
 - **min gap**: the smallest distance - r_i - r_j over all robot-robot and robot-obstacle
-  pairs and samples (negative: overlap).
+  pairs and samples (negative: overlap); `min_gap_robots_m` over the robot-robot pairs
+  only, `min_gap_obstacles_m` over the robot-obstacle pairs only (None without such pairs).
 - **path length**: the polyline length of the robot's run, starting at its scenario start.
   `path_ratio` = path length / straight distance from the start to the point where the
   robot arrived (>= 1, exactly 1 for a straight run; None if it never arrived).
@@ -251,6 +252,8 @@ class RunMetrics:
     contacts: int
     contact_pairs: list[list[int]]
     min_gap_m: float | None
+    min_gap_robots_m: float | None
+    min_gap_obstacles_m: float | None
     path_length_mean_m: float | None
     path_ratio_mean: float | None
     time_to_goal_mean_s: float | None
@@ -542,13 +545,27 @@ def deadline_misses(seq: np.ndarray, pose_stamp_s: np.ndarray, control_period_s:
     return int(late.sum()), int(gaps.size)
 
 
-def contact_episodes(traj: Trajectory, spec: RunSpec
-                     ) -> tuple[list[ContactEpisode], np.ndarray]:
-    """Contact episodes and each robot's min gap to any other disc (robot or obstacle).
+@dataclass(frozen=True)
+class ContactScan:
+    """What `contact_episodes` finds over a whole trajectory.
 
-    Returns:
-        (episodes in time order, (n,) min gap per robot column [m], +inf without pairs).
+    Args:
+        episodes: contact episodes in time order.
+        robot_min_gap_m: (n,) each robot column's min gap to any other disc [m].
+        robots_min_gap_m: the min gap between two robots [m].
+        obstacles_min_gap_m: the min gap between a robot and an obstacle [m].
+        (Each +inf without such pairs.)
     """
+
+    episodes: list[ContactEpisode]
+    robot_min_gap_m: np.ndarray
+    robots_min_gap_m: float
+    obstacles_min_gap_m: float
+
+
+def contact_episodes(traj: Trajectory, spec: RunSpec) -> ContactScan:
+    """Contact episodes and the min gaps: each robot's to any other disc (robot or
+    obstacle), and the run's robot-robot and robot-obstacle ones."""
     n, m = traj.robot_ids.size, spec.obstacle_ids.size
     ids = np.concatenate([traj.robot_ids, spec.obstacle_ids])
     radius = np.concatenate([spec.radius_m, spec.obstacle_radius_m])
@@ -557,7 +574,7 @@ def contact_episodes(traj: Trajectory, spec: RunSpec
     i, j = i[keep], j[keep]
     sum_r = radius[i] + radius[j]
     episodes: list[ContactEpisode] = []
-    robot_min = np.full(n + m, np.inf)
+    pair_min = np.full(i.size, np.inf)
     prev = np.zeros(i.size, dtype=bool)
     for c0 in range(0, traj.t_s.size, _CHUNK_TICKS):
         t = traj.t_s[c0:c0 + _CHUNK_TICKS]
@@ -565,9 +582,7 @@ def contact_episodes(traj: Trajectory, spec: RunSpec
         d = centres[:, i, :] - centres[:, j, :]
         gap = np.hypot(d[..., 0], d[..., 1]) - sum_r  # (t, P)
         if gap.size:
-            pair_min = gap.min(axis=0)
-            np.minimum.at(robot_min, i, pair_min)
-            np.minimum.at(robot_min, j, pair_min)
+            np.minimum(pair_min, gap.min(axis=0), out=pair_min)
         touching = gap < -CONTACT_OVERLAP_M
         # A new episode: touching now, not at the previous sample.
         new = touching & ~np.vstack([prev[None, :], touching[:-1]])
@@ -576,7 +591,14 @@ def contact_episodes(traj: Trajectory, spec: RunSpec
                                            float(-gap[k, p])))
         if touching.shape[0]:
             prev = touching[-1]
-    return episodes, robot_min[:n]
+    robot_min = np.full(n + m, np.inf)
+    np.minimum.at(robot_min, i, pair_min)
+    np.minimum.at(robot_min, j, pair_min)
+    with_robot = j < n
+    return ContactScan(
+        episodes=episodes, robot_min_gap_m=robot_min[:n],
+        robots_min_gap_m=float(pair_min[with_robot].min(initial=np.inf)),
+        obstacles_min_gap_m=float(pair_min[~with_robot].min(initial=np.inf)))
 
 
 def _centres(xy: np.ndarray, t_s: np.ndarray, spec: RunSpec) -> np.ndarray:
@@ -604,6 +626,10 @@ def _confirmed(traj: Trajectory, spec: RunSpec, t_s: float, id_a: int, id_b: int
 
 def _pct(values: np.ndarray, q: float) -> float | None:
     return float(np.percentile(values, q)) if values.size else None
+
+
+def _finite(value: float) -> float | None:
+    return value if math.isfinite(value) else None
 
 
 def _mean(values: Iterable[float | None]) -> float | None:
@@ -644,7 +670,8 @@ def compute_metrics(traj: Trajectory, commands: Commands, spec: RunSpec, *,
     """
     if not np.array_equal(traj.robot_ids, spec.robot_ids):
         raise ValueError("trajectory robot columns must match the scenario's robot ids")
-    episodes, robot_min_gap = contact_episodes(traj, spec)
+    scan = contact_episodes(traj, spec)
+    episodes, robot_min_gap = scan.episodes, scan.robot_min_gap_m
     min_gap = float(robot_min_gap.min()) if robot_min_gap.size else math.inf
     for t_ev, a, b in contact_events:
         if not _confirmed(traj, spec, float(t_ev), int(a), int(b), world_dt_s):
@@ -694,7 +721,7 @@ def compute_metrics(traj: Trajectory, commands: Commands, spec: RunSpec, *,
             side_flips=flips[0],
             side_flips_same_threat=flips[1],
             contacts=sum(1 for e in episodes if rid in (e.id_a, e.id_b)),
-            min_gap_m=gap_k if math.isfinite(gap_k) else None,
+            min_gap_m=_finite(gap_k),
             plan_ms_mean=float(plan.mean()) if plan.size else None,
             plan_ms_p50=_pct(plan, 50),
             plan_ms_p99=_pct(plan, 99),
@@ -716,7 +743,9 @@ def compute_metrics(traj: Trajectory, commands: Commands, spec: RunSpec, *,
         success=bool(n > 0 and len(arrived) == n and not episodes),
         contacts=len(episodes),
         contact_pairs=[list(p) for p in pairs],
-        min_gap_m=min_gap if math.isfinite(min_gap) else None,
+        min_gap_m=_finite(min_gap),
+        min_gap_robots_m=_finite(scan.robots_min_gap_m),
+        min_gap_obstacles_m=_finite(scan.obstacles_min_gap_m),
         path_length_mean_m=_mean(r.path_length_m for r in arrived),
         path_ratio_mean=_mean(r.path_ratio for r in arrived),
         time_to_goal_mean_s=_mean(r.time_to_goal_s for r in arrived),

@@ -89,7 +89,7 @@ def plot_trajectories(data: RunData, path: Path, *, disc_interval_s: float = DIS
             discs = [Circle(p, r.radius_m) for p in xy[::step]]
             ax.add_collection(PatchCollection(discs, facecolor=c, edgecolor=c, alpha=0.18,
                                               lw=0.6, zorder=2))
-        episodes, _ = contact_episodes(traj, RunSpec.from_scenario(s))
+        episodes = contact_episodes(traj, RunSpec.from_scenario(s)).episodes
         spots = [_contact_spot(data, e.t_s, e.id_a, e.id_b) for e in episodes]
         spots = [p for p in spots if p is not None]
         if spots:

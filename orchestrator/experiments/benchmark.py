@@ -6,14 +6,18 @@ for every chosen planner and seed. Seeds come in two disjoint named sets:
 `EVALUATION_SEEDS`, which the suite reports on by default, and `TUNING_SEEDS`, which is
 what anyone tuning a planner against the suite should use (`--seeds tuning`), so the
 reported figures never come from the seeds a parameter was chosen on. A seed draws the
-seeded families (`circle_mixed`, `random_*`, `obstacles_circle`) and, for every case, a
-start jitter of up to `START_JITTER_M` (the deterministic families and the setups would
-otherwise repeat one run exactly; lockstep runs are deterministic).
+seeded families (`circle_mixed`, `random_*`, `obstacles_circle`, and of the liveness
+families the doorway offsets, corridor lanes, pillar, platoon offset, speeds and the odd
+grids' leaving robot) and, for every case, a start jitter of up to `START_JITTER_M` (the
+deterministic families and the setups would otherwise repeat one run exactly; lockstep
+runs are deterministic).
 
 Each run is an ordinary run directory (`orchestrator report` reads it), lockstep by
 default or distributed (`experiments.distributed.run_scenario_distributed`, the path of
 `orchestrator run`). The table has one row per case and planner, aggregated over seeds
-from the runs' `metrics.json` (`summarize`).
+from the runs' `metrics.json` (`summarize`): per-robot figures (reversals, time and path
+ratios) as median, 95th percentile (and maximum) over every robot of every run, and the
+issue-39 targets the row misses (`target_misses`).
 """
 
 from __future__ import annotations
@@ -33,10 +37,10 @@ from agent.core.scenario import Scenario
 from orchestrator.analysis.rundir import safe_name, write_json
 from orchestrator.experiments.families import SETUPS, ideal_time_s, resolve
 
-TUNING_SEEDS: tuple[int, ...] = (100, 101)
-"""Seeds to tune planners on (`--seeds tuning`); never reported by default."""
-EVALUATION_SEEDS: tuple[int, ...] = (0, 1, 2, 3, 4)
-"""Seeds the suite reports on (the default)."""
+TUNING_SEEDS: tuple[int, ...] = tuple(range(100, 106))
+"""Seeds to tune planners on (`--seeds tuning`, 100-105); never reported by default."""
+EVALUATION_SEEDS: tuple[int, ...] = tuple(range(10))
+"""Seeds the suite reports on (the default, 0-9)."""
 QUICK_SEEDS: tuple[int, ...] = (0,)
 """Seeds of `--quick` when `--seeds` is not given (the first evaluation seed)."""
 START_JITTER_M = 0.2
@@ -81,6 +85,14 @@ SUITE: tuple[Case, ...] = (
     *_cases("random_medium", (20,)),
     *_cases("random_dense", (20,)),
     *_cases("obstacles_circle", (12, 24)),
+    *_cases("wall_door", (12,)),
+    *_cases("wall_doors", (16,)),
+    *_cases("corridor", (8,)),
+    *_cases("grid_dense", (16, 25)),
+    *_cases("pillar_circle", (24, 40)),
+    *_cases("random_40", (40,)),
+    *_cases("platoons", (18,)),
+    *_cases("crossing_60_mixed", (16,)),
     *(Case("setups", name) for name in SETUPS),
 )
 """The full suite, in table order."""
@@ -94,13 +106,22 @@ QUICK_SUITE: tuple[Case, ...] = (
     *_cases("swap_grid", (4,)),
     *_cases("random_dense", (8,)),
     *_cases("obstacles_circle", (8,)),
+    *_cases("wall_door", (6,)),
+    *_cases("corridor", (4,)),
 )
 """`--quick`: small cases, for CI and a first look."""
 
+LIVENESS_FAMILIES: tuple[str, ...] = ("wall_door", "wall_doors", "corridor", "grid_dense",
+                                      "pillar_circle", "random_40", "platoons",
+                                      "crossing_60_mixed")
+"""The families of issue 39 (`liveness_families`)."""
+
 FAMILY_ALIASES: dict[str, tuple[str, ...]] = {
-    "crossing": ("crossing_45", "crossing_90", "crossing_135"),
-    "random": ("random_sparse", "random_medium", "random_dense"),
+    "crossing": ("crossing_45", "crossing_90", "crossing_135", "crossing_60_mixed"),
+    "random": ("random_sparse", "random_medium", "random_dense", "random_40"),
     "swap": ("swap_pairs", "swap_grid"),
+    "walls": ("wall_door", "wall_doors", "corridor"),
+    "liveness": LIVENESS_FAMILIES,
 }
 """`--families` names that stand for several families."""
 
@@ -195,10 +216,16 @@ def job_cost(job: Job) -> float:
 
 
 RECORD_METRICS = ("robots", "arrived", "success", "contacts", "min_gap_m",
+                  "min_gap_robots_m", "min_gap_obstacles_m",
                   "oscillations_per_robot", "oscillations_max", "path_ratio_mean",
                   "time_ratio_mean", "plan_ms_p50", "plan_ms_p99", "sim_time_s",
                   "time_limit_s")
-"""The `metrics.json` keys a run record keeps (plus the per-robot oscillation counts)."""
+"""The `metrics.json` keys a run record keeps (plus `PER_ROBOT_METRICS`)."""
+PER_ROBOT_METRICS = (("robot_oscillations", "oscillations"),
+                     ("robot_time_ratios", "time_ratio"),
+                     ("robot_path_ratios", "path_ratio"))
+"""(record key, `metrics.json` per-robot key): lists with one value per robot (None for a
+ratio of a robot that did not arrive)."""
 
 
 def run_record(job: Job, metrics: dict[str, Any] | None, *, wall_s: float,
@@ -210,7 +237,8 @@ def run_record(job: Job, metrics: dict[str, Any] | None, *, wall_s: float,
         "family": job.case.family, "case": job.case.label, "planner": job.planner,
         "seed": job.seed, "mode": job.mode, "dir": str(job.out_dir),
         **{k: m.get(k) for k in RECORD_METRICS},
-        "robot_oscillations": [r.get("oscillations") for r in m.get("per_robot") or []],
+        **{key: [r.get(field) for r in m.get("per_robot") or []]
+           for key, field in PER_ROBOT_METRICS},
         "ideal_time_s": ideal_s, "wall_s": round(wall_s, 3),
         "world_status": world_status, "error": error,
     }
@@ -290,32 +318,148 @@ def run_jobs(jobs: Sequence[Job], *, workers: int = 1,
 COLUMNS: tuple[tuple[str, str], ...] = (
     ("case", "family"), ("planner", "planner"), ("runs", "runs"),
     ("success_rate", "success"), ("arrived_rate", "arrived"), ("contacts", "contacts"),
-    ("min_gap_m", "min gap m"), ("osc_per_robot_median", "osc/robot p50"),
-    ("osc_per_robot_max", "osc/robot max"), ("path_ratio_mean", "path ratio"),
-    ("time_ratio_mean", "time ratio"), ("plan_ms_p50", "plan ms p50"),
-    ("plan_ms_p99", "plan ms p99"),
+    ("min_gap_robots_m", "gap r-r m"), ("min_gap_obstacles_m", "gap r-o m"),
+    ("osc_per_robot_median", "osc/robot p50"), ("osc_per_robot_p95", "osc/robot p95"),
+    ("osc_per_robot_max", "osc/robot max"), ("time_ratio_median", "time ratio p50"),
+    ("time_ratio_p95", "time ratio p95"), ("path_ratio_median", "path ratio p50"),
+    ("path_ratio_p95", "path ratio p95"), ("plan_ms_p50", "plan ms p50"),
+    ("plan_ms_p99", "plan ms p99"), ("targets", "targets"),
 )
-"""(row key, column header) of the table, in order."""
+"""(row key, column header) of the table, in order. Rows also keep `min_gap_m`,
+`path_ratio_mean` and `time_ratio_mean` (benchmark.json, the plot and the README summary)."""
 
 TABLE_NOTES = (
     "success: share of runs in which every robot arrived with no contact; arrived: share "
-    "of robots that arrived; contacts: contact episodes summed over the runs; min gap: the "
-    "smallest gap over the runs (negative: overlap); osc/robot p50 and max: median and "
-    "largest reversal count of one robot, over every robot of every run; path ratio and "
-    "time ratio: means over the runs of the per-run means over the robots that arrived "
-    "(time ratio: time to goal over straight distance / own v_max); plan ms p50: median of "
-    "the runs' p50, p99: largest of the runs' p99.")
+    "of robots that arrived; contacts: contact episodes summed over the runs; gap r-r and "
+    "r-o: the smallest robot-robot and robot-obstacle gap over the runs (negative: "
+    "overlap; '-': no such pair); osc/robot p50, p95 and max: median, 95th percentile and "
+    "largest reversal count of one robot, over every robot of every run; time ratio and "
+    "path ratio p50 and p95: the same over every robot that arrived (time ratio: time to "
+    "goal over straight distance / own v_max; path ratio: path length over straight "
+    "distance); plan ms p50: median of the runs' p50, p99: largest of the runs' p99; "
+    "targets: the issue-39 targets the row misses (`Targets`), or ok.")
+
+
+@dataclass(frozen=True)
+class Targets:
+    """The targets of issue 39 for the default planner, checked per table row.
+
+    Args:
+        arrived_rate: share of robots that arrive.
+        contacts: contact episodes at most.
+        min_gap_m: robot-robot and robot-obstacle clearance at least [m].
+        osc_median, osc_median_open: median reversals per robot at most (open: the
+            `OPEN_FAMILIES`).
+        osc_p95: 95th percentile of reversals per robot at most.
+        time_ratio_median, time_ratio_median_confined: median time ratio per robot at most
+            (confined: the `CONFINED_FAMILIES`).
+        path_ratio_median: median path ratio per robot at most.
+        reference_time_factor: where the planner and `REFERENCE_PLANNER` both succeed in
+            every run, its median time ratio at most this times the reference's.
+    """
+
+    arrived_rate: float = 1.0
+    contacts: int = 0
+    min_gap_m: float = 0.05
+    osc_median: float = 3.0
+    osc_median_open: float = 2.0
+    osc_p95: float = 6.0
+    time_ratio_median: float = 1.3
+    time_ratio_median_confined: float = 1.5
+    path_ratio_median: float = 1.15
+    reference_time_factor: float = 1.2
+
+
+TARGETS = Targets()
+OPEN_FAMILIES: tuple[str, ...] = ("circle", "circle_mixed", "circles", "crossing",
+                                  "crossing4", "crossing_45", "crossing_90", "crossing_135",
+                                  "crossing_60_mixed", "setups")
+"""Open circles and crossings (no obstacles, not a grid): the stricter reversal target."""
+CONFINED_FAMILIES: tuple[str, ...] = ("grid_dense", "swap_grid", "wall_door", "wall_doors",
+                                      "corridor")
+"""Grids, doorways and the corridor: the looser time-ratio target."""
+REFERENCE_PLANNER = "orca"
+"""The planner every other one must succeed wherever it succeeds (and be nearly as fast)."""
+
+
+def target_misses(row: dict[str, Any], reference: dict[str, Any] | None = None,
+                  targets: Targets = TARGETS) -> list[str]:
+    """The targets a `summarize` row misses, each as a short phrase ("osc p50 5 > 3").
+
+    Args:
+        row: a table row (its family picks the reversal and time-ratio targets).
+        reference: the `REFERENCE_PLANNER`'s row of the same case, if any.
+        targets: the limits.
+
+    A figure that does not exist (no robot arrived, no obstacle) is not checked against
+    its target; not arriving is a miss of its own.
+    """
+    misses: list[str] = []
+
+    def above(label: str, value: float | None, limit: float, fmt: str = ".2f") -> None:
+        if value is not None and value > limit + 1e-9:
+            misses.append(f"{label} {value:{fmt}} > {limit:g}")
+
+    if row.get("errors"):
+        misses.append(f"errors {row['errors']}")
+    arrived = row.get("arrived_rate")
+    if arrived is None or arrived < targets.arrived_rate:
+        misses.append("arrived " + ("-" if arrived is None else f"{100.0 * arrived:.0f} %"))
+    if (row.get("contacts") or 0) > targets.contacts:
+        misses.append(f"contacts {row['contacts']}")
+    gaps = [("gap r-r", row.get("min_gap_robots_m")), ("gap r-o", row.get("min_gap_obstacles_m"))]
+    if all(v is None for _, v in gaps):  # records without the split: the overall gap
+        gaps = [("gap", row.get("min_gap_m"))]
+    for label, gap in gaps:
+        if gap is not None and gap < targets.min_gap_m:
+            misses.append(f"{label} {gap:.3f} < {targets.min_gap_m:g}")
+    family = row.get("family")
+    above("osc p50", row.get("osc_per_robot_median"),
+          targets.osc_median_open if family in OPEN_FAMILIES else targets.osc_median, "g")
+    above("osc p95", row.get("osc_per_robot_p95"), targets.osc_p95, "g")
+    above("time p50", row.get("time_ratio_median"),
+          targets.time_ratio_median_confined if family in CONFINED_FAMILIES
+          else targets.time_ratio_median)
+    above("path p50", row.get("path_ratio_median"), targets.path_ratio_median)
+    if reference is not None:
+        ours, theirs = row.get("success_rate") or 0.0, reference.get("success_rate") or 0.0
+        if ours < theirs:
+            misses.append(f"success {100.0 * ours:.0f} % < {reference['planner']} "
+                          f"{100.0 * theirs:.0f} %")
+        t_ours, t_theirs = row.get("time_ratio_median"), reference.get("time_ratio_median")
+        if ours == theirs == 1.0 and t_ours is not None and t_theirs:
+            above(f"time vs {reference['planner']}", t_ours / t_theirs,
+                  targets.reference_time_factor)
+    return misses
+
+
+def _is_number(value: Any) -> bool:
+    return (isinstance(value, int | float) and not isinstance(value, bool)
+            and math.isfinite(value))
 
 
 def _values(records: Iterable[dict[str, Any]], key: str) -> np.ndarray:
-    vals = [r.get(key) for r in records]
-    out = np.array([float(v) for v in vals if isinstance(v, int | float)
-                    and not isinstance(v, bool) and math.isfinite(v)], dtype=float)
-    return out
+    return np.array([float(r[key]) for r in records if _is_number(r.get(key))], dtype=float)
+
+
+def _per_robot(records: Iterable[dict[str, Any]], key: str,
+               fallback: Sequence[str]) -> np.ndarray:
+    """Every robot's value of the per-robot list `key` (`PER_ROBOT_METRICS`) over the
+    runs, leaving out values that do not exist (a ratio of a robot that did not arrive).
+    A record without the list (an older one) contributes its run figures `fallback`."""
+    out: list[float] = []
+    for r in records:
+        values = r.get(key) or [r.get(k) for k in fallback]
+        out += [float(v) for v in values if _is_number(v)]
+    return np.array(out, dtype=float)
 
 
 def _stat(values: np.ndarray, fn: Callable[[np.ndarray], Any]) -> float | None:
     return float(fn(values)) if values.size else None
+
+
+def _p95(values: np.ndarray) -> float:
+    return float(np.percentile(values, 95))
 
 
 def summarize(records: Sequence[dict[str, Any]],
@@ -325,6 +469,8 @@ def summarize(records: Sequence[dict[str, Any]],
 
     A run that failed to produce metrics counts as a run without success (and adds to
     `errors`). Rows follow `case_order` then `planner_order` (else first appearance).
+    Each row's `target_misses` (and `targets`, the cell) come from `target_misses`, with
+    the `REFERENCE_PLANNER`'s row of the same case as the reference.
     """
     groups: dict[tuple[str, str], list[dict[str, Any]]] = {}
     for r in records:
@@ -338,11 +484,10 @@ def summarize(records: Sequence[dict[str, Any]],
             if not runs:
                 continue
             ok = [r for r in runs if r.get("error") is None]
-            robot_osc = np.array([o for r in ok for o in (r.get("robot_oscillations") or [])
-                                  if isinstance(o, int | float)], dtype=float)
-            if robot_osc.size == 0:  # records without per-robot counts: the run figures
-                robot_osc = np.concatenate([_values(ok, "oscillations_per_robot"),
-                                            _values(ok, "oscillations_max")])
+            osc = _per_robot(ok, "robot_oscillations",
+                             ("oscillations_per_robot", "oscillations_max"))
+            time_ratio = _per_robot(ok, "robot_time_ratios", ("time_ratio_mean",))
+            path_ratio = _per_robot(ok, "robot_path_ratios", ("path_ratio_mean",))
             robots = _values(ok, "robots").sum()
             rows.append({
                 "family": runs[0]["family"], "case": case, "planner": planner,
@@ -352,8 +497,15 @@ def summarize(records: Sequence[dict[str, Any]],
                                  if robots else None),
                 "contacts": int(_values(ok, "contacts").sum()),
                 "min_gap_m": _stat(_values(ok, "min_gap_m"), np.min),
-                "osc_per_robot_median": _stat(robot_osc, np.median),
-                "osc_per_robot_max": _stat(robot_osc, np.max),
+                "min_gap_robots_m": _stat(_values(ok, "min_gap_robots_m"), np.min),
+                "min_gap_obstacles_m": _stat(_values(ok, "min_gap_obstacles_m"), np.min),
+                "osc_per_robot_median": _stat(osc, np.median),
+                "osc_per_robot_p95": _stat(osc, _p95),
+                "osc_per_robot_max": _stat(osc, np.max),
+                "time_ratio_median": _stat(time_ratio, np.median),
+                "time_ratio_p95": _stat(time_ratio, _p95),
+                "path_ratio_median": _stat(path_ratio, np.median),
+                "path_ratio_p95": _stat(path_ratio, _p95),
                 "path_ratio_mean": _stat(_values(ok, "path_ratio_mean"), np.mean),
                 "time_ratio_mean": _stat(_values(ok, "time_ratio_mean"), np.mean),
                 "plan_ms_p50": _stat(_values(ok, "plan_ms_p50"), np.median),
@@ -361,6 +513,12 @@ def summarize(records: Sequence[dict[str, Any]],
                 "errors": len(runs) - len(ok),
                 "seeds": [r["seed"] for r in runs],
             })
+    by = {(r["case"], r["planner"]): r for r in rows}
+    for row in rows:
+        reference = (by.get((row["case"], REFERENCE_PLANNER))
+                     if row["planner"] != REFERENCE_PLANNER else None)
+        row["target_misses"] = target_misses(row, reference)
+        row["targets"] = "; ".join(row["target_misses"]) or "ok"
     return rows
 
 
@@ -370,10 +528,10 @@ def _cell(key: str, value: Any) -> str:
     if key in ("success_rate", "arrived_rate"):
         return f"{100.0 * value:.0f} %"
     if isinstance(value, float):
-        if key in ("osc_per_robot_median", "osc_per_robot_max"):
+        if key.startswith("osc_per_robot"):
             return f"{value:g}"
-        if key.startswith("plan_ms"):
-            return f"{value:.2f}"
+        if key.startswith("min_gap"):
+            return f"{value:.3f}"
         return f"{value:.2f}"
     return str(value)
 
@@ -473,6 +631,12 @@ README_GROUPS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("pair and grid swaps", ("swap_pairs", "swap_grid")),
     ("random starts and goals", ("random_sparse", "random_medium", "random_dense")),
     ("circles around obstacles", ("obstacles_circle",)),
+    ("walls with doorways, a corridor", ("wall_door", "wall_doors", "corridor")),
+    ("dense grids (2.6-3 m)", ("grid_dense",)),
+    ("circles round a pillar", ("pillar_circle",)),
+    ("random, 40 robots in 36 m", ("random_40",)),
+    ("platoons head-on", ("platoons",)),
+    ("crossing at 60 deg, mixed speeds", ("crossing_60_mixed",)),
     ("setups A-G", ("setups",)),
 )
 """How the README's summary groups the benchmark's families."""

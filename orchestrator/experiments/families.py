@@ -8,7 +8,8 @@ Scale (the paper's grid units read as metres): robot radius 0.5 m, v_max 1.1 m/s
 d_safety 0.3 m; straight start-goal distance 36 m for setups A-E, 76 m for F and G;
 lanes of one cohort 3 m apart (starts >= 2.5 m apart); time limit 4x the ideal time
 (longest straight line / v_max), rounded up to 10 s; the benchmark families (circle_mixed,
-crossing_<angle>, swap_pairs, swap_grid, random_<density>, obstacles_circle) 3x + 30 s.
+crossing_<angle>, swap_pairs, swap_grid, random_<density>, obstacles_circle, and the
+liveness families of `liveness_families`) 3x + 30 s.
 """
 
 from __future__ import annotations
@@ -343,7 +344,19 @@ def crossing(n: int, rng: np.random.Generator | None = None, *, flows: int = 2,
     return _scenario(name, f"{flows} perpendicular flows of {k} robots", _cohorts(spec, h))
 
 
-def _angled_crossing(k: int, lanes: np.ndarray, h: float, angle_deg: float) -> Scenario:
+def angled_lanes(lanes: np.ndarray, h: float, angle_deg: float
+                 ) -> tuple[np.ndarray, np.ndarray, float]:
+    """Starts and goals of two cohorts on `lanes` crossing at angle_deg (`crossing`).
+
+    Args:
+        lanes: (k,) lane offsets [m] of each cohort.
+        h: the smallest half run [m]; lengthened in 1 m steps until starts, and goals,
+            keep the 2.5 m spacing.
+        angle_deg: the second cohort's direction to the first's, in (0, 180).
+
+    Returns:
+        (starts (2k, 2), goals (2k, 2), the half run used [m]); the first cohort first.
+    """
     _require(math.isfinite(angle_deg) and 0.0 < angle_deg < 180.0,
              f"crossing: the angle must be in (0, 180) deg, got {angle_deg!r}")
     phi = math.radians(angle_deg)
@@ -361,6 +374,11 @@ def _angled_crossing(k: int, lanes: np.ndarray, h: float, angle_deg: float) -> S
         h += 1.0
     else:  # pragma: no cover - 200 m more always separates the cohorts
         raise ScenarioError(f"crossing: could not separate the cohorts at {angle_deg:g} deg")
+    return starts, goals, h
+
+
+def _angled_crossing(k: int, lanes: np.ndarray, h: float, angle_deg: float) -> Scenario:
+    starts, goals, h = angled_lanes(lanes, h, angle_deg)
     robots = [_robot(i, s, g) for i, (s, g) in enumerate(zip(starts, goals))]
     n = 2 * k
     label = f"{angle_deg:g}"
@@ -583,10 +601,24 @@ FAMILIES: dict[str, tuple[int, str]] = {
     "random_medium": (20, "N seeded random starts and goals, 2.5 robots per 100 m^2"),
     "random_dense": (20, "N seeded random starts and goals, 5 robots per 100 m^2"),
     "obstacles_circle": (12, "antipodal circle (radius >= 12 m) around 3-5 static obstacles"),
+    # The liveness families (issue 39); generators: `liveness_families.GENERATORS`.
+    "wall_door": (12, "two groups of N/2 swap sides through one 4.4 m doorway in a disc wall"),
+    "wall_doors": (16, "two groups of N/2 swap sides of a disc wall with two doorways"),
+    "corridor": (8, "two groups of N/2 pass head-on through an 18 m corridor, 4.6 m wide"),
+    "grid_dense": (25, "k x k grid (N = k^2) 2.6-3 m apart, each robot to its mirror point"),
+    "pillar_circle": (24, "antipodal circle (radius >= 18 m) round a central pillar"),
+    "random_40": (40, "N seeded random starts and goals, 40 robots per 36 m square"),
+    "platoons": (16, "two platoons of N/2 (3 columns, 2.5 m apart) meeting head-on"),
+    "crossing_60_mixed": (16, "two cohorts of N/2 crossing at 60 deg, v_max 0.8-1.4 m/s"),
 }
 
 
 def _family(name: str, n: int, rng: np.random.Generator) -> Scenario:
+    # Imported here: liveness_families builds on this module's building blocks.
+    from orchestrator.experiments.liveness_families import GENERATORS
+
+    if name in GENERATORS:
+        return GENERATORS[name](n, rng)
     if name == "circle":
         return circle(n, rng)
     if name == "crossing":

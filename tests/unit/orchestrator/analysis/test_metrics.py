@@ -286,6 +286,27 @@ def test_min_gap_and_moving_obstacle_contact():
     assert m5.contacts == 1 and m5.contact_pairs == [[-1, 0]]
 
 
+def test_min_gap_is_also_split_into_robot_robot_and_robot_obstacle():
+    # Robot-robot gaps 0.4, 0.5, 0.3 m; robot 1 to the obstacle 0.204, 0.2, 0.217 m.
+    t = np.arange(3) * DT
+    xy = np.array([[[0.0, 0.0], [1.4, 0.0]], [[0.0, 0.0], [1.5, 0.0]],
+                   [[0.0, 0.0], [1.3, 0.0]]])
+    sp = spec([(0, 0), (1.4, 0)], [(0, 0), (1.4, 0)],
+              obstacles=[((1.5, 1.2), (0.0, 0.0), 0.5)])
+    m = metrics(trajectory(t, xy), sp)
+    assert m.min_gap_robots_m == pytest.approx(0.3)
+    assert m.min_gap_obstacles_m == pytest.approx(0.2)
+    assert m.min_gap_m == pytest.approx(0.2)
+    # Without obstacles the robot-obstacle figure does not exist.
+    m = metrics(trajectory(t, xy), spec([(0, 0), (1.4, 0)], [(0, 0), (1.4, 0)]))
+    assert m.min_gap_obstacles_m is None and m.min_gap_robots_m == pytest.approx(0.3)
+    # One robot alone by an obstacle: no robot-robot figure.
+    one = metrics(trajectory(t, xy[:, :1]), spec([(0, 0)], [(0, 0)],
+                                                 obstacles=[((0.0, 2.0), (0.0, 0.0), 1.0)]))
+    assert one.min_gap_robots_m is None and one.min_gap_obstacles_m == pytest.approx(0.5)
+    assert one.to_json_dict()["min_gap_robots_m"] is None
+
+
 def test_unconfirmed_contact_event_counts_but_a_confirmed_one_does_not_double():
     d = [3.0, 0.99, 3.0]
     t = np.arange(3) * DT
@@ -374,7 +395,8 @@ def test_json_has_the_documented_keys_and_no_nan():
     m = metrics(trajectory(t, xy), spec([(0, 0)], [(5, 0)]))
     content = m.to_json_dict()
     text = json.dumps(content, allow_nan=False)
-    for key in ("robots", "arrived", "success", "contacts", "min_gap_m", "path_ratio_mean",
+    for key in ("robots", "arrived", "success", "contacts", "min_gap_m", "min_gap_robots_m",
+                "min_gap_obstacles_m", "path_ratio_mean",
                 "time_ratio_mean", "oscillations_per_robot", "side_flips_per_robot",
                 "plan_ms_p50", "plan_ms_p99", "sim_latency_ms_p50", "sim_latency_ms_p99",
                 "deadline_miss_rate", "per_robot", "reversal_causes_per_robot"):
