@@ -1568,7 +1568,8 @@ class RunConfigMsg:
     Wire body: ``run`` (str), ``robot`` (map of every `RobotSpec` field, ``limits`` nested),
     ``planner`` (map of every `PlannerConfig` field, ``mpc`` nested), ``goal_tolerance``,
     ``control_rate``, ``world_rate``, ``time_scale``, ``time_limit``, ``cmd_timeout`` (floats),
-    ``known_ids`` (list of every robot and obstacle id of the run).
+    ``known_ids`` (list of every robot and obstacle id of the run), ``static_map`` (list of
+    [x, y, radius] of the static obstacles, which every robot knows in advance).
 
     Args:
         run_id: the run this configuration belongs to.
@@ -1581,6 +1582,8 @@ class RunConfigMsg:
         time_limit_s: sim time at which the world gives up.
         cmd_timeout_s: a command older than this (sim time) makes the world brake the robot.
         known_ids: every robot (>= 0) and obstacle (< 0) id of the run.
+        static_map: (x [m], y [m], radius [m]) of every static obstacle (the robots route
+            round them, `agent.planning.routing`).
     """
 
     run_id: str
@@ -1593,6 +1596,7 @@ class RunConfigMsg:
     time_limit_s: float
     cmd_timeout_s: float
     known_ids: tuple[int, ...]
+    static_map: tuple[tuple[float, float, float], ...] = ()
 
     TYPE: typing.ClassVar[str] = "config"
 
@@ -1628,6 +1632,22 @@ class RunConfigMsg:
         if self.robot.id not in ids:
             raise ProtocolError("config.known_ids: does not contain the robot's own id")
         set_(self, "known_ids", ids)
+        if isinstance(self.static_map, str | bytes) or not isinstance(self.static_map, Iterable):
+            raise ProtocolError("config.static_map: expected a sequence of [x, y, radius]")
+        discs = []
+        for disc in self.static_map:
+            if isinstance(disc, str | bytes) or not isinstance(disc, Iterable):
+                raise ProtocolError("config.static_map[]: expected [x, y, radius]")
+            values = tuple(disc)
+            if len(values) != 3:
+                raise ProtocolError("config.static_map[]: expected [x, y, radius]")
+            discs.append((_float(values[0], "config.static_map[].x", -MAX_COORD_M, MAX_COORD_M),
+                          _float(values[1], "config.static_map[].y", -MAX_COORD_M, MAX_COORD_M),
+                          _float(values[2], "config.static_map[].radius", 0.0, MAX_RADIUS_M,
+                                 lo_open=True)))
+            if len(discs) > MAX_OBSTACLES:
+                raise ProtocolError(f"config.static_map: more than {MAX_OBSTACLES} discs")
+        set_(self, "static_map", tuple(discs))
 
     def encode(self) -> bytes:
         """Serialise to msgpack."""
@@ -1642,6 +1662,7 @@ class RunConfigMsg:
             "time_limit": self.time_limit_s,
             "cmd_timeout": self.cmd_timeout_s,
             "known_ids": list(self.known_ids),
+            "static_map": [list(d) for d in self.static_map],
         })
 
     @classmethod
@@ -1650,10 +1671,12 @@ class RunConfigMsg:
         """Parse and validate; optionally insist on this run and this robot."""
         body = _open_envelope(data, cls.TYPE, (
             "run", "robot", "planner", "goal_tolerance", "control_rate", "world_rate",
-            "time_scale", "time_limit", "cmd_timeout", "known_ids",
+            "time_scale", "time_limit", "cmd_timeout", "known_ids", "static_map",
         ))
         if not isinstance(body["known_ids"], list):
             raise ProtocolError("config.known_ids: expected a list")
+        if not isinstance(body["static_map"], list):
+            raise ProtocolError("config.static_map: expected a list")
         msg = cls(
             run_id=_str(body["run"], "config.run", MAX_RUN_ID_CHARS),
             robot=_load_dataclass(body["robot"], RobotSpec, "config.robot"),
@@ -1665,6 +1688,7 @@ class RunConfigMsg:
             time_limit_s=body["time_limit"],
             cmd_timeout_s=body["cmd_timeout"],
             known_ids=tuple(body["known_ids"]),
+            static_map=tuple(body["static_map"]),
         )
         if expected_run_id is not None and msg.run_id != expected_run_id:
             raise ProtocolError(f"config.run: {msg.run_id!r}, expected {expected_run_id!r}")

@@ -61,6 +61,7 @@ import zenoh
 
 from agent import flags as argtypes
 from agent.core.scenario import Scenario
+from agent.planning.routing import StaticMap
 from agent.process import (
     ExitCode,
     SessionError,
@@ -215,6 +216,8 @@ def parse_args(argv: list[str] | None = None) -> WorldOptions:
 def run_configs(scenario: Scenario, options: WorldOptions) -> dict[int, bytes]:
     """The encoded `RunConfigMsg` of every robot, served on the configuration queryable."""
     known = tuple(r.id for r in scenario.robots) + tuple(o.id for o in scenario.obstacles)
+    static_map = StaticMap.of_obstacles(scenario.obstacles)
+    static = tuple(zip(*static_map.center_m.T.tolist(), static_map.radius_m.tolist()))
     return {
         spec.id: RunConfigMsg(
             run_id=options.run_id,
@@ -227,6 +230,7 @@ def run_configs(scenario: Scenario, options: WorldOptions) -> dict[int, bytes]:
             time_limit_s=scenario.time_limit_s,
             cmd_timeout_s=options.cmd_timeout_s,
             known_ids=known,
+            static_map=static,
         ).encode()
         for spec in scenario.robots
     }

@@ -48,7 +48,9 @@ wrong types (booleans are not numbers, floats are not ints); non-finite numbers;
 negative sizes, speeds and horizons (weights and margins may be zero; `v_min` may be
 negative but not above `v_max`); unknown planner names; duplicate robot ids; robot discs
 that overlap each other or an obstacle at their starts; goal discs (robot radius around
-the goal) that overlap an obstacle disc at t = 0 or another robot's goal disc.
+the goal) that overlap an obstacle disc at t = 0 or another robot's goal disc; goals that
+no path round the static obstacles reaches (enclosed, or behind gaps narrower than the
+robot: `robots[0].goal: robot 0 cannot reach its goal: ...`).
 """
 
 from __future__ import annotations
@@ -76,6 +78,7 @@ from agent.core.config import (
     profile_config,
 )
 from agent.core.scenario import ObstacleSpec, RobotSpec, Scenario
+from agent.planning.routing import StaticMap, unreachable_reason
 from protocol import (
     MAX_COORD_M,
     MAX_OBSTACLES,
@@ -375,7 +378,8 @@ def validate_scenario(scenario: Scenario, source: str = "<scenario>") -> Scenari
     Checks finiteness and signs of every number, planner names, unique robot ids,
     obstacle ids, and the geometry at t = 0: robot discs at their starts must not overlap
     each other or an obstacle; goal discs (robot radius around the goal) must not overlap
-    an obstacle disc or another robot's goal disc.
+    an obstacle disc or another robot's goal disc; every goal must be reachable round the
+    static obstacles (`_check_reachable`).
 
     Raises:
         ScenarioError: naming `source` and the field path in the file format.
@@ -446,7 +450,22 @@ def validate_scenario(scenario: Scenario, source: str = "<scenario>") -> Scenari
                              lambda i: f"disc overlaps obstacles[{i}] at t=0")
         _raise_first_overlap(ctx, _gaps(goal, radius, ob_c, ob_r), everywhere, "goal",
                              lambda i: f"goal disc overlaps obstacles[{i}] at t=0")
+        _check_reachable(ctx, scenario)
     return scenario
+
+
+def _check_reachable(ctx: _Ctx, scenario: Scenario) -> None:
+    """Every goal is reachable round the static obstacles (`agent.planning.routing`):
+    a goal enclosed by them, or behind gaps narrower than the robot, is refused. Other
+    robots never make a goal unreachable (they move, or can be waited out)."""
+    static = StaticMap.of_obstacles(scenario.obstacles)
+    if not static.routable:
+        return
+    for k, r in enumerate(scenario.robots):
+        why = unreachable_reason(np.array(r.start[:2]), np.array(r.goal), static, r.radius_m)
+        if why is not None:
+            raise ctx.error(_join(_join("robots", k), "goal"),
+                            f"robot {r.id} cannot reach its goal: {why}")
 
 
 def _at_most(ctx: _Ctx, path: str, value: float, bound: float, unit: str) -> None:

@@ -1,7 +1,7 @@
 """Frozen configuration of a robot and its planner.
 
 `PlannerConfig` holds the user-facing planner settings, grouped in small frozen
-sub-configs (`safety`, `threats`, `cost`, `reference`, `mpc`, `orca`, `liveness`), and the `profile`
+sub-configs (`safety`, `threats`, `cost`, `reference`, `mpc`, `orca`), and the `profile`
 that switches this project's additions to the paper's method on (``default``) or off
 (``paper``). Every setting is read by a named planner (`SETTINGS` lists which); what is
 not a setting is a module constant next to the code that uses it.
@@ -27,7 +27,6 @@ POSITIVE_FIELDS = frozenset({
     "v_max_mps", "omega_max_radps", "accel_max_mps2", "alpha_max_radps2",
     "t_max_s", "sensing_radius_m", "max_neighbors", "max_depth",
     "horizon_steps", "dt_s", "time_horizon_s",
-    "stuck_after_s", "progress_m", "slow_mps", "detour_ratio", "yield_s", "yield_radius_m",
 })
 """Numeric config fields that must be > 0 (by field name, over every config class)."""
 SIGNED_FIELDS = frozenset({"v_min_mps"})
@@ -201,39 +200,11 @@ class OrcaConfig:
 
 
 @dataclass(frozen=True)
-class LivenessConfig:
-    """Progress monitoring and what a stuck robot does (`agent.planning.liveness`); read by
-    eifp-mpc only.
-
-    Args:
-        stuck_after_s: a robot whose remaining route has not shrunk by `progress_m` for
-            this long is stuck.
-        progress_m: what counts as progress.
-        slow_mps: sensed robots slower than this count as part of a knot (re-route round
-            them).
-        detour_ratio: a re-route round a knot is taken when at most this many times the
-            straight distance left to the goal.
-        yield_s: how long a yielding robot stands.
-        yield_radius_m: a stuck robot yields to lower ids within this distance (centres).
-    """
-
-    stuck_after_s: float = 4.0
-    progress_m: float = 0.5
-    slow_mps: float = 0.3
-    detour_ratio: float = 3.0
-    yield_s: float = 3.0
-    yield_radius_m: float = 5.0
-
-    def __post_init__(self) -> None:
-        _check_ranges(self)
-
-
-@dataclass(frozen=True)
 class PlannerConfig:
     """The planner settings of a run, shared by its robots; see `SETTINGS`.
 
     Args:
-        safety, threats, cost, reference, mpc, orca, liveness: the sub-configs.
+        safety, threats, cost, reference, mpc, orca: the sub-configs.
         profile: ``default`` (this project's additions on) or ``paper`` (the paper's method
             as written; `paper_config`). The planners derive their mechanisms from it
             (`agent.planning.ifp.mechanisms`).
@@ -248,7 +219,6 @@ class PlannerConfig:
     reference: ReferenceConfig = field(default_factory=ReferenceConfig)
     mpc: MpcConfig = field(default_factory=MpcConfig)
     orca: OrcaConfig = field(default_factory=OrcaConfig)
-    liveness: LivenessConfig = field(default_factory=LivenessConfig)
     profile: str = "default"
 
     def __post_init__(self) -> None:
@@ -296,8 +266,7 @@ class PlannerConfig:
         return dataclasses.replace(self, **top)  # type: ignore[arg-type]
 
 
-SUB_CONFIGS: tuple[str, ...] = ("safety", "threats", "cost", "reference", "mpc", "orca",
-                                 "liveness")
+SUB_CONFIGS: tuple[str, ...] = ("safety", "threats", "cost", "reference", "mpc", "orca")
 """The sub-config fields of `PlannerConfig`, in order."""
 
 SETTINGS: dict[str, tuple[str, ...]] = {
@@ -316,12 +285,6 @@ SETTINGS: dict[str, tuple[str, ...]] = {
     "mpc.dt_s": ("eifp-mpc",),
     "mpc.clearance_margin_m": ("eifp-mpc",),
     "orca.time_horizon_s": ("orca",),
-    "liveness.stuck_after_s": ("eifp-mpc",),
-    "liveness.progress_m": ("eifp-mpc",),
-    "liveness.slow_mps": ("eifp-mpc",),
-    "liveness.detour_ratio": ("eifp-mpc",),
-    "liveness.yield_s": ("eifp-mpc",),
-    "liveness.yield_radius_m": ("eifp-mpc",),
 }
 """Every user-facing planner setting (sub-config.field) and the planners that read it."""
 

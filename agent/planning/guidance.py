@@ -15,7 +15,6 @@ goal instead of braking at it), the route length left, and whether to yield.
 
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass
 
@@ -28,7 +27,6 @@ from agent.planning.routing import (
     Route,
     RouteFollower,
     StaticMap,
-    VisibilityGraph,
     plan_route,
     route_or_tight,
 )
@@ -53,20 +51,6 @@ class Guidance:
     tail_m: np.ndarray
     left_m: float
     strategy: Strategy = Strategy.GO
-
-
-@functools.lru_cache(maxsize=8)
-def _shared_graph(centers: bytes, radii: bytes, clearance_m: float) -> VisibilityGraph:
-    """The visibility graph of one map and clearance, built once per process: every robot
-    of a lockstep run with the same radius shares it (a memo of a pure function)."""
-    static = StaticMap(np.frombuffer(centers).reshape(-1, 2), np.frombuffer(radii))
-    return VisibilityGraph.build(static, clearance_m)
-
-
-def shared_graph(static: StaticMap, clearance_m: float) -> VisibilityGraph:
-    """`VisibilityGraph.build(static, clearance_m)`, memoised on the map's contents."""
-    return _shared_graph(static.center_m.tobytes(), static.radius_m.tobytes(),
-                         float(clearance_m))
 
 
 class RouteGuide:
@@ -104,11 +88,7 @@ class RouteGuide:
     def _plan(self, here: np.ndarray, goal: np.ndarray, radius_m: float) -> RouteFollower:
         route = None
         if self.routes:
-            clearance = radius_m + self.d_safety_m + ROUTE_MARGIN_M
-            route = plan_route(here, goal, self.static, clearance,
-                               shared_graph(self.static, clearance))
-            if route is None:
-                route = route_or_tight(here, goal, self.static, radius_m, self.d_safety_m)
+            route = route_or_tight(here, goal, self.static, radius_m, self.d_safety_m)
         if route is None:  # no map, or no route from here (validation saw one from the start)
             route = Route(np.stack((here, goal)), 0.0)
             return RouteFollower(route, StaticMap.empty())

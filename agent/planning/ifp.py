@@ -65,6 +65,7 @@ import numpy as np
 
 from agent.core.config import PlannerConfig
 from agent.core.types import Observation, Others, PlanStatus, Side, Threat
+from agent.planning.liveness import LivenessConfig
 from agent.planning.threats import (
     as_complex,
     legs_threats,
@@ -184,8 +185,9 @@ class Mechanisms:
         routing: the robot routes round the scenario's static obstacles, known in
             advance (`agent.planning.routing`), and eIFP plans towards the farthest route
             waypoint it can see (`agent.planning.guidance`).
-        liveness: the robot monitors its progress and, when stuck, re-routes round the
-            knot or yields to lower ids (`agent.planning.liveness`).
+        liveness: with thresholds (not None), the robot monitors its progress and, when
+            stuck, re-routes round the knot or yields to lower ids
+            (`agent.planning.liveness`).
     """
 
     direct_leg_check: bool = False
@@ -201,7 +203,7 @@ class Mechanisms:
     braking_guard: bool = False
     keep_plan: bool = False
     routing: bool = False
-    liveness: bool = False
+    liveness: LivenessConfig | None = None
 
 
 PAPER_MECHANISMS = Mechanisms()
@@ -217,7 +219,8 @@ the corners of a lines-and-arcs reference, so it keeps the spline and the paper'
 EIFP_MPC_MECHANISMS = dataclasses.replace(
     EIFP_MECHANISMS, inflated_threats=True, commitment=True, via_margin_m=ARC_VIA_MARGIN_M,
     escape_band_m=ESCAPE_BAND_M, horizon_via_points=True, lines_arcs=True,
-    clamp_heading=False, braking_guard=True, keep_plan=True, routing=True, liveness=True)
+    clamp_heading=False, braking_guard=True, keep_plan=True, routing=True,
+    liveness=LivenessConfig())
 """eifp-mpc in the default profile: every mechanism."""
 
 
@@ -404,6 +407,8 @@ def plan_via_points(
                            threats_cfg.max_neighbors)
     speed = float(observation.limits.v_max_mps)
     radius = inflated_radius(observation.radius_m, others.radius_m, config.safety.d_safety_m)
+    if mech.routing and len(others):
+        radius = _keep_static_gap(p, others, radius)
 
     # Eqs. (3)-(6) at the measured velocity.
     t_start = timer() if timer is not None else 0.0
@@ -564,6 +569,30 @@ def plan_via_points(
         resolved_sides=resolved,
         threats_s=threats_s,
     )
+
+
+STATIC_GAP_TOL_M = 1.0e-3
+"""`_keep_static_gap` leaves this much of the robot's current distance to a static disc
+as slack [m], so that holding the distance is not a threat by rounding."""
+
+
+def _keep_static_gap(p: np.ndarray, others: Others, radius: np.ndarray) -> np.ndarray:
+    """The inflated radii, with a static obstacle's cut to the robot's distance from it
+    (less `STATIC_GAP_TOL_M`) when the robot is already inside (`Mechanisms.routing`).
+
+    With routes, the static map is the route's business and eIFP's only job against it is
+    not to get closer. A robot that passing robots pushed inside a wall disc's inflated
+    radius would otherwise resolve that disc from its boundary, where the tangent
+    via-points lie along the wall or in the next disc: it turns to the wall, the braking
+    guard stops it, and the plan, still holding, keeps it there. Cut to the present
+    distance, a static disc is a threat only to a leg that goes closer still, and is
+    never escaped from: the robot keeps what clearance it has and follows its route.
+    """
+    static = ~others.is_robot & ~others.velocity_mps.any(axis=1)
+    if not static.any():
+        return radius
+    here = np.hypot(*(others.position_m - p).T) - STATIC_GAP_TOL_M
+    return np.where(static, np.minimum(radius, np.maximum(here, 0.0)), radius)
 
 
 def _keep_previous(previous: ViaPlan, new_wps: list[complex], speed: float,

@@ -4,8 +4,7 @@ Not in the paper (arXiv 2508.08264): eIFP and its MPC are local and reactive, so
 robots (or a knot of them) can each keep choosing a plan that the other's plan undoes,
 and circle or stand for ever. Each robot therefore watches its own progress along its
 route (`ProgressMonitor`) and, when it has made none for `LivenessConfig.stuck_after_s`,
-changes strategy (`Liveness.decide`), in this order (thresholds:
-`agent.core.config.LivenessConfig`, the scenario file's `liveness` settings):
+changes strategy (`Liveness.decide`), in this order (thresholds: `LivenessConfig`):
 
 1. **Route round the knot.** The sensed robots that are slow (below
    `LivenessConfig.slow_mps`) within the sensing radius are added to the static map as
@@ -34,11 +33,42 @@ from __future__ import annotations
 
 import enum
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
-from agent.core.config import LivenessConfig
 from agent.core.types import Others
+
+
+@dataclass(frozen=True)
+class LivenessConfig:
+    """Thresholds of progress monitoring and of the strategies (`Mechanisms.liveness`).
+
+    Args:
+        stuck_after_s: a robot whose remaining route has not shrunk by `progress_m` for
+            this long is stuck [s].
+        progress_m: what counts as progress [m].
+        slow_mps: sensed robots slower than this count as part of a knot (rule 1), and
+            yielding is only to robots at least this fast (rule 2) [m/s].
+        detour_ratio: a re-route round a knot is taken when at most this many times the
+            straight distance left to the goal.
+        yield_s: how long a yielding robot stands at most [s].
+        yield_radius_m: a stuck robot yields to lower ids within this distance (centres) [m].
+    """
+
+    stuck_after_s: float = 4.0
+    progress_m: float = 0.5
+    slow_mps: float = 0.3
+    detour_ratio: float = 3.0
+    yield_s: float = 3.0
+    yield_radius_m: float = 5.0
+
+    def __post_init__(self) -> None:
+        for name in ("stuck_after_s", "progress_m", "slow_mps", "detour_ratio", "yield_s",
+                     "yield_radius_m"):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0.0):
+                raise ValueError(f"LivenessConfig.{name} must be positive, got {value!r}")
 
 
 class ProgressMonitor:
@@ -53,6 +83,7 @@ class ProgressMonitor:
         self.config = config
         self._best_m = math.inf
         self._since_s = 0.0
+        self.progressed = False
 
     def restart(self, now_s: float, left_m: float) -> None:
         """Start the clock again from `left_m` at `now_s` (after a change of strategy)."""
@@ -60,8 +91,11 @@ class ProgressMonitor:
         self._since_s = now_s
 
     def stuck(self, now_s: float, left_m: float) -> bool:
-        """Record `left_m` (distance still to go [m]) at `now_s`; True when stuck."""
-        if left_m <= self._best_m - self.config.progress_m or not math.isfinite(self._best_m):
+        """Record `left_m` (distance still to go [m]) at `now_s`; True when stuck.
+        `progressed` tells whether this call found progress."""
+        self.progressed = (left_m <= self._best_m - self.config.progress_m
+                           or not math.isfinite(self._best_m))
+        if self.progressed:
             self.restart(now_s, left_m)
             return False
         return now_s - self._since_s >= self.config.stuck_after_s
@@ -137,7 +171,8 @@ class Liveness:
             self._yield_until_s = -math.inf  # nobody left to give way to
             self.monitor.restart(now_s, left_m)
         if not self.monitor.stuck(now_s, left_m):
-            self._tried_reroute = False
+            if self.monitor.progressed:
+                self._tried_reroute = False  # real progress: start the rules afresh
             return Strategy.GO
         self.monitor.restart(now_s, left_m)
         if not self._tried_reroute:

@@ -166,11 +166,11 @@ class ViaPointPlanner:
         self._plan_ifp = plan_ifp
         self._trackers: dict[object, object] = {}
         self.guide: RouteGuide | None = None
-        if self.mech.routing or self.mech.liveness:
+        if self.mech.routing or self.mech.liveness is not None:
             self.guide = RouteGuide(
                 static_map if static_map is not None else StaticMap.empty(),
                 config.safety.d_safety_m, routes=self.mech.routing,
-                liveness=config.liveness if self.mech.liveness else None)
+                liveness=self.mech.liveness)
 
     def reset(self) -> None:
         """Forget side memory, MPC warm starts, the route and the liveness state."""

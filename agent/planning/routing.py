@@ -24,9 +24,9 @@ The graph (`plan_route`):
 
 The clearance is the inflated radius of Eq. (7) (robot radius + obstacle radius +
 d_safety) plus `ROUTE_MARGIN_M`. `route_or_tight` falls back to the robot's radius alone
-(plus `TIGHT_MARGIN_M`) when a passage admits the robot but not its safety margin: the
-robot is then routed through it and eIFP's via-points and the MPC keep what clearance
-the passage has. A goal that no route reaches even then is unreachable
+(plus `TIGHT_MARGIN_M`) when a passage admits the robot but not its safety margin and the
+way round is much longer (`TIGHT_DETOUR_RATIO`): the robot is then routed through it and
+eIFP's via-points and the MPC keep what clearance the passage has. A goal that no route reaches even then is unreachable
 (`unreachable_reason`; scenario validation refuses it).
 
 Cost: the graph has n = 2 + RING_NODES x M nodes for M static discs and checks n^2/2
@@ -37,6 +37,7 @@ then plan locally, as without a map, and validation does not check reachability.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -44,6 +45,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
+
+from agent.core.scenario import ObstacleSpec
 
 RING_NODES = 8
 """Graph nodes placed round every static disc."""
@@ -54,6 +57,10 @@ corner exactly on the inflated disc would put eIFP's via-point on its boundary."
 
 TIGHT_MARGIN_M = 0.02
 """A tight route (`route_or_tight`) keeps the robot's radius plus this from a disc [m]."""
+
+TIGHT_DETOUR_RATIO = 1.5
+"""A tight passage is taken when the way round with full clearance is more than this
+many times longer (`route_or_tight`)."""
 
 MAX_ROUTED_OBSTACLES = 128
 """Maps with more static discs than this are not routed (cost grows as M^3)."""
@@ -93,6 +100,11 @@ class StaticMap:
     def empty() -> StaticMap:
         """No static discs."""
         return StaticMap(np.zeros((0, 2)), np.zeros(0))
+
+    @staticmethod
+    def of_obstacles(obstacles: Iterable[ObstacleSpec]) -> StaticMap:
+        """The static obstacles of a scenario (velocity 0)."""
+        return StaticMap.from_discs((o.center, o.radius_m, o.velocity) for o in obstacles)
 
     @staticmethod
     def from_discs(discs: Iterable[tuple[tuple[float, float], float, tuple[float, float]]]
@@ -275,16 +287,35 @@ def plan_route(start_m: np.ndarray, goal_m: np.ndarray, static: StaticMap,
     return Route(nodes[path[::-1]], clearance_m)
 
 
+@functools.lru_cache(maxsize=8)
+def _shared_graph(centers: bytes, radii: bytes, clearance_m: float) -> VisibilityGraph:
+    """The visibility graph of one map and clearance, built once per process: every robot
+    of a lockstep run with the same radius shares it (a memo of a pure function)."""
+    static = StaticMap(np.frombuffer(centers).reshape(-1, 2), np.frombuffer(radii))
+    return VisibilityGraph.build(static, clearance_m)
+
+
+def shared_graph(static: StaticMap, clearance_m: float) -> VisibilityGraph:
+    """`VisibilityGraph.build(static, clearance_m)`, memoised on the map's contents."""
+    return _shared_graph(static.center_m.tobytes(), static.radius_m.tobytes(),
+                         float(clearance_m))
+
+
 def route_or_tight(start_m: np.ndarray, goal_m: np.ndarray, static: StaticMap,
                    robot_radius_m: float, d_safety_m: float) -> Route | None:
-    """A route with the full clearance (robot radius + d_safety + `ROUTE_MARGIN_M`), else
-    a tight one (robot radius + `TIGHT_MARGIN_M`), else None (unreachable)."""
-    full = plan_route(start_m, goal_m, static, robot_radius_m + d_safety_m + ROUTE_MARGIN_M)
-    if full is not None:
+    """A route with the full clearance (robot radius + d_safety + `ROUTE_MARGIN_M`), or a
+    tight one (robot radius + `TIGHT_MARGIN_M`) when there is no full one or the full one
+    is more than `TIGHT_DETOUR_RATIO` times longer; None when neither exists (unreachable).
+    """
+    clearance = robot_radius_m + d_safety_m + ROUTE_MARGIN_M
+    full = plan_route(start_m, goal_m, static, clearance, shared_graph(static, clearance))
+    if full is not None and full.waypoints_m.shape[0] == 2:
+        return full  # the straight line
+    clearance = robot_radius_m + TIGHT_MARGIN_M
+    tight = plan_route(start_m, goal_m, static, clearance, shared_graph(static, clearance))
+    if tight is None or (full is not None
+                         and full.length_m <= TIGHT_DETOUR_RATIO * tight.length_m):
         return full
-    tight = plan_route(start_m, goal_m, static, robot_radius_m + TIGHT_MARGIN_M)
-    if tight is None:
-        return None
     return Route(tight.waypoints_m, tight.clearance_m, tight=True)
 
 
@@ -292,13 +323,15 @@ def unreachable_reason(start_m: np.ndarray, goal_m: np.ndarray, static: StaticMa
                        robot_radius_m: float) -> str | None:
     """Why no route reaches the goal from the start, or None when one does.
 
-    Only the robot's own radius counts here (a passage narrower than the robot is closed;
-    one narrower than its safety margin is not), and only static discs: a passage
+    Only the robot's own radius (plus `TIGHT_MARGIN_M`) counts here (a passage narrower
+    than the robot is closed; one narrower than its safety margin is not), and only static discs: a passage
     blocked by other robots is theirs to clear, never a reason to refuse a scenario.
     """
     if not static.routable:
         return None
-    if plan_route(start_m, goal_m, static, robot_radius_m) is not None:
+    clearance = robot_radius_m + TIGHT_MARGIN_M
+    if plan_route(start_m, goal_m, static, clearance,
+                  shared_graph(static, clearance)) is not None:
         return None
     keep = static.radius_m + robot_radius_m
     goal = np.asarray(goal_m, dtype=float)

@@ -152,8 +152,7 @@ def run_lockstep(scenario: Scenario, sink: RunSink, *, world_rate_hz: float = 50
     dt_s = 1.0 / world_rate_hz
     slots = pose_slot_count(world_rate_hz, control_rate_hz)
 
-    static_map = StaticMap.from_discs((o.center, o.radius_m, o.velocity)
-                                      for o in scenario.obstacles)
+    static_map = StaticMap.of_obstacles(scenario.obstacles)
 
     def controller(spec: RobotSpec) -> RobotController:
         rate_hz = plan.timing_of(spec.id).control_rate_hz or control_rate_hz

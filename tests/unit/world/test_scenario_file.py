@@ -8,6 +8,7 @@ import textwrap
 from pathlib import Path
 
 import pytest
+import yaml
 
 from agent.core.config import SUB_CONFIGS, MpcConfig, PlannerConfig, RobotLimits
 from agent.core.scenario import ObstacleSpec, RobotSpec, Scenario
@@ -427,3 +428,29 @@ def test_a_moving_obstacle_must_stay_on_the_map_for_the_whole_run(tmp_path):
                     "velocity: [2, 0]}\n")
     with pytest.raises(ScenarioError, match=r"drift.yaml: obstacles\[0\].center: must be at most"):
         load_scenario(path)
+
+
+def test_a_goal_no_route_reaches_is_refused_naming_the_file_and_robot(tmp_path):
+    """A goal inside a closed ring of obstacles (gaps narrower than the robot) is refused
+    at validation; one the robot fits to, through a gap wider than its diameter, is not."""
+    import math
+
+    def ring(radius_m: float) -> list[dict]:
+        return [{"center": [10.0 * math.cos(2 * math.pi * k / 40),
+                            10.0 * math.sin(2 * math.pi * k / 40)], "radius": radius_m}
+                for k in range(40)]
+
+    robots = [{"id": 0, "start": [20.0, 0.0, 0.0], "goal": [0.0, 0.0]},
+              {"id": 1, "start": [0.0, 20.0, 0.0], "goal": [0.0, 30.0]}]
+    path = tmp_path / "ring.yaml"
+    # centres 1.57 m apart: 0.9 m discs leave 0 m gaps (closed); 0.2 m discs leave 1.17 m
+    path.write_text(yaml.safe_dump({"name": "ring", "time_limit": 60, "robots": robots,
+                                    "obstacles": ring(0.9)}))
+    with pytest.raises(ScenarioError) as err:
+        load_scenario(path)
+    message = str(err.value)
+    assert message.startswith(str(path)) and "robots[0].goal" in message
+    assert "robot 0 cannot reach its goal" in message and "\n" not in message
+    path.write_text(yaml.safe_dump({"name": "ring", "time_limit": 60, "robots": robots,
+                                    "obstacles": ring(0.2)}))
+    assert len(load_scenario(path).robots) == 2

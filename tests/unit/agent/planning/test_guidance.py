@@ -1,0 +1,105 @@
+"""Routes and liveness in the planning cycle (`agent.planning.guidance` and its use in
+`agent.planning.planners`)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from agent.core.config import PlannerConfig, RobotLimits
+from agent.core.types import EgoState, Observation, Others, PlanStatus
+from agent.planning.guidance import RouteGuide
+from agent.planning.liveness import LivenessConfig, Strategy
+from agent.planning.planners import make_planner
+from agent.planning.routing import StaticMap, segment_disc_distance
+from world.sim.dynamics import integrate_unicycle
+
+
+def closed_wall(reach_m: float = 6.0) -> StaticMap:
+    """Touching 0.6 m discs along x = 0 from -reach to reach: no doorway."""
+    ys = np.arange(-reach_m, reach_m + 1e-9, 1.2)
+    return StaticMap(np.column_stack((np.zeros(ys.size), ys)), np.full(ys.size, 0.6))
+
+
+def cup() -> StaticMap:
+    """A closed wall at x = 0 (y in [-6, 6]) with arms back to x = -6 at y = +-6: a cup
+    open to the left, the classic local minimum for a goal on the right."""
+    wall = closed_wall()
+    xs = np.arange(-6.0, -0.1, 1.2)
+    arms = np.concatenate((np.column_stack((xs, np.full(xs.size, 6.0))),
+                           np.column_stack((xs, np.full(xs.size, -6.0)))))
+    return StaticMap(np.concatenate((wall.center_m, arms)),
+                     np.concatenate((wall.radius_m, np.full(arms.shape[0], 0.6))))
+
+
+def as_others(static: StaticMap) -> Others:
+    n = len(static)
+    return Others(ids=-(np.arange(n) + 1), position_m=static.center_m,
+                  velocity_mps=np.zeros((n, 2)), radius_m=static.radius_m,
+                  linearity=np.zeros(n), track_start_m=static.center_m,
+                  is_robot=np.zeros(n, dtype=bool))
+
+
+def observation(x: float, y: float, heading: float, v: float, goal: tuple[float, float],
+                others: Others, robot_id: int = 0) -> Observation:
+    return Observation(robot_id=robot_id,
+                       ego=EgoState(x_m=x, y_m=y, heading_rad=heading, v_mps=v,
+                                    omega_radps=0.0),
+                       goal_m=np.array(goal), radius_m=0.5, limits=RobotLimits(),
+                       goal_tolerance_m=0.25, others=others)
+
+
+def test_the_guide_heads_for_a_visible_route_waypoint_and_hands_on_the_rest() -> None:
+    static = closed_wall()
+    guide = RouteGuide(static, 0.3)
+    g = guide.guide(observation(-4.0, 0.0, 0.0, 0.0, (4.0, 0.0), as_others(static)), 0.0)
+    assert guide.route is not None and guide.route.waypoints_m.shape[0] > 2
+    assert g.strategy is Strategy.GO
+    assert g.tail_m.shape[0] >= 1 and np.allclose(g.tail_m[-1], (4.0, 0.0))
+    # the intermediate goal is in sight: the leg to it clears every disc by the route's
+    # clearance
+    d = segment_disc_distance(np.array([[-4.0, 0.0]]), g.goal_m[None], static.center_m)
+    assert (d - static.radius_m).min() >= 0.9 - 1e-6
+    assert g.left_m > 8.0  # round the wall, not through it
+
+
+def test_without_a_map_the_goal_is_the_goal() -> None:
+    guide = RouteGuide(StaticMap.empty(), 0.3, liveness=LivenessConfig())
+    g = guide.guide(observation(0.0, 0.0, 0.0, 0.0, (5.0, 0.0), Others.empty()), 0.0)
+    assert np.allclose(g.goal_m, (5.0, 0.0)) and g.tail_m.shape == (0, 2)
+    assert math.isclose(g.left_m, 5.0)
+
+
+def drive(planner_name: str, static: StaticMap, start: tuple[float, float, float],
+          goal: tuple[float, float], seconds: float = 40.0) -> tuple[np.ndarray, float]:
+    """Plan and step one robot alone (10 Hz plans, 50 Hz unicycle); the path and the
+    smallest gap to a disc edge minus the robot's radius."""
+    planner = make_planner(planner_name, PlannerConfig(), static_map=static)
+    x, y, th = start
+    v = w = 0.0
+    path = [(x, y)]
+    others = as_others(static)
+    for k in range(int(seconds * 10)):
+        res = planner.plan(observation(x, y, th, v, goal, others), k * 0.1)
+        if res.status == PlanStatus.ARRIVED:
+            break
+        v, w = res.v_mps, res.omega_radps
+        for _ in range(5):
+            x, y, th = integrate_unicycle(np.array([[x, y, th]]), np.array([v]),
+                                          np.array([w]), 0.02)[0].tolist()
+            path.append((x, y))
+    pts = np.array(path)
+    gap = np.hypot(*(pts[:, None, :] - static.center_m[None]).transpose(2, 0, 1))
+    return pts, float((gap - static.radius_m - 0.5).min())
+
+
+def test_eifp_mpc_leaves_a_cup_that_traps_eifp_without_a_route() -> None:
+    static = cup()
+    goal = (4.0, 0.0)
+    path, gap = drive("eifp-mpc", static, (-3.0, 0.0, 0.0), goal, seconds=60.0)
+    assert math.dist(path[-1], goal) < 0.25  # arrived
+    assert gap > 0.0  # never touched the cup
+    # eIFP (no routes; otherwise the same via-points) stays in the cup's local minimum
+    path, _ = drive("eifp", static, (-3.0, 0.0, 0.0), goal, seconds=60.0)
+    assert (path[:, 0] < 0.0).all() and (np.abs(path[:, 1]) < 6.0).all()

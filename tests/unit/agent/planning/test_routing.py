@@ -1,0 +1,187 @@
+"""Routes over the static map (`agent.planning.routing`)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from agent.core.scenario import ObstacleSpec
+from agent.planning.routing import (
+    MAX_ROUTED_OBSTACLES,
+    ROUTE_MARGIN_M,
+    RouteFollower,
+    StaticMap,
+    VisibilityGraph,
+    plan_route,
+    route_or_tight,
+    segment_disc_distance,
+    unreachable_reason,
+)
+
+ROBOT_M = 0.5
+D_SAFETY_M = 0.3
+CLEARANCE_M = ROBOT_M + D_SAFETY_M + ROUTE_MARGIN_M
+
+
+def wall(door_m: float = 4.4, reach_m: float = 9.0, radius_m: float = 0.6,
+         spacing_m: float = 1.2, offset_m: float = 0.0) -> StaticMap:
+    """A wall of touching discs along x = 0, with a doorway `door_m` wide between the
+    edges of its two discs, centred on y = offset_m; it reaches about `reach_m` each way
+    (door_m = 0: no doorway, one closed wall)."""
+    k = np.arange(0.0, reach_m / spacing_m)
+    if door_m <= 0.0:
+        ys = np.concatenate((-k[::-1] * spacing_m, k[1:] * spacing_m))
+    else:
+        edge = door_m / 2.0 + radius_m
+        ys = np.concatenate((-(edge + k[::-1] * spacing_m), edge + k * spacing_m))
+    ys = ys + offset_m
+    return StaticMap(np.column_stack((np.zeros(ys.size), ys)), np.full(ys.size, radius_m))
+
+
+def clearance_along(points_m: np.ndarray, static: StaticMap) -> float:
+    """Smallest distance from a polyline to any disc edge."""
+    d = segment_disc_distance(points_m[:-1], points_m[1:], static.center_m)
+    return float((d - static.radius_m[None, :]).min())
+
+
+def test_segment_disc_distance_matches_the_analytic_cases() -> None:
+    a = np.array([[0.0, 0.0], [0.0, 0.0], [1.0, 1.0]])
+    b = np.array([[10.0, 0.0], [10.0, 0.0], [1.0, 1.0]])
+    c = np.array([[5.0, 3.0], [-4.0, 3.0]])
+    d = segment_disc_distance(a, b, c)
+    assert d[0, 0] == pytest.approx(3.0)  # perpendicular foot inside the segment
+    assert d[1, 1] == pytest.approx(5.0)  # nearest point: the start
+    assert d[2, 0] == pytest.approx(math.hypot(4.0, 2.0))  # a zero-length segment is a point
+
+
+def test_a_clear_line_is_its_own_route() -> None:
+    static = StaticMap(np.array([[0.0, 10.0]]), np.array([1.0]))
+    route = plan_route(np.array([-5.0, 0.0]), np.array([5.0, 0.0]), static, CLEARANCE_M)
+    assert route is not None
+    assert route.waypoints_m.shape == (2, 2)
+    assert route.length_m == pytest.approx(10.0)
+
+
+def test_the_route_through_a_doorway_clears_every_disc_and_is_near_shortest() -> None:
+    static = wall()
+    start, goal = np.array([-6.0, 0.5]), np.array([6.0, -0.5])
+    route = plan_route(start, goal, static, CLEARANCE_M)
+    assert route is not None and not route.tight
+    # it keeps the clearance from every disc edge (rounding aside)
+    assert clearance_along(route.waypoints_m, static) >= CLEARANCE_M - 1e-6
+    # and goes through the doorway (|y| < 2.8 at the wall), not round the ends (|y| > 9)
+    assert abs(np.interp(0.0, route.waypoints_m[:, 0], route.waypoints_m[:, 1])) < 2.2
+    assert route.length_m < 1.05 * math.dist(start, goal)
+
+
+def test_a_wall_without_a_doorway_is_gone_round() -> None:
+    static = wall(door_m=0.0)
+    route = plan_route(np.array([-4.0, 0.0]), np.array([4.0, 0.0]), static, CLEARANCE_M)
+    assert route is not None
+    reach = float(np.abs(static.center_m[:, 1]).max())
+    assert np.abs(route.waypoints_m[:, 1]).max() > reach + 0.6 + CLEARANCE_M - 0.1
+    assert clearance_along(route.waypoints_m, static) >= CLEARANCE_M - 1e-6
+
+
+def test_a_doorway_only_the_robot_fits_through_gives_a_tight_route() -> None:
+    # clear width 1.6 m between disc edges: the robot (1 m) fits, its 0.3 m margin on each
+    # side plus the route margin does not
+    static = wall(door_m=1.6, reach_m=40.0)
+    route = route_or_tight(np.array([-4.0, 0.0]), np.array([4.0, 0.0]), static,
+                           ROBOT_M, D_SAFETY_M)
+    assert route is not None and route.tight
+    assert clearance_along(route.waypoints_m, static) >= ROBOT_M - 1e-6
+
+
+def test_a_goal_behind_a_gap_narrower_than_the_robot_is_unreachable() -> None:
+    # a wall with a 0.9 m doorway: too narrow for the 1 m robot, so round the ends
+    static = wall(door_m=0.9, reach_m=8.4)
+    route = route_or_tight(np.array([-4.0, 0.0]), np.array([4.0, 0.0]), static,
+                           ROBOT_M, D_SAFETY_M)
+    assert route is not None and np.abs(route.waypoints_m[:, 1]).max() > 8.0
+    # a closed ring round the goal
+    a = np.linspace(0.0, 2.0 * math.pi, 36, endpoint=False)
+    ring = StaticMap(np.column_stack((8.0 * np.cos(a), 8.0 * np.sin(a))), np.full(36, 0.8))
+    why = unreachable_reason(np.array([20.0, 0.0]), np.array([0.0, 0.0]), ring, ROBOT_M)
+    assert why is not None and "no path" in why
+    assert unreachable_reason(np.array([2.0, 0.0]), np.array([0.0, 3.0]), ring, ROBOT_M) is None
+
+
+def test_a_gap_wider_than_the_robot_is_not_a_reason_to_refuse() -> None:
+    a = np.linspace(0.0, 2.0 * math.pi, 24, endpoint=False)
+    ring = StaticMap(np.column_stack((8.0 * np.cos(a), 8.0 * np.sin(a))), np.full(24, 0.4))
+    # neighbouring discs are 2.09 m apart centre to centre: 1.29 m between edges > 1 m
+    assert unreachable_reason(np.array([20.0, 0.0]), np.array([0.0, 0.0]), ring,
+                              ROBOT_M) is None
+
+
+def test_a_start_inside_the_margin_is_not_cut_off() -> None:
+    static = StaticMap(np.array([[0.0, 0.0]]), np.array([1.0]))
+    start = np.array([1.7, 0.0])  # 0.7 m from the edge, inside the 0.9 m clearance
+    route = plan_route(start, np.array([-6.0, 0.0]), static, CLEARANCE_M)
+    assert route is not None
+    assert clearance_along(route.waypoints_m[1:], static) >= CLEARANCE_M - 1e-6
+
+
+def test_the_shared_graph_gives_the_same_route_as_a_fresh_one() -> None:
+    static = wall(offset_m=-0.6)
+    graph = VisibilityGraph.build(static, CLEARANCE_M)
+    start, goal = np.array([-5.0, 6.0]), np.array([5.0, -6.0])
+    a = plan_route(start, goal, static, CLEARANCE_M, graph)
+    b = plan_route(start, goal, static, CLEARANCE_M)
+    assert a is not None and b is not None
+    np.testing.assert_allclose(a.waypoints_m, b.waypoints_m)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.lists(st.tuples(st.floats(-8, 8), st.floats(-8, 8), st.floats(0.3, 1.5)),
+                min_size=1, max_size=8),
+       st.floats(-math.pi, math.pi))
+def test_every_route_found_keeps_its_clearance(discs: list[tuple[float, float, float]],
+                                               angle: float) -> None:
+    static = StaticMap(np.array([d[:2] for d in discs]), np.array([d[2] for d in discs]))
+    start = 14.0 * np.array([math.cos(angle), math.sin(angle)])
+    route = plan_route(start, -start, static, CLEARANCE_M)
+    if route is None:  # possible: discs can close every way; nothing to check then
+        return
+    assert clearance_along(route.waypoints_m, static) >= CLEARANCE_M - 1e-6
+    np.testing.assert_allclose(route.waypoints_m[[0, -1]], [start, -start])
+
+
+def test_the_follower_looks_ahead_to_the_farthest_visible_waypoint_and_never_back() -> None:
+    static = wall(door_m=0.0)
+    route = plan_route(np.array([-4.0, 0.0]), np.array([4.0, 0.0]), static, CLEARANCE_M)
+    assert route is not None and route.waypoints_m.shape[0] >= 4
+    follower = RouteFollower(route, static)
+    first = follower.intermediate_goal(np.array([-4.0, 0.0]))
+    assert not np.allclose(first, route.waypoints_m[-1])  # the goal is behind the wall
+    left0 = follower.progress_left_m(np.array([-4.0, 0.0]))
+    assert left0 == pytest.approx(route.length_m)
+    # past the wall's end the goal itself is in sight
+    top = route.waypoints_m[np.argmax(np.abs(route.waypoints_m[:, 1]))]
+    beyond = top + np.array([1.5, 0.0])
+    assert np.allclose(follower.intermediate_goal(beyond), route.waypoints_m[-1])
+    # and back at the start, the follower does not go back along the route
+    assert np.allclose(follower.intermediate_goal(np.array([-4.0, 0.0])),
+                       route.waypoints_m[-1])
+
+
+def test_static_map_of_a_scenario_keeps_only_still_obstacles() -> None:
+    obstacles = (ObstacleSpec(-1, (0.0, 0.0), 1.0), ObstacleSpec(-2, (5.0, 0.0), 1.0, (0.5, 0.0)))
+    static = StaticMap.of_obstacles(obstacles)
+    assert len(static) == 1 and static.routable
+    assert not StaticMap.empty().routable
+    many = StaticMap(np.zeros((MAX_ROUTED_OBSTACLES + 1, 2)), np.ones(MAX_ROUTED_OBSTACLES + 1))
+    assert not many.routable
+    assert unreachable_reason(np.array([9.0, 9.0]), np.zeros(2), many, ROBOT_M) is None
+
+
+def test_static_map_refuses_bad_discs() -> None:
+    with pytest.raises(ValueError, match="radii"):
+        StaticMap(np.zeros((2, 2)), np.array([1.0, -1.0]))
+    with pytest.raises(ValueError, match="centres"):
+        StaticMap(np.zeros((2, 2)), np.array([1.0]))
