@@ -35,7 +35,8 @@ import numpy as np
 
 from agent.core.scenario import Scenario
 from orchestrator.analysis.rundir import safe_name, write_json
-from orchestrator.experiments.families import SETUPS, ideal_time_s, resolve
+from orchestrator.experiments.families import SETUPS, resolve
+from orchestrator.experiments.scenario_blocks import ideal_time_s
 
 TUNING_SEEDS: tuple[int, ...] = tuple(range(100, 106))
 """Seeds to tune planners on (`--seeds tuning`, 100-105); never reported by default."""

@@ -21,39 +21,33 @@ from pathlib import Path
 
 import numpy as np
 
-from agent.core.config import (
-    PLANNER_NAMES,
-    PlannerConfig,
-    RobotLimits,
-    SafetyConfig,
-    profile_config,
-)
+from agent.core.config import PLANNER_NAMES, profile_config
 from agent.core.scenario import ObstacleSpec, RobotSpec, Scenario
+from orchestrator.experiments.liveness_families import GENERATORS as LIVENESS_GENERATORS
+from orchestrator.experiments.scenario_blocks import (
+    LANE_SPACING_M,
+    LONG_RUN_M,
+    MIN_CIRCLE_RADIUS_M,
+    MIN_START_SPACING_M,
+    MIXED_RADII_M,
+    MIXED_V_MAX_MPS,
+    ROBOT_RADIUS_M,
+    SHORT_RUN_M,
+    angled_lanes,
+    benchmark_time_limit_s,
+    circle_radius_m,
+    crossing_half_run_m,
+    lane_offsets,
+    make_scenario,
+    mixed_values,
+    random_scenario,
+    require,
+    robot_spec,
+)
 from protocol import MAX_ROBOTS
 from world.scenario_file import ScenarioError, load_scenario, validate_scenario
 
 SETUPS_DIR = Path(__file__).resolve().parent.parent / "setups"
-
-ROBOT_RADIUS_M = 0.5
-V_MAX_MPS = 1.1
-OMEGA_MAX_RADPS = 1.5
-D_SAFETY_M = 0.3
-SHORT_RUN_M = 36.0
-"""Straight start-goal distance of setups A-E."""
-LONG_RUN_M = 76.0
-"""Straight start-goal distance of setups F and G."""
-LANE_SPACING_M = 3.0
-"""Distance between neighbouring lanes of one cohort."""
-MIN_START_SPACING_M = 2.5
-"""Smallest centre distance between two starts (or two goals) a generator produces."""
-MIN_CIRCLE_RADIUS_M = 18.0
-TIME_LIMIT_FACTOR = 4.0
-"""Time limit = this many times the ideal time, rounded up to 10 s."""
-BENCH_TIME_LIMIT_FACTOR = 3.0
-BENCH_TIME_MARGIN_S = 30.0
-"""Benchmark families (`benchmark_time_limit_s`): 3x the ideal time + 30 s."""
-COORD_DECIMALS = 4
-HEADING_DECIMALS = 6
 
 # Setup E: five robots, goals near the centre (pairwise >= 2.5 m apart), each start 36 m
 # from its goal in a random direction (approach directions >= 35 deg apart). Drawn once
@@ -72,75 +66,6 @@ _SETUP_E = (
 # Building blocks
 # --------------------------------------------------------------------------------------
 
-def _robot(robot_id: int, start_xy: Sequence[float], goal_xy: Sequence[float], *,
-           exact: bool = False, radius_m: float = ROBOT_RADIUS_M,
-           v_max_mps: float = V_MAX_MPS) -> RobotSpec:
-    """A robot at the setups' scale, heading straight at its goal.
-
-    Coordinates are rounded to 0.1 mm and headings to 1 urad (short, readable files)
-    unless `exact`. The `+ 0.0` turns -0.0 into 0.0.
-    """
-    def r(value: float, decimals: int) -> float:
-        return float(value) + 0.0 if exact else round(float(value), decimals) + 0.0
-
-    sx, sy = (r(c, COORD_DECIMALS) for c in start_xy)
-    gx, gy = (r(c, COORD_DECIMALS) for c in goal_xy)
-    heading = r(math.atan2(gy - sy, gx - sx), HEADING_DECIMALS)
-    return RobotSpec(
-        id=robot_id,
-        start=(sx, sy, heading),
-        goal=(gx, gy),
-        radius_m=float(radius_m),
-        limits=RobotLimits(v_max_mps=float(v_max_mps), omega_max_radps=OMEGA_MAX_RADPS),
-    )
-
-
-def ideal_time_s(robots: Sequence[RobotSpec]) -> float:
-    """Longest straight start-goal line over v_max (the best any planner can do)."""
-    return max(
-        math.hypot(r.goal[0] - r.start[0], r.goal[1] - r.start[1]) / r.limits.v_max_mps
-        for r in robots
-    )
-
-
-def benchmark_time_limit_s(robots: Sequence[RobotSpec]) -> float:
-    """The benchmark families' limit: 3x the ideal time + 30 s, rounded up to 10 s.
-
-    Generous, so a slow planner fails by time rather than by a tight limit; short runs
-    (a swap over 12 m, ideal 11 s) get the margin, long ones the factor.
-    """
-    ideal = ideal_time_s(robots)
-    return math.ceil((BENCH_TIME_LIMIT_FACTOR * ideal + BENCH_TIME_MARGIN_S) / 10.0) * 10.0
-
-
-def _scenario(name: str, description: str, robots: Sequence[RobotSpec], *,
-              obstacles: Sequence[ObstacleSpec] = (),
-              time_limit_s: float | None = None) -> Scenario:
-    limit = time_limit_s if time_limit_s is not None else \
-        math.ceil(TIME_LIMIT_FACTOR * ideal_time_s(robots) / 10.0) * 10.0
-    scenario = Scenario(
-        name=name,
-        description=description,
-        time_limit_s=float(limit),
-        goal_tolerance_m=0.25,
-        planner_config=PlannerConfig(safety=SafetyConfig(d_safety_m=D_SAFETY_M)),
-        robots=tuple(robots),
-        obstacles=tuple(obstacles),
-    )
-    return validate_scenario(scenario, name)
-
-
-def _lanes(k: int, spacing_m: float = LANE_SPACING_M, offset_m: float = 0.0) -> np.ndarray:
-    """(k,) lane offsets centred on 0 (plus offset_m), spacing_m apart."""
-    return (np.arange(k) - (k - 1) / 2.0) * spacing_m + offset_m
-
-
-def _half_run(k: int, minimum_m: float) -> float:
-    """Half the crossing distance: the requested one, or more when cohorts are wide."""
-    lanes_half_width = (k - 1) / 2.0 * LANE_SPACING_M
-    return max(minimum_m, lanes_half_width + 2.0 * MIN_START_SPACING_M)
-
-
 # Direction of a cohort -> (start(lane, h), goal(lane, h)).
 _FLOWS: dict[str, Callable[[float, float], tuple[tuple[float, float], tuple[float, float]]]] = {
     "left_to_right": lambda s, h: ((-h, s), (h, s)),
@@ -155,13 +80,8 @@ def _cohorts(flows: Sequence[tuple[str, np.ndarray]], half_run_m: float) -> list
     for flow, lanes in flows:
         for s in lanes:
             start, goal = _FLOWS[flow](float(s), half_run_m)
-            robots.append(_robot(len(robots), start, goal))
+            robots.append(robot_spec(len(robots), start, goal))
     return robots
-
-
-def _require(condition: bool, message: str) -> None:
-    if not condition:
-        raise ScenarioError(message)
 
 
 # --------------------------------------------------------------------------------------
@@ -171,18 +91,18 @@ def _require(condition: bool, message: str) -> None:
 def setup_a() -> Scenario:
     """Two robots mirrored across the x axis; their paths cross at right angles at (0, 0)."""
     c = SHORT_RUN_M / 2.0 / math.sqrt(2.0)
-    robots = [_robot(0, (-c, c), (c, -c)), _robot(1, (-c, -c), (c, c))]
-    return _scenario("setup_a", "A: two robots mirrored across the x axis, paths crossing at "
-                     "right angles at the origin (symmetric conflict)", robots)
+    robots = [robot_spec(0, (-c, c), (c, -c)), robot_spec(1, (-c, -c), (c, c))]
+    return make_scenario("setup_a", "A: two robots mirrored across the x axis, paths crossing at "
+                         "right angles at the origin (symmetric conflict)", robots)
 
 
 def setup_b() -> Scenario:
     """Three robots in a T: one from the top, two head-on from the left and right."""
     h = SHORT_RUN_M / 2.0
-    robots = [_robot(0, (0.0, h), (0.0, -h)), _robot(1, (-h, 0.0), (h, 0.0)),
-              _robot(2, (h, 0.0), (-h, 0.0))]
-    return _scenario("setup_b", "B: three robots T-shaped, one from the top and two from "
-                     "opposite sides, all meeting at the origin", robots)
+    robots = [robot_spec(0, (0.0, h), (0.0, -h)), robot_spec(1, (-h, 0.0), (h, 0.0)),
+              robot_spec(2, (h, 0.0), (-h, 0.0))]
+    return make_scenario("setup_b", "B: three robots T-shaped, one from the top and two from "
+                         "opposite sides, all meeting at the origin", robots)
 
 
 def setup_c() -> Scenario:
@@ -192,52 +112,52 @@ def setup_c() -> Scenario:
     for k, deg in enumerate((90.0, 210.0, 330.0)):
         a = math.radians(deg)
         start = (h * math.cos(a), h * math.sin(a))
-        robots.append(_robot(k, start, (-start[0], -start[1])))
-    return _scenario("setup_c", "C: three robots at 120 deg converging through the origin "
-                     "(radial symmetry)", robots)
+        robots.append(robot_spec(k, start, (-start[0], -start[1])))
+    return make_scenario("setup_c", "C: three robots at 120 deg converging through the origin "
+                         "(radial symmetry)", robots)
 
 
 def setup_d() -> Scenario:
     """Four robots on a cross swapping with the antipodal robot (mirrored across both axes)."""
     h = SHORT_RUN_M / 2.0
     starts = [(h, 0.0), (0.0, h), (-h, 0.0), (0.0, -h)]
-    robots = [_robot(k, s, (-s[0], -s[1])) for k, s in enumerate(starts)]
-    return _scenario("setup_d", "D: four robots in a cross, antipodal swap through the "
-                     "origin (mirrored across both axes)", robots)
+    robots = [robot_spec(k, s, (-s[0], -s[1])) for k, s in enumerate(starts)]
+    return make_scenario("setup_d", "D: four robots in a cross, antipodal swap through the "
+                         "origin (mirrored across both axes)", robots)
 
 
 def setup_e() -> Scenario:
     """Five robots at seeded random places, goals clustered around the centre."""
-    robots = [_robot(k, s, g) for k, (s, g) in enumerate(_SETUP_E)]
-    return _scenario("setup_e", "E: five robots randomly distributed (seeded), goals "
-                     "clustered within 4 m of the origin", robots)
+    robots = [robot_spec(k, s, g) for k, (s, g) in enumerate(_SETUP_E)]
+    return make_scenario("setup_e", "E: five robots randomly distributed (seeded), goals "
+                         "clustered within 4 m of the origin", robots)
 
 
 def setup_f(n: int = 12) -> Scenario:
     """Three groups of n/3: left to right, top to bottom and bottom to top (head-on)."""
-    _require(n >= 3 and n % 3 == 0,
-             f"setup_f: --agents must be a positive multiple of 3 (three groups), got {n}")
+    require(n >= 3 and n % 3 == 0,
+            f"setup_f: --agents must be a positive multiple of 3 (three groups), got {n}")
     k = n // 3
-    lanes = _lanes(k)
+    lanes = lane_offsets(k)
     flows = [("left_to_right", lanes), ("top_to_bottom", lanes), ("bottom_to_top", lanes)]
-    robots = _cohorts(flows, _half_run(k, LONG_RUN_M / 2.0))
+    robots = _cohorts(flows, crossing_half_run_m(k, LONG_RUN_M / 2.0))
     name = "setup_f" if n == 12 else f"setup_f_{n}"
-    return _scenario(name, f"F: {n} robots in three groups of {k}: left to right, top to "
-                     "bottom, bottom to top", robots)
+    return make_scenario(name, f"F: {n} robots in three groups of {k}: left to right, top to "
+                         "bottom, bottom to top", robots)
 
 
 def setup_g(n: int = 16) -> Scenario:
     """Four cohorts of n/4, each crossing to the opposite side (opposing cohorts head-on)."""
-    _require(n >= 4 and n % 4 == 0,
-             f"setup_g: --agents must be a positive multiple of 4 (four cohorts), got {n}")
+    require(n >= 4 and n % 4 == 0,
+            f"setup_g: --agents must be a positive multiple of 4 (four cohorts), got {n}")
     k = n // 4
-    lanes = _lanes(k)
+    lanes = lane_offsets(k)
     flows = [("left_to_right", lanes), ("right_to_left", lanes),
              ("top_to_bottom", lanes), ("bottom_to_top", lanes)]
-    robots = _cohorts(flows, _half_run(k, LONG_RUN_M / 2.0))
+    robots = _cohorts(flows, crossing_half_run_m(k, LONG_RUN_M / 2.0))
     name = "setup_g" if n == 16 else f"setup_g_{n}"
-    return _scenario(name, f"G: {n} robots in four cohorts of {k}, each crossing to the "
-                     "opposite side (dense cross-flow)", robots)
+    return make_scenario(name, f"G: {n} robots in four cohorts of {k}, each crossing to the "
+                         "opposite side (dense cross-flow)", robots)
 
 
 SETUPS: dict[str, Callable[..., Scenario]] = {
@@ -258,7 +178,7 @@ def circle(n: int, rng: np.random.Generator | None = None) -> Scenario:
     least 18 m. For even n the second half of the robots is the exact negation of the
     first half. `rng` is unused (the family is deterministic).
     """
-    _require(n >= 2, f"circle: --agents must be >= 2, got {n}")
+    require(n >= 2, f"circle: --agents must be >= 2, got {n}")
     radius_m = max(MIN_CIRCLE_RADIUS_M, MIN_START_SPACING_M / 2.0 / math.sin(math.pi / n))
     radius_m = math.ceil(radius_m * 10.0) / 10.0
     half = n // 2 if n % 2 == 0 else n
@@ -266,9 +186,9 @@ def circle(n: int, rng: np.random.Generator | None = None) -> Scenario:
                radius_m * math.sin(2.0 * math.pi * k / n)) for k in range(half)]
     if n % 2 == 0:
         starts += [(-x, -y) for x, y in starts]
-    robots = [_robot(k, (x, y), (-x, -y), exact=True) for k, (x, y) in enumerate(starts)]
-    return _scenario(f"circle_{n}", f"{n} robots on a circle of radius {radius_m:g} m, "
-                     "antipodal swap", robots)
+    robots = [robot_spec(k, (x, y), (-x, -y), exact=True) for k, (x, y) in enumerate(starts)]
+    return make_scenario(f"circle_{n}", f"{n} robots on a circle of radius {radius_m:g} m, "
+                         "antipodal swap", robots)
 
 
 CIRCLES_GROUP = 8
@@ -290,7 +210,7 @@ def circles(n: int, rng: np.random.Generator | None = None) -> Scenario:
     on the rims of neighbouring circles meet each other. Circle g is rotated by
     g * 22.5 deg / 3 (neighbouring circles are not mirror images). `rng` is unused.
     """
-    _require(n >= 2, f"circles: --agents must be >= 2, got {n}")
+    require(n >= 2, f"circles: --agents must be >= 2, got {n}")
     groups = math.ceil(n / CIRCLES_GROUP)
     sizes = [n // groups + (1 if g < n % groups else 0) for g in range(groups)]
     cols = math.ceil(math.sqrt(groups))
@@ -303,9 +223,9 @@ def circles(n: int, rng: np.random.Generator | None = None) -> Scenario:
         for k in range(size):
             a = turn + 2.0 * math.pi * k / size
             dx, dy = CIRCLES_RADIUS_M * math.cos(a), CIRCLES_RADIUS_M * math.sin(a)
-            robots.append(_robot(len(robots), (cx + dx, cy + dy), (cx - dx, cy - dy)))
-    scenario = _scenario(f"circles_{n}", f"{n} robots in {groups} antipodal circles of "
-                         f"radius {CIRCLES_RADIUS_M:g} m, {CIRCLES_PITCH_M:g} m apart", robots)
+            robots.append(robot_spec(len(robots), (cx + dx, cy + dy), (cx - dx, cy - dy)))
+    scenario = make_scenario(f"circles_{n}", f"{n} robots in {groups} antipodal circles of "
+                             f"radius {CIRCLES_RADIUS_M:g} m, {CIRCLES_PITCH_M:g} m apart", robots)
     return dataclasses.replace(scenario, time_limit_s=CIRCLES_TIME_LIMIT_S)
 
 
@@ -324,139 +244,40 @@ def crossing(n: int, rng: np.random.Generator | None = None, *, flows: int = 2,
     generators' 2.5 m spacing. The scenario is then named `crossing_<angle>_<n>` and has
     the benchmark time limit (`benchmark_time_limit_s`).
     """
-    _require(flows in (2, 4), f"crossing: flows must be 2 or 4, got {flows}")
-    _require(n >= flows and n % flows == 0,
-             f"crossing: --agents must be a positive multiple of {flows}, got {n}")
+    require(flows in (2, 4), f"crossing: flows must be 2 or 4, got {flows}")
+    require(n >= flows and n % flows == 0,
+            f"crossing: --agents must be a positive multiple of {flows}, got {n}")
     k = n // flows
-    h = _half_run(k + 1, SHORT_RUN_M / 2.0)  # k + 1: interleaved lanes reach half a lane out
-    lanes = _lanes(k)
+    # k + 1: interleaved lanes reach half a lane out.
+    h = crossing_half_run_m(k + 1, SHORT_RUN_M / 2.0)
+    lanes = lane_offsets(k)
     if angle_deg is not None:
-        _require(flows == 2, "crossing: an angle needs flows=2")
+        require(flows == 2, "crossing: an angle needs flows=2")
         return _angled_crossing(k, lanes, h, float(angle_deg))
     if flows == 2:
         spec = [("left_to_right", lanes), ("bottom_to_top", lanes)]
         name = f"crossing_{n}"
     else:
-        shifted = _lanes(k, offset_m=LANE_SPACING_M / 2.0)
+        shifted = lane_offsets(k, offset_m=LANE_SPACING_M / 2.0)
         spec = [("left_to_right", lanes), ("bottom_to_top", lanes),
                 ("right_to_left", shifted), ("top_to_bottom", shifted)]
         name = f"crossing4_{n}"
-    return _scenario(name, f"{flows} perpendicular flows of {k} robots", _cohorts(spec, h))
-
-
-def angled_lanes(lanes: np.ndarray, h: float, angle_deg: float
-                 ) -> tuple[np.ndarray, np.ndarray, float]:
-    """Starts and goals of two cohorts on `lanes` crossing at angle_deg (`crossing`).
-
-    Args:
-        lanes: (k,) lane offsets [m] of each cohort.
-        h: the smallest half run [m]; lengthened in 1 m steps until starts, and goals,
-            keep the 2.5 m spacing.
-        angle_deg: the second cohort's direction to the first's, in (0, 180).
-
-    Returns:
-        (starts (2k, 2), goals (2k, 2), the half run used [m]); the first cohort first.
-    """
-    _require(math.isfinite(angle_deg) and 0.0 < angle_deg < 180.0,
-             f"crossing: the angle must be in (0, 180) deg, got {angle_deg!r}")
-    phi = math.radians(angle_deg)
-    directions = (np.array([1.0, 0.0]), np.array([math.cos(phi), math.sin(phi)]))
-    # Lane offsets along the left normal of the first cohort and the right normal of the
-    # second: at 90 deg these are exactly the `left_to_right` and `bottom_to_top` flows.
-    normals = (np.array([0.0, 1.0]), np.array([math.sin(phi), -math.cos(phi)]))
-    for _ in range(200):
-        starts = np.array([-h * d + s * nrm for d, nrm in zip(directions, normals)
-                           for s in lanes])
-        goals = np.array([h * d + s * nrm for d, nrm in zip(directions, normals)
-                          for s in lanes])
-        if min(_min_spacing(starts), _min_spacing(goals)) >= MIN_START_SPACING_M:
-            break
-        h += 1.0
-    else:  # pragma: no cover - 200 m more always separates the cohorts
-        raise ScenarioError(f"crossing: could not separate the cohorts at {angle_deg:g} deg")
-    return starts, goals, h
+    return make_scenario(name, f"{flows} perpendicular flows of {k} robots", _cohorts(spec, h))
 
 
 def _angled_crossing(k: int, lanes: np.ndarray, h: float, angle_deg: float) -> Scenario:
     starts, goals, h = angled_lanes(lanes, h, angle_deg)
-    robots = [_robot(i, s, g) for i, (s, g) in enumerate(zip(starts, goals))]
+    robots = [robot_spec(i, s, g) for i, (s, g) in enumerate(zip(starts, goals))]
     n = 2 * k
     label = f"{angle_deg:g}"
-    return _scenario(f"crossing_{label}_{n}", f"two cohorts of {k} crossing at {label} deg "
-                     f"({2.0 * h:g} m runs)", robots, time_limit_s=benchmark_time_limit_s(robots))
-
-
-def _min_spacing(xy: np.ndarray) -> float:
-    """Smallest centre distance between two rows of (m, 2) points (inf for fewer than 2)."""
-    if len(xy) < 2:
-        return math.inf
-    i, j = np.triu_indices(len(xy), k=1)
-    return float(np.hypot(*(xy[i] - xy[j]).T).min())
-
-
-def random_scenario(n: int, rng: np.random.Generator, *, max_tries: int = 20_000,
-                    density_per_m2: float | None = None, name: str | None = None) -> Scenario:
-    """n robots with seeded random starts and goals in a square.
-
-    The square's side is max(20 m, 4 m * sqrt(n)), or sqrt(n / density_per_m2) when a
-    density (robots per square metre) is given; starts are pairwise >= 2.5 m apart, goals
-    too, and each goal is at least half the side away from its start. With a density the
-    scenario has the benchmark time limit (`benchmark_time_limit_s`).
-    """
-    _require(n >= 1, f"random: --agents must be >= 1, got {n}")
-    if density_per_m2 is None:
-        side_m = max(20.0, 4.0 * math.sqrt(n))
-    else:
-        _require(math.isfinite(density_per_m2) and density_per_m2 > 0.0,
-                 f"random: the density must be > 0, got {density_per_m2!r}")
-        side_m = round(math.sqrt(n / density_per_m2), 2)
-    starts: list[np.ndarray] = []
-    goals: list[np.ndarray] = []
-    tries = 0
-    while len(starts) < n:
-        tries += 1
-        if tries > max_tries:
-            raise ScenarioError(f"random: could not place {n} robots in {side_m:g} m square")
-        s, g = rng.uniform(-side_m / 2.0, side_m / 2.0, size=(2, 2))
-        s, g = np.round(s, 2), np.round(g, 2)
-        if np.hypot(*(g - s)) < side_m / 2.0:
-            continue
-        if any(np.hypot(*(s - o)) < MIN_START_SPACING_M for o in starts):
-            continue
-        if any(np.hypot(*(g - o)) < MIN_START_SPACING_M for o in goals):
-            continue
-        starts.append(s)
-        goals.append(g)
-    robots = [_robot(k, s, g) for k, (s, g) in enumerate(zip(starts, goals))]
-    if density_per_m2 is None:
-        return _scenario(name or f"random_{n}", f"{n} robots, random starts and goals in a "
-                         f"{side_m:g} m square", robots)
-    return _scenario(name or f"random_{n}", f"{n} robots, random starts and goals in a "
-                     f"{side_m:g} m square ({100.0 * density_per_m2:g} robots per 100 m^2)",
-                     robots, time_limit_s=benchmark_time_limit_s(robots))
+    return make_scenario(f"crossing_{label}_{n}", f"two cohorts of {k} crossing at {label} deg "
+                         f"({2.0 * h:g} m runs)", robots,
+                         time_limit_s=benchmark_time_limit_s(robots))
 
 
 # --------------------------------------------------------------------------------------
 # Benchmark families (orchestrator benchmark): scenarios the planners were not tuned on
 # --------------------------------------------------------------------------------------
-
-MIXED_RADII_M = (0.3, 0.5, 0.7)
-"""Disc radii of `circle_mixed`, each used by about a third of the robots."""
-MIXED_V_MAX_MPS = (0.8, 1.1, 1.4)
-"""v_max of `circle_mixed`, each used by about a third of the robots (drawn independently
-of the radii)."""
-
-
-def _mixed(values: Sequence[float], n: int, rng: np.random.Generator) -> np.ndarray:
-    """(n,) values cycled so each appears n // len or one more times, in seeded order."""
-    return rng.permutation(np.resize(np.asarray(values, dtype=float), n))
-
-
-def _circle_radius_m(n: int, spacing_m: float, minimum_m: float) -> float:
-    """The smallest radius (0.1 m steps, >= minimum_m) with neighbours spacing_m apart."""
-    radius_m = max(minimum_m, spacing_m / 2.0 / math.sin(math.pi / n))
-    return math.ceil(radius_m * 10.0) / 10.0
-
 
 def circle_mixed(n: int, rng: np.random.Generator) -> Scenario:
     """The antipodal circle with mixed robots: radii 0.3/0.5/0.7 m, v_max 0.8/1.1/1.4 m/s.
@@ -466,19 +287,19 @@ def circle_mixed(n: int, rng: np.random.Generator) -> Scenario:
     2.5 m centre spacing plus what the largest disc adds over 0.5 m (2.9 m). Ideal time
     and time limit follow from each robot's own v_max (the slowest robot decides).
     """
-    _require(n >= 2, f"circle_mixed: --agents must be >= 2, got {n}")
+    require(n >= 2, f"circle_mixed: --agents must be >= 2, got {n}")
     spacing_m = MIN_START_SPACING_M + 2.0 * (max(MIXED_RADII_M) - ROBOT_RADIUS_M)
-    radius_m = _circle_radius_m(n, spacing_m, MIN_CIRCLE_RADIUS_M)
-    radii = _mixed(MIXED_RADII_M, n, rng)
-    speeds = _mixed(MIXED_V_MAX_MPS, n, rng)
+    radius_m = circle_radius_m(n, spacing_m, MIN_CIRCLE_RADIUS_M)
+    radii = mixed_values(MIXED_RADII_M, n, rng)
+    speeds = mixed_values(MIXED_V_MAX_MPS, n, rng)
     robots = []
     for k in range(n):
         a = 2.0 * math.pi * k / n
         x, y = radius_m * math.cos(a), radius_m * math.sin(a)
-        robots.append(_robot(k, (x, y), (-x, -y), radius_m=radii[k], v_max_mps=speeds[k]))
-    return _scenario(f"circle_mixed_{n}", f"{n} mixed robots (radius 0.3-0.7 m, v_max "
-                     f"0.8-1.4 m/s) on a circle of radius {radius_m:g} m, antipodal swap",
-                     robots, time_limit_s=benchmark_time_limit_s(robots))
+        robots.append(robot_spec(k, (x, y), (-x, -y), radius_m=radii[k], v_max_mps=speeds[k]))
+    return make_scenario(f"circle_mixed_{n}", f"{n} mixed robots (radius 0.3-0.7 m, v_max "
+                         f"0.8-1.4 m/s) on a circle of radius {radius_m:g} m, antipodal swap",
+                         robots, time_limit_s=benchmark_time_limit_s(robots))
 
 
 SWAP_RUN_M = 12.0
@@ -493,16 +314,17 @@ def swap_pairs(n: int, rng: np.random.Generator | None = None) -> Scenario:
     Pair p: robots at (-6 m, y_p) and (+6 m, y_p), lanes 3 m apart (so neighbouring pairs
     interact while they dodge); robot 2p starts on the left. `rng` is unused.
     """
-    _require(n >= 2 and n % 2 == 0, f"swap_pairs: --agents must be a positive even number, "
-             f"got {n}")
+    require(n >= 2 and n % 2 == 0, f"swap_pairs: --agents must be a positive even number, "
+            f"got {n}")
     half = SWAP_RUN_M / 2.0
     robots = []
-    for y in _lanes(n // 2, SWAP_PAIR_SPACING_M):
-        robots.append(_robot(len(robots), (-half, y), (half, y)))
-        robots.append(_robot(len(robots), (half, y), (-half, y)))
-    return _scenario(f"swap_pairs_{n}", f"{n // 2} pairs side by side ({SWAP_PAIR_SPACING_M:g} m "
-                     f"apart), each swapping places head-on over {SWAP_RUN_M:g} m", robots,
-                     time_limit_s=benchmark_time_limit_s(robots))
+    for y in lane_offsets(n // 2, SWAP_PAIR_SPACING_M):
+        robots.append(robot_spec(len(robots), (-half, y), (half, y)))
+        robots.append(robot_spec(len(robots), (half, y), (-half, y)))
+    return make_scenario(f"swap_pairs_{n}", f"{n // 2} pairs side by side "
+                         f"({SWAP_PAIR_SPACING_M:g} m apart), each swapping places head-on "
+                         f"over {SWAP_RUN_M:g} m", robots,
+                         time_limit_s=benchmark_time_limit_s(robots))
 
 
 SWAP_GRID_SPACING_M = 4.0
@@ -517,15 +339,15 @@ def swap_grid(n: int, rng: np.random.Generator | None = None) -> Scenario:
     straight line passes through the centre. `rng` is unused.
     """
     k = math.isqrt(max(n, 0))
-    _require(n >= 4 and k * k == n and k % 2 == 0,
-             f"swap_grid: --agents must be the square of an even number (4, 16, 36, ...), "
-             f"got {n}")
-    lanes = _lanes(k, SWAP_GRID_SPACING_M)
-    robots = [_robot(i * k + j, (x, y), (-x, -y))
+    require(n >= 4 and k * k == n and k % 2 == 0,
+            f"swap_grid: --agents must be the square of an even number (4, 16, 36, ...), "
+            f"got {n}")
+    lanes = lane_offsets(k, SWAP_GRID_SPACING_M)
+    robots = [robot_spec(i * k + j, (x, y), (-x, -y))
               for i, y in enumerate(lanes) for j, x in enumerate(lanes)]
-    return _scenario(f"swap_grid_{n}", f"{k}x{k} grid ({SWAP_GRID_SPACING_M:g} m cells), every "
-                     "robot to the cell mirrored through the centre", robots,
-                     time_limit_s=benchmark_time_limit_s(robots))
+    return make_scenario(f"swap_grid_{n}", f"{k}x{k} grid ({SWAP_GRID_SPACING_M:g} m cells), every "
+                         "robot to the cell mirrored through the centre", robots,
+                         time_limit_s=benchmark_time_limit_s(robots))
 
 
 RANDOM_DENSITIES_PER_M2 = {"sparse": 0.01, "medium": 0.025, "dense": 0.05}
@@ -534,9 +356,9 @@ RANDOM_DENSITIES_PER_M2 = {"sparse": 0.01, "medium": 0.025, "dense": 0.05}
 
 def random_density(n: int, rng: np.random.Generator, density: str) -> Scenario:
     """`random_scenario` in a square sized for a named density (`RANDOM_DENSITIES_PER_M2`)."""
-    _require(density in RANDOM_DENSITIES_PER_M2,
-             f"random: density must be one of {', '.join(RANDOM_DENSITIES_PER_M2)}, "
-             f"got {density!r}")
+    require(density in RANDOM_DENSITIES_PER_M2,
+            f"random: density must be one of {', '.join(RANDOM_DENSITIES_PER_M2)}, "
+            f"got {density!r}")
     return random_scenario(n, rng, density_per_m2=RANDOM_DENSITIES_PER_M2[density],
                            name=f"random_{density}_{n}")
 
@@ -557,8 +379,8 @@ def obstacles_circle(n: int, rng: np.random.Generator, *, max_tries: int = 10_00
     meets); pairwise gaps >= 2.5 m. Starts and goals are on the circle, so the obstacles
     never overlap them (and `validate_scenario` checks it).
     """
-    _require(n >= 2, f"obstacles_circle: --agents must be >= 2, got {n}")
-    radius_m = _circle_radius_m(n, MIN_START_SPACING_M, OBSTACLE_CIRCLE_MIN_RADIUS_M)
+    require(n >= 2, f"obstacles_circle: --agents must be >= 2, got {n}")
+    radius_m = circle_radius_m(n, MIN_START_SPACING_M, OBSTACLE_CIRCLE_MIN_RADIUS_M)
     count = int(rng.integers(3, 6))
     obstacles: list[ObstacleSpec] = []
     tries = 0
@@ -578,10 +400,10 @@ def obstacles_circle(n: int, rng: np.random.Generator, *, max_tries: int = 10_00
     for k in range(n):
         a = 2.0 * math.pi * k / n
         x, y = radius_m * math.cos(a), radius_m * math.sin(a)
-        robots.append(_robot(k, (x, y), (-x, -y)))
-    return _scenario(f"obstacles_circle_{n}", f"{n} robots on a circle of radius "
-                     f"{radius_m:g} m, antipodal swap around {count} static obstacles",
-                     robots, obstacles=obstacles, time_limit_s=benchmark_time_limit_s(robots))
+        robots.append(robot_spec(k, (x, y), (-x, -y)))
+    return make_scenario(f"obstacles_circle_{n}", f"{n} robots on a circle of radius "
+                         f"{radius_m:g} m, antipodal swap around {count} static obstacles",
+                         robots, obstacles=obstacles, time_limit_s=benchmark_time_limit_s(robots))
 
 
 FAMILIES: dict[str, tuple[int, str]] = {
@@ -614,11 +436,8 @@ FAMILIES: dict[str, tuple[int, str]] = {
 
 
 def _family(name: str, n: int, rng: np.random.Generator) -> Scenario:
-    # Imported here: liveness_families builds on this module's building blocks.
-    from orchestrator.experiments.liveness_families import GENERATORS
-
-    if name in GENERATORS:
-        return GENERATORS[name](n, rng)
+    if name in LIVENESS_GENERATORS:
+        return LIVENESS_GENERATORS[name](n, rng)
     if name == "circle":
         return circle(n, rng)
     if name == "crossing":

@@ -8,7 +8,7 @@ random scene, two platoons meeting head-on and a mixed-speed crossing at 60 deg.
 Everything here is pure, like `families`: a generator takes the robot count and a
 `numpy.random.Generator` and returns a validated `Scenario` at the families' scale (robot
 radius 0.5 m, v_max 1.1 m/s, d_safety 0.3 m) with the benchmark time limit
-(`families.benchmark_time_limit_s`: 3x the straight-line ideal time + 30 s). `GENERATORS`
+(`scenario_blocks.benchmark_time_limit_s`: 3x the straight-line ideal time + 30 s). `GENERATORS`
 is what `families.resolve` dispatches to; `families.FAMILIES` lists the names.
 
 Walls and corridor walls are rows of static discs (radius 0.6 m, centres at most 1.2 m
@@ -24,22 +24,22 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from agent.core.scenario import ObstacleSpec, RobotSpec, Scenario
-from orchestrator.experiments.families import (
+from orchestrator.experiments.scenario_blocks import (
     COORD_DECIMALS,
     MIN_CIRCLE_RADIUS_M,
     MIN_START_SPACING_M,
     MIXED_V_MAX_MPS,
     SHORT_RUN_M,
-    _circle_radius_m,
-    _half_run,
-    _lanes,
-    _mixed,
-    _require,
-    _robot,
-    _scenario,
     angled_lanes,
     benchmark_time_limit_s,
+    circle_radius_m,
+    crossing_half_run_m,
+    lane_offsets,
+    make_scenario,
+    mixed_values,
     random_scenario,
+    require,
+    robot_spec,
 )
 
 WALL_DISC_RADIUS_M = 0.6
@@ -131,8 +131,8 @@ def wall_discs(y_m: float, x_from_m: float, x_to_m: float, doors_x_m: Sequence[f
              x_to_m]
     discs: list[ObstacleSpec] = []
     for a, b in zip(edges[::2], edges[1::2]):
-        _require(b - a >= 2.0 * r - 1e-9, f"wall: a stretch of {b - a:g} m between "
-                 "doorways is shorter than one disc")
+        require(b - a >= 2.0 * r - 1e-9, f"wall: a stretch of {b - a:g} m between "
+                "doorways is shorter than one disc")
         count = math.ceil(round((b - a - 2.0 * r) / WALL_DISC_SPACING_M, 9)) + 1
         for x in np.linspace(a + r, b - r, count):
             centre = (round(float(x), COORD_DECIMALS) + 0.0, round(y_m, COORD_DECIMALS) + 0.0)
@@ -155,7 +155,7 @@ def _swap_across_wall(doors_x_m: Sequence[float], lanes_per_door: int, k: int
     goal is its start mirrored across the wall: the group below (first) goes up, the
     group above comes down, head-on in every lane.
     """
-    lanes = sorted(float(d + s) for d in doors_x_m for s in _lanes(lanes_per_door))
+    lanes = sorted(float(d + s) for d in doors_x_m for s in lane_offsets(lanes_per_door))
     pairs = []
     for side in (-1.0, 1.0):
         for j in range(k):
@@ -167,21 +167,21 @@ def _swap_across_wall(doors_x_m: Sequence[float], lanes_per_door: int, k: int
 
 def _wall_scenario(name: str, n: int, rng: np.random.Generator, doors_x_m: Sequence[float],
                    lanes_per_door: int) -> Scenario:
-    _require(n >= 2 and n % 2 == 0, f"{name}: --agents must be a positive even number "
-             f"(two groups), got {n}")
+    require(n >= 2 and n % 2 == 0, f"{name}: --agents must be a positive even number "
+            f"(two groups), got {n}")
     pairs = _swap_across_wall(doors_x_m, lanes_per_door, n // 2)
     depth = max(abs(s[1]) for s, _ in pairs)
     reach = (max(abs(s[0]) for s, _ in pairs) +
              max(WALL_END_MARGIN_M, WALL_END_DEPTH_FACTOR * depth))
     doors = np.asarray(doors_x_m, dtype=float) + _door_offsets(len(doors_x_m), rng)
     walls = wall_discs(0.0, -reach, reach, doors.tolist())
-    robots = [_robot(i, s, g) for i, (s, g) in enumerate(pairs)]
+    robots = [robot_spec(i, s, g) for i, (s, g) in enumerate(pairs)]
     where = ", ".join(f"{d:g}" for d in doors)
-    return _scenario(f"{name}_{n}", f"two groups of {n // 2} swap sides of a {2 * reach:g} m "
-                     f"wall of {len(walls)} discs through {len(doors)} "
-                     f"doorway{'s' if len(doors) > 1 else ''} of {DOORWAY_WIDTH_M:g} m at "
-                     f"x = {where} m", robots, obstacles=walls,
-                     time_limit_s=benchmark_time_limit_s(robots))
+    return make_scenario(f"{name}_{n}", f"two groups of {n // 2} swap sides of a {2 * reach:g} m "
+                         f"wall of {len(walls)} discs through {len(doors)} "
+                         f"doorway{'s' if len(doors) > 1 else ''} of {DOORWAY_WIDTH_M:g} m at "
+                         f"x = {where} m", robots, obstacles=walls,
+                         time_limit_s=benchmark_time_limit_s(robots))
 
 
 def wall_door(n: int, rng: np.random.Generator) -> Scenario:
@@ -213,23 +213,23 @@ def corridor(n: int, rng: np.random.Generator) -> Scenario:
     mouth, 3 m apart. A robot's goal is its start mirrored across x = 0 (the other
     group's start area), so the groups meet head-on inside the corridor.
     """
-    _require(n >= 2 and n % 2 == 0, f"corridor: --agents must be a positive even number "
-             f"(two groups), got {n}")
+    require(n >= 2 and n % 2 == 0, f"corridor: --agents must be a positive even number "
+            f"(two groups), got {n}")
     half_length = CORRIDOR_LENGTH_M / 2.0
     wall_y = CORRIDOR_WIDTH_M / 2.0 + WALL_DISC_RADIUS_M
     walls = wall_discs(-wall_y, -half_length, half_length, ())
     walls += wall_discs(wall_y, -half_length, half_length, (), first_id=-len(walls) - 1)
-    lanes = _lanes(2, CORRIDOR_LANE_SPACING_M)
+    lanes = lane_offsets(2, CORRIDOR_LANE_SPACING_M)
     robots: list[RobotSpec] = []
     for side, offset in zip((-1.0, 1.0), rng.uniform(-CORRIDOR_LANE_OFFSET_M,
                                                      CORRIDOR_LANE_OFFSET_M, size=2)):
         for j in range(n // 2):
             x = side * (half_length + CORRIDOR_ENTRY_M + (j // 2) * ROW_SPACING_M)
             y = float(lanes[j % 2]) + round(float(offset), 2)
-            robots.append(_robot(len(robots), (x, y), (-x, y)))
-    return _scenario(f"corridor_{n}", f"two groups of {n // 2} pass head-on through a "
-                     f"{CORRIDOR_LENGTH_M:g} m corridor, {CORRIDOR_WIDTH_M:g} m wide",
-                     robots, obstacles=walls, time_limit_s=benchmark_time_limit_s(robots))
+            robots.append(robot_spec(len(robots), (x, y), (-x, y)))
+    return make_scenario(f"corridor_{n}", f"two groups of {n // 2} pass head-on through a "
+                         f"{CORRIDOR_LENGTH_M:g} m corridor, {CORRIDOR_WIDTH_M:g} m wide",
+                         robots, obstacles=walls, time_limit_s=benchmark_time_limit_s(robots))
 
 
 def grid_dense(n: int, rng: np.random.Generator) -> Scenario:
@@ -243,10 +243,10 @@ def grid_dense(n: int, rng: np.random.Generator) -> Scenario:
     Even k: `rng` is unused.
     """
     k = math.isqrt(max(n, 0))
-    _require(n >= 4 and k * k == n, f"grid_dense: --agents must be a square (4, 9, 16, 25, "
-             f"...), got {n}")
+    require(n >= 4 and k * k == n, f"grid_dense: --agents must be a square (4, 9, 16, 25, "
+            f"...), got {n}")
     spacing_m = GRID_DENSE_SPACING_M.get(k, GRID_DENSE_DEFAULT_SPACING_M)
-    lanes = _lanes(k, spacing_m)
+    lanes = lane_offsets(k, spacing_m)
     starts = [(float(x), float(y)) for y in lanes for x in lanes]
     goals = [(-x + 0.0, -y + 0.0) for x, y in starts]
     if k % 2 == 1:
@@ -254,11 +254,11 @@ def grid_dense(n: int, rng: np.random.Generator) -> Scenario:
         angle = math.pi / 2.0 * int(rng.integers(4))
         goals[n // 2] = (round(exit_m * math.cos(angle), COORD_DECIMALS) + 0.0,
                          round(exit_m * math.sin(angle), COORD_DECIMALS) + 0.0)
-    robots = [_robot(i, s, g) for i, (s, g) in enumerate(zip(starts, goals))]
-    return _scenario(f"grid_dense_{n}", f"{k}x{k} grid, {spacing_m:g} m apart, every robot to "
-                     "its start mirrored through the centre" +
-                     (" (the centre robot leaves the grid)" if k % 2 else ""), robots,
-                     time_limit_s=benchmark_time_limit_s(robots))
+    robots = [robot_spec(i, s, g) for i, (s, g) in enumerate(zip(starts, goals))]
+    return make_scenario(f"grid_dense_{n}", f"{k}x{k} grid, {spacing_m:g} m apart, every robot to "
+                         "its start mirrored through the centre" +
+                         (" (the centre robot leaves the grid)" if k % 2 else ""), robots,
+                         time_limit_s=benchmark_time_limit_s(robots))
 
 
 def pillar_circle(n: int, rng: np.random.Generator) -> Scenario:
@@ -267,8 +267,8 @@ def pillar_circle(n: int, rng: np.random.Generator) -> Scenario:
     The pillar is a static disc of seeded radius (uniform 1.5-2 m), its centre seeded
     uniform in the disc of 0.5 m round the origin: every straight line meets it.
     """
-    _require(n >= 2, f"pillar_circle: --agents must be >= 2, got {n}")
-    radius_m = _circle_radius_m(n, MIN_START_SPACING_M, MIN_CIRCLE_RADIUS_M)
+    require(n >= 2, f"pillar_circle: --agents must be >= 2, got {n}")
+    radius_m = circle_radius_m(n, MIN_START_SPACING_M, MIN_CIRCLE_RADIUS_M)
     pillar_r = round(float(rng.uniform(*PILLAR_RADII_M)), 2)
     rho = PILLAR_OFFSET_M * math.sqrt(rng.uniform())  # sqrt: uniform over the disc
     phi = rng.uniform(0.0, 2.0 * math.pi)
@@ -277,11 +277,11 @@ def pillar_circle(n: int, rng: np.random.Generator) -> Scenario:
     for k in range(n):
         a = 2.0 * math.pi * k / n
         x, y = radius_m * math.cos(a), radius_m * math.sin(a)
-        robots.append(_robot(k, (x, y), (-x, -y)))
+        robots.append(robot_spec(k, (x, y), (-x, -y)))
     pillar = ObstacleSpec(id=-1, center=centre, radius_m=pillar_r)
-    return _scenario(f"pillar_circle_{n}", f"{n} robots on a circle of radius {radius_m:g} m, "
-                     f"antipodal swap round a pillar of radius {pillar_r:g} m", robots,
-                     obstacles=(pillar,), time_limit_s=benchmark_time_limit_s(robots))
+    return make_scenario(f"pillar_circle_{n}", f"{n} robots on a circle of radius {radius_m:g} m, "
+                         f"antipodal swap round a pillar of radius {pillar_r:g} m", robots,
+                         obstacles=(pillar,), time_limit_s=benchmark_time_limit_s(robots))
 
 
 def random_40(n: int, rng: np.random.Generator) -> Scenario:
@@ -299,21 +299,22 @@ def platoons(n: int, rng: np.random.Generator) -> Scenario:
     by a seeded offset (uniform in +-1.25 m, half a lane); every goal is the robot's start
     moved 32 m along its platoon's direction.
     """
-    _require(n >= 2 and n % 2 == 0, f"platoons: --agents must be a positive even number "
-             f"(two platoons), got {n}")
+    require(n >= 2 and n % 2 == 0, f"platoons: --agents must be a positive even number "
+            f"(two platoons), got {n}")
     k = n // 2
     columns = min(PLATOON_COLUMNS, k)
     offsets = (0.0, round(float(rng.uniform(-0.5, 0.5)) * PLATOON_SPACING_M, 2))
     robots: list[RobotSpec] = []
     for direction, offset in zip((1.0, -1.0), offsets):
-        lanes = _lanes(columns, PLATOON_SPACING_M, offset)
+        lanes = lane_offsets(columns, PLATOON_SPACING_M, offset)
         for j in range(k):
             x = -direction * (PLATOON_GAP_M / 2.0 + (j // columns) * PLATOON_SPACING_M)
             y = float(lanes[j % columns])
-            robots.append(_robot(len(robots), (x, y), (x + direction * PLATOON_RUN_M, y)))
-    return _scenario(f"platoons_{n}", f"two platoons of {k} ({columns} columns, "
-                     f"{PLATOON_SPACING_M:g} m apart) meet head-on, each moving "
-                     f"{PLATOON_RUN_M:g} m", robots, time_limit_s=benchmark_time_limit_s(robots))
+            robots.append(robot_spec(len(robots), (x, y), (x + direction * PLATOON_RUN_M, y)))
+    return make_scenario(f"platoons_{n}", f"two platoons of {k} ({columns} columns, "
+                         f"{PLATOON_SPACING_M:g} m apart) meet head-on, each moving "
+                         f"{PLATOON_RUN_M:g} m", robots,
+                         time_limit_s=benchmark_time_limit_s(robots))
 
 
 def crossing_60_mixed(n: int, rng: np.random.Generator) -> Scenario:
@@ -324,17 +325,17 @@ def crossing_60_mixed(n: int, rng: np.random.Generator) -> Scenario:
     `circle_mixed`); radii stay 0.5 m. The ideal time and the limit follow from each
     robot's own v_max.
     """
-    _require(n >= 2 and n % 2 == 0, f"crossing_60_mixed: --agents must be a positive even "
-             f"number, got {n}")
+    require(n >= 2 and n % 2 == 0, f"crossing_60_mixed: --agents must be a positive even "
+            f"number, got {n}")
     k = n // 2
-    starts, goals, h = angled_lanes(_lanes(k), _half_run(k + 1, SHORT_RUN_M / 2.0),
+    starts, goals, h = angled_lanes(lane_offsets(k), crossing_half_run_m(k + 1, SHORT_RUN_M / 2.0),
                                     CROSSING_MIXED_ANGLE_DEG)
-    speeds = _mixed(MIXED_V_MAX_MPS, n, rng)
-    robots = [_robot(i, s, g, v_max_mps=v)
+    speeds = mixed_values(MIXED_V_MAX_MPS, n, rng)
+    robots = [robot_spec(i, s, g, v_max_mps=v)
               for i, (s, g, v) in enumerate(zip(starts, goals, speeds))]
-    return _scenario(f"crossing_60_mixed_{n}", f"two cohorts of {k} crossing at 60 deg "
-                     f"({2.0 * h:g} m runs), v_max 0.8-1.4 m/s", robots,
-                     time_limit_s=benchmark_time_limit_s(robots))
+    return make_scenario(f"crossing_60_mixed_{n}", f"two cohorts of {k} crossing at 60 deg "
+                         f"({2.0 * h:g} m runs), v_max 0.8-1.4 m/s", robots,
+                         time_limit_s=benchmark_time_limit_s(robots))
 
 
 GENERATORS: dict[str, Callable[[int, np.random.Generator], Scenario]] = {

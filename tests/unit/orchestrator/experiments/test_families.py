@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from agent.core.scenario import Scenario
-from orchestrator.experiments import families
+from orchestrator.experiments import families, scenario_blocks
 from orchestrator.experiments.families import (
     CIRCLES_GROUP,
     CIRCLES_RADIUS_M,
@@ -269,7 +269,7 @@ def test_benchmark_families_have_their_size_spacing_and_a_generous_limit(family,
     assert disc_gaps(starts(s), radii(s)) >= 1.5 - 1e-6
     assert disc_gaps(goals(s), radii(s)) >= 1.5 - 1e-6
     assert np.all(straight(s) > 1.0)  # every robot has somewhere to go
-    ideal = families.ideal_time_s(s.robots)
+    ideal = scenario_blocks.ideal_time_s(s.robots)
     assert s.time_limit_s >= 3.0 * ideal + 30.0 - 1e-9
     assert s.time_limit_s <= 3.0 * ideal + 40.0  # rounded up to 10 s, no more
     for r in s.robots:  # headings point at the goals
@@ -294,10 +294,10 @@ def test_circle_mixed_has_every_radius_and_speed_and_the_slowest_sets_the_limit(
     assert set(speeds) == set(families.MIXED_V_MAX_MPS)
     # Antipodal: every goal is the negated start.
     np.testing.assert_allclose(goals(s), -starts(s), atol=1e-3)
-    np.testing.assert_allclose(families.ideal_time_s(s.robots),
+    np.testing.assert_allclose(scenario_blocks.ideal_time_s(s.robots),
                                np.max(straight(s) / speeds))
     # The slowest robots (0.8 m/s) decide: the ideal time is the diameter over 0.8 m/s.
-    assert families.ideal_time_s(s.robots) == pytest.approx(straight(s).max() / 0.8)
+    assert scenario_blocks.ideal_time_s(s.robots) == pytest.approx(straight(s).max() / 0.8)
 
 
 @pytest.mark.parametrize("angle", [45.0, 90.0, 135.0])

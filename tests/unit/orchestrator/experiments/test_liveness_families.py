@@ -10,7 +10,7 @@ import pytest
 from scipy import ndimage
 
 from agent.core.scenario import Scenario
-from orchestrator.experiments import families
+from orchestrator.experiments import families, scenario_blocks
 from orchestrator.experiments import liveness_families as lf
 from orchestrator.experiments.families import resolve
 from world.scenario_file import ScenarioError, dump_scenario, load_scenario
@@ -65,11 +65,11 @@ def test_each_family_is_valid_sized_spaced_and_at_the_families_scale(family, n, 
     s = resolve(family, agents=n, seed=4)
     assert len(s.robots) == n and s.name == f"{family}_{n}"
     assert [r.id for r in s.robots] == list(range(n))
-    assert min_pair_distance(starts(s)) >= families.MIN_START_SPACING_M - 1e-9
-    assert min_pair_distance(goals(s)) >= families.MIN_START_SPACING_M - 1e-9
+    assert min_pair_distance(starts(s)) >= scenario_blocks.MIN_START_SPACING_M - 1e-9
+    assert min_pair_distance(goals(s)) >= scenario_blocks.MIN_START_SPACING_M - 1e-9
     assert all(r.radius_m == 0.5 for r in s.robots)
     assert s.planner_config.safety.d_safety_m == 0.3
-    assert s.time_limit_s == families.benchmark_time_limit_s(s.robots)
+    assert s.time_limit_s == scenario_blocks.benchmark_time_limit_s(s.robots)
     assert np.all(np.hypot(*(goals(s) - starts(s)).T) > 3.0)  # everyone has to travel
     for r in s.robots:  # headings point at the goals
         want = math.atan2(r.goal[1] - r.start[1], r.goal[0] - r.start[0])
@@ -259,14 +259,14 @@ def test_platoons_meet_head_on_in_formation(n):
 def test_crossing_60_mixed_has_every_speed_and_the_60_deg_geometry():
     s = resolve("crossing_60_mixed", agents=16, seed=0)
     speeds = np.array([r.limits.v_max_mps for r in s.robots])
-    assert set(speeds) == set(families.MIXED_V_MAX_MPS)
+    assert set(speeds) == set(scenario_blocks.MIXED_V_MAX_MPS)
     d = goals(s) - starts(s)
     heading = np.degrees(np.arctan2(d[:, 1], d[:, 0]))
     np.testing.assert_allclose(heading[:8], 0.0, atol=1e-3)
     np.testing.assert_allclose(heading[8:], 60.0, atol=1e-3)
     plain = families.crossing(16, angle_deg=60.0)
     assert [r.start for r in s.robots] == [r.start for r in plain.robots]
-    assert families.ideal_time_s(s.robots) == pytest.approx(np.max(np.hypot(*d.T) / speeds))
+    assert scenario_blocks.ideal_time_s(s.robots) == pytest.approx(np.max(np.hypot(*d.T) / speeds))
 
 
 @pytest.mark.parametrize("family", ["wall_door", "wall_doors", "corridor", "platoons",
