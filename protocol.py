@@ -1561,6 +1561,31 @@ def _load_dataclass(data: object, cls: type, where: str) -> Any:
         raise ProtocolError(f"{where}: {exc}") from exc
 
 
+def _static_map(rows: object, known: frozenset[int]
+                ) -> tuple[tuple[int, float, float, float], ...]:
+    """`RunConfigMsg.static_map` checked: [id, x, y, radius] rows, ids known obstacles."""
+    what = "config.static_map"
+    if isinstance(rows, str | bytes) or not isinstance(rows, Iterable):
+        raise ProtocolError(f"{what}: expected a sequence of [id, x, y, radius]")
+    out = []
+    for row in rows:
+        if isinstance(row, str | bytes) or not isinstance(row, Iterable):
+            raise ProtocolError(f"{what}[]: expected [id, x, y, radius]")
+        values = tuple(row)
+        if len(values) != 4:
+            raise ProtocolError(f"{what}[]: expected [id, x, y, radius]")
+        disc_id = _int(values[0], f"{what}[].id", MIN_OBSTACLE_ID, -1)
+        if disc_id not in known:
+            raise ProtocolError(f"{what}[].id: {disc_id} is not one of known_ids")
+        out.append((disc_id,
+                    _float(values[1], f"{what}[].x", -MAX_COORD_M, MAX_COORD_M),
+                    _float(values[2], f"{what}[].y", -MAX_COORD_M, MAX_COORD_M),
+                    _float(values[3], f"{what}[].radius", 0.0, MAX_RADIUS_M, lo_open=True)))
+        if len(out) > MAX_OBSTACLES:
+            raise ProtocolError(f"{what}: more than {MAX_OBSTACLES} discs")
+    return tuple(out)
+
+
 @dataclass(frozen=True)
 class RunConfigMsg:
     """World -> one robot (query reply): everything the robot needs to plan in this run.
@@ -1569,7 +1594,7 @@ class RunConfigMsg:
     ``planner`` (map of every `PlannerConfig` field, ``mpc`` nested), ``goal_tolerance``,
     ``control_rate``, ``world_rate``, ``time_scale``, ``time_limit``, ``cmd_timeout`` (floats),
     ``known_ids`` (list of every robot and obstacle id of the run), ``static_map`` (list of
-    [x, y, radius] of the static obstacles, which every robot knows in advance).
+    [id, x, y, radius] of the static obstacles, which every robot knows in advance).
 
     Args:
         run_id: the run this configuration belongs to.
@@ -1582,8 +1607,8 @@ class RunConfigMsg:
         time_limit_s: sim time at which the world gives up.
         cmd_timeout_s: a command older than this (sim time) makes the world brake the robot.
         known_ids: every robot (>= 0) and obstacle (< 0) id of the run.
-        static_map: (x [m], y [m], radius [m]) of every static obstacle (the robots route
-            round them, `agent.planning.routing`).
+        static_map: (id, x [m], y [m], radius [m]) of every static obstacle (the robots
+            route round them, `agent.planning.routing`); each id is one of `known_ids`.
     """
 
     run_id: str
@@ -1596,7 +1621,7 @@ class RunConfigMsg:
     time_limit_s: float
     cmd_timeout_s: float
     known_ids: tuple[int, ...]
-    static_map: tuple[tuple[float, float, float], ...] = ()
+    static_map: tuple[tuple[int, float, float, float], ...] = ()
 
     TYPE: typing.ClassVar[str] = "config"
 
@@ -1632,22 +1657,7 @@ class RunConfigMsg:
         if self.robot.id not in ids:
             raise ProtocolError("config.known_ids: does not contain the robot's own id")
         set_(self, "known_ids", ids)
-        if isinstance(self.static_map, str | bytes) or not isinstance(self.static_map, Iterable):
-            raise ProtocolError("config.static_map: expected a sequence of [x, y, radius]")
-        discs = []
-        for disc in self.static_map:
-            if isinstance(disc, str | bytes) or not isinstance(disc, Iterable):
-                raise ProtocolError("config.static_map[]: expected [x, y, radius]")
-            values = tuple(disc)
-            if len(values) != 3:
-                raise ProtocolError("config.static_map[]: expected [x, y, radius]")
-            discs.append((_float(values[0], "config.static_map[].x", -MAX_COORD_M, MAX_COORD_M),
-                          _float(values[1], "config.static_map[].y", -MAX_COORD_M, MAX_COORD_M),
-                          _float(values[2], "config.static_map[].radius", 0.0, MAX_RADIUS_M,
-                                 lo_open=True)))
-            if len(discs) > MAX_OBSTACLES:
-                raise ProtocolError(f"config.static_map: more than {MAX_OBSTACLES} discs")
-        set_(self, "static_map", tuple(discs))
+        set_(self, "static_map", _static_map(self.static_map, frozenset(ids)))
 
     def encode(self) -> bytes:
         """Serialise to msgpack."""

@@ -419,11 +419,9 @@ def make_controller(config: RunConfigMsg, period_s: float, *,
                     compensate_latency: bool = True) -> RobotController:
     """The robot's `RobotController`, its planner set up for this control period."""
     from agent.planning.controller import RobotController
-
     from agent.planning.routing import StaticMap
 
-    static = StaticMap(np.array([d[:2] for d in config.static_map], dtype=float).reshape(-1, 2),
-                       np.array([d[2] for d in config.static_map], dtype=float))
+    static = StaticMap.from_rows(config.static_map)
     return RobotController(config.robot, config.planner, config.goal_tolerance_m,
                            control_period_s=period_s, compensate_latency=compensate_latency,
                            static_map=static)

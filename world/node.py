@@ -216,8 +216,7 @@ def parse_args(argv: list[str] | None = None) -> WorldOptions:
 def run_configs(scenario: Scenario, options: WorldOptions) -> dict[int, bytes]:
     """The encoded `RunConfigMsg` of every robot, served on the configuration queryable."""
     known = tuple(r.id for r in scenario.robots) + tuple(o.id for o in scenario.obstacles)
-    static_map = StaticMap.of_obstacles(scenario.obstacles)
-    static = tuple(zip(*static_map.center_m.T.tolist(), static_map.radius_m.tolist()))
+    static = StaticMap.of_obstacles(scenario.obstacles).rows()
     return {
         spec.id: RunConfigMsg(
             run_id=options.run_id,

@@ -7,7 +7,8 @@ of the route (appended to the via-points so the reference runs on past the inter
 goal instead of braking at it), the route length left, and whether to yield.
 
 - The route is planned on the first cycle, from where the robot is (`route_or_tight`),
-  and again when the liveness rules ask for a re-route round a knot of slow robots.
+  again when none of its waypoints ahead is in sight (other robots pushed the robot off
+  it), and when the liveness rules ask for a re-route round a knot of slow robots.
 - Without a map (no static discs, or more than `routing.MAX_ROUTED_OBSTACLES`) the route
   is the straight line to the goal: progress is still monitored, and rule 2 of
   `agent.planning.liveness` (yield by id) still applies.
@@ -69,9 +70,14 @@ class RouteGuide:
         self.static = static
         self.d_safety_m = float(d_safety_m)
         self.routes = routes and static.routable
+        self.map_ids: frozenset[int] = (
+            frozenset(static.ids.tolist()) if self.routes and static.ids is not None
+            else frozenset())
+        """Obstacle ids of the map's discs, when routes are planned on it (else empty)."""
         self.liveness = Liveness(liveness) if liveness is not None else None
         self._follower: RouteFollower | None = None
         self._goal: tuple[float, float] | None = None
+        self.replans = 0
 
     def reset(self) -> None:
         """Forget the route and the liveness state."""
@@ -113,8 +119,14 @@ class RouteGuide:
                 self.liveness.rerouted(taken)
                 strategy = Strategy.GO if taken else self.liveness.fallback(
                     now_s, observation.robot_id, here, observation.others)
+        target = self._follower.intermediate_goal(here)
+        if target is None:  # pushed off the route: a new one from here
+            self._follower = self._plan(here, goal, observation.radius_m)
+            self.replans += 1
+            target = self._follower.intermediate_goal(here)
+            if target is None:  # nothing in sight even so (squeezed into the margin)
+                target = self._follower.remaining_m[0]
         follower = self._follower
-        target = follower.intermediate_goal(here)
         rest = follower.remaining_m
         tail = rest[1:] if rest.shape[0] > 1 else _NO_TAIL
         return Guidance(goal_m=target, tail_m=tail, left_m=follower.progress_left_m(here),

@@ -184,7 +184,11 @@ class Mechanisms:
             replaced.
         routing: the robot routes round the scenario's static obstacles, known in
             advance (`agent.planning.routing`), and eIFP plans towards the farthest route
-            waypoint it can see (`agent.planning.guidance`).
+            waypoint it can see (`agent.planning.guidance`). The static obstacles are then
+            the route's business: eIFP resolves only robots and moving obstacles, a
+            via-point whose legs would cross a static disc is infeasible
+            (`_off_the_map`), and a static disc the robot is already inside of counts
+            only as far as the robot is from it (`_keep_static_gap`).
         liveness: with thresholds (not None), the robot monitors its progress and, when
             stuck, re-routes round the knot or yields to lower ids
             (`agent.planning.liveness`).
@@ -407,8 +411,11 @@ def plan_via_points(
                            threats_cfg.max_neighbors)
     speed = float(observation.limits.v_max_mps)
     radius = inflated_radius(observation.radius_m, others.radius_m, config.safety.d_safety_m)
-    if mech.routing and len(others):
-        radius = _keep_static_gap(p, others, radius)
+    static = np.zeros(len(others), dtype=bool)
+    if mech.routing and observation.map_ids and len(others):
+        static = np.fromiter((i in observation.map_ids for i in others.ids.tolist()),
+                             dtype=bool, count=len(others))
+        radius = _keep_static_gap(p, others, radius, static)
 
     # Eqs. (3)-(6) at the measured velocity.
     t_start = timer() if timer is not None else 0.0
@@ -422,6 +429,8 @@ def plan_via_points(
         ignored_ids = ignored_ids | more_ignored
         committed_ids = committed_ids | more_committed
     select = make_selector(others)
+    if static.any():
+        select = _off_the_map(select, others.position_m[static], radius[static])
     if committed_ids and len(others):
         index = _with_committed(index, tcpa, others, committed_ids, t_max_s)
     threats = threat_records(index, tcpa, dcpa, others)
@@ -434,10 +443,11 @@ def plan_via_points(
             to_goal_m = math.hypot(goal[0] - p[0], goal[1] - p[1])
         to_goal_s = to_goal_m / float(observation.limits.v_max_mps)
         index = index[tcpa[index] <= to_goal_s + GOAL_TCPA_MARGIN_S]
-    ignored = np.zeros(len(others), dtype=bool)
+    ignored = static.copy()
     if ignored_ids and len(others):
-        ignored = np.fromiter((i in ignored_ids for i in others.ids.tolist()), dtype=bool,
-                              count=len(others))
+        ignored |= np.fromiter((i in ignored_ids for i in others.ids.tolist()), dtype=bool,
+                               count=len(others))
+    if ignored.any():
         index = index[~ignored[index]]
     if mech.commitment and primary_id is not None and index.size > 1:
         hit = (others.ids[index] == primary_id).nonzero()[0]
@@ -576,9 +586,32 @@ STATIC_GAP_TOL_M = 1.0e-3
 as slack [m], so that holding the distance is not a threat by rounding."""
 
 
-def _keep_static_gap(p: np.ndarray, others: Others, radius: np.ndarray) -> np.ndarray:
-    """The inflated radii, with a static obstacle's cut to the robot's distance from it
-    (less `STATIC_GAP_TOL_M`) when the robot is already inside (`Mechanisms.routing`).
+def _off_the_map(select: CandidateSelector, center_m: np.ndarray, keep_m: np.ndarray
+                 ) -> CandidateSelector:
+    """`select`, with a candidate whose legs (leg start -> candidate -> leg end) come
+    closer to a static disc than `keep_m` infeasible (`Mechanisms.routing`): the route
+    keeps the robot off the map, and a via-point round a robot must not lead into it."""
+    from agent.planning.routing import segment_clears
+
+    def off_map(k: int, points: tuple[complex, complex], times: tuple[float, float],
+                a: complex, b: complex) -> int | None:
+        ends = np.array([[a.real, a.imag], [b.real, b.imag]])
+        pts = np.array([[z.real, z.imag] for z in points])
+        clear = (segment_clears(np.repeat(ends[:1], 2, axis=0), pts, center_m, keep_m)
+                 & segment_clears(pts, np.repeat(ends[1:], 2, axis=0), center_m, keep_m))
+        times = (times[0] if clear[0] else math.inf, times[1] if clear[1] else math.inf)
+        if times == (math.inf, math.inf):
+            return None
+        return select(k, points, times, a, b)
+
+    return off_map
+
+
+def _keep_static_gap(p: np.ndarray, others: Others, radius: np.ndarray, static: np.ndarray
+                     ) -> np.ndarray:
+    """The inflated radii, with a static obstacle's (`static`, (K,) bool: on the robot's
+    map) cut to the robot's distance from it (less `STATIC_GAP_TOL_M`) when the robot is
+    already inside (`Mechanisms.routing`).
 
     With routes, the static map is the route's business and eIFP's only job against it is
     not to get closer. A robot that passing robots pushed inside a wall disc's inflated
@@ -588,7 +621,6 @@ def _keep_static_gap(p: np.ndarray, others: Others, radius: np.ndarray) -> np.nd
     distance, a static disc is a threat only to a leg that goes closer still, and is
     never escaped from: the robot keeps what clearance it has and follows its route.
     """
-    static = ~others.is_robot & ~others.velocity_mps.any(axis=1)
     if not static.any():
         return radius
     here = np.hypot(*(others.position_m - p).T) - STATIC_GAP_TOL_M

@@ -215,6 +215,8 @@ class ViaPointPlanner:
             observation = observation.with_others(near)
         tail = None
         if self.guide is not None:
+            if self.guide.map_ids:
+                observation = observation.with_map(self.guide.map_ids)
             guided = self.guide.guide(observation, now_s)
             if guided.strategy is Strategy.YIELD and not _inside_any(observation, cfg):
                 return _yield_result(observation, clock() - t0)

@@ -26,8 +26,8 @@ The clearance is the inflated radius of Eq. (7) (robot radius + obstacle radius 
 d_safety) plus `ROUTE_MARGIN_M`. `route_or_tight` falls back to the robot's radius alone
 (plus `TIGHT_MARGIN_M`) when a passage admits the robot but not its safety margin and the
 way round is much longer (`TIGHT_DETOUR_RATIO`): the robot is then routed through it and
-eIFP's via-points and the MPC keep what clearance the passage has. A goal that no route reaches even then is unreachable
-(`unreachable_reason`; scenario validation refuses it).
+eIFP's via-points and the MPC keep what clearance the passage has. A goal that no route
+reaches even then is unreachable (`unreachable_reason`; scenario validation refuses it).
 
 Cost: the graph has n = 2 + RING_NODES x M nodes for M static discs and checks n^2/2
 segments against M discs, vectorised in chunks; M = 30 takes a few milliseconds. Maps of
@@ -79,16 +79,26 @@ class StaticMap:
     Args:
         center_m: (M, 2) disc centres [m].
         radius_m: (M,) disc radii [m].
+        ids: (M,) the obstacle ids the discs have in the poses (so the planner knows which
+            sensed discs are on its map); None: not sensed as such (discs added for a
+            re-route, test maps).
     """
 
     center_m: np.ndarray
     radius_m: np.ndarray
+    ids: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         c = np.asarray(self.center_m, dtype=float).reshape(-1, 2)
         r = np.asarray(self.radius_m, dtype=float).reshape(-1)
         if c.shape[0] != r.shape[0]:
             raise ValueError(f"StaticMap: {c.shape[0]} centres but {r.shape[0]} radii")
+        if self.ids is not None:
+            ids = np.asarray(self.ids, dtype=np.int64).reshape(-1)
+            if ids.shape[0] != r.shape[0]:
+                raise ValueError(f"StaticMap: {ids.shape[0]} ids but {r.shape[0]} radii")
+            ids.flags.writeable = False
+            object.__setattr__(self, "ids", ids)
         if not (np.isfinite(c).all() and np.isfinite(r).all() and (r > 0.0).all()):
             raise ValueError("StaticMap: centres must be finite and radii positive")
         c.flags.writeable = False
@@ -103,18 +113,26 @@ class StaticMap:
 
     @staticmethod
     def of_obstacles(obstacles: Iterable[ObstacleSpec]) -> StaticMap:
-        """The static obstacles of a scenario (velocity 0)."""
-        return StaticMap.from_discs((o.center, o.radius_m, o.velocity) for o in obstacles)
+        """The static obstacles of a scenario (velocity 0), with their ids."""
+        kept = [o for o in obstacles if o.velocity[0] == 0.0 and o.velocity[1] == 0.0]
+        return StaticMap.from_rows([(o.id, *o.center, o.radius_m) for o in kept])
 
     @staticmethod
-    def from_discs(discs: Iterable[tuple[tuple[float, float], float, tuple[float, float]]]
-                   ) -> StaticMap:
-        """The static ones of (centre [m], radius [m], velocity [m/s]) discs: velocity 0."""
-        kept = [(c, r) for c, r, v in discs if v[0] == 0.0 and v[1] == 0.0]
-        if not kept:
-            return StaticMap.empty()
-        return StaticMap(np.array([c for c, _ in kept], dtype=float),
-                         np.array([r for _, r in kept], dtype=float))
+    def from_rows(rows: Iterable[tuple[int, float, float, float]]) -> StaticMap:
+        """A map from (id, x [m], y [m], radius [m]) rows (`RunConfigMsg.static_map`)."""
+        table = list(rows)
+        if not table:
+            return StaticMap(np.zeros((0, 2)), np.zeros(0), np.zeros(0, dtype=np.int64))
+        return StaticMap(np.array([r[1:3] for r in table], dtype=float),
+                         np.array([r[3] for r in table], dtype=float),
+                         np.array([r[0] for r in table], dtype=np.int64))
+
+    def rows(self) -> tuple[tuple[int, float, float, float], ...]:
+        """(id, x, y, radius) per disc, for the wire (ids must be known)."""
+        if self.ids is None:
+            raise ValueError("StaticMap.rows: the map has no ids")
+        return tuple((int(i), float(c[0]), float(c[1]), float(r))
+                     for i, c, r in zip(self.ids, self.center_m, self.radius_m))
 
     def __len__(self) -> int:
         return int(self.radius_m.shape[0])
@@ -324,8 +342,9 @@ def unreachable_reason(start_m: np.ndarray, goal_m: np.ndarray, static: StaticMa
     """Why no route reaches the goal from the start, or None when one does.
 
     Only the robot's own radius (plus `TIGHT_MARGIN_M`) counts here (a passage narrower
-    than the robot is closed; one narrower than its safety margin is not), and only static discs: a passage
-    blocked by other robots is theirs to clear, never a reason to refuse a scenario.
+    than the robot is closed; one narrower than its safety margin is not), and only static
+    discs: a passage blocked by other robots is theirs to clear, never a reason to refuse
+    a scenario.
     """
     if not static.routable:
         return None
@@ -365,10 +384,12 @@ class RouteFollower:
         """(k, 2) the route waypoints not yet passed (goal last)."""
         return self.route.waypoints_m[self._next:]
 
-    def intermediate_goal(self, position_m: np.ndarray) -> np.ndarray:
-        """The farthest visible route waypoint from `position_m` (advances the follower)."""
+    def intermediate_goal(self, position_m: np.ndarray) -> np.ndarray | None:
+        """The farthest visible route waypoint from `position_m` (advances the follower),
+        or None when none of the waypoints ahead is in sight (the robot was pushed off
+        its route: re-route from where it is)."""
         wps = self.route.waypoints_m
-        if self._next >= wps.shape[0] - 1:
+        if self._next >= wps.shape[0] - 1 and len(self.static) == 0:
             return wps[-1]
         keep = self.static.radius_m + self.route.clearance_m
         here = np.asarray(position_m, dtype=float)
@@ -376,8 +397,9 @@ class RouteFollower:
         need = _endpoint_keep(here, self.static.center_m, keep)
         seen = segment_clears(np.broadcast_to(here, ahead.shape), ahead,
                               self.static.center_m, need)
-        if seen.any():
-            self._next += int(np.flatnonzero(seen)[-1])
+        if not seen.any():
+            return None
+        self._next += int(np.flatnonzero(seen)[-1])
         return wps[self._next]
 
     def progress_left_m(self, position_m: np.ndarray) -> float:

@@ -75,7 +75,7 @@ def make_config() -> RunConfigMsg:
     return RunConfigMsg(run_id="run-1", robot=spec, planner=planner, goal_tolerance_m=0.2,
                         control_rate_hz=10.0, world_rate_hz=50.0, time_scale=1.0, time_limit_s=60.0,
                         cmd_timeout_s=0.5, known_ids=(0, 1, 2, -1),
-                        static_map=((0.0, 5.0, 1.0), (-3.5, 2.0, 0.6)))
+                        static_map=((-1, 0.0, 5.0, 1.0),))
 
 
 def make_debug(**overrides: object) -> PlanDebugMsg:
@@ -220,7 +220,7 @@ def test_config_round_trip_rebuilds_nested_dataclasses() -> None:
     assert back.planner.profile == "paper" and back.planner.is_paper
     assert back.robot.start == (-4.0, 0.5, 0.1) and back.robot.goal == (4.0, -0.5)
     # the static map every robot routes over
-    assert back.static_map == ((0.0, 5.0, 1.0), (-3.5, 2.0, 0.6))
+    assert back.static_map == ((-1, 0.0, 5.0, 1.0),)
 
 
 def test_config_round_trip_with_defaults() -> None:
@@ -558,10 +558,12 @@ def test_config_rejects_bad_values() -> None:
         (("known_ids",), "abc"),
         (("run",), "bad run/id"),
         (("static_map",), "abc"),
-        (("static_map",), [[0.0, 1.0]]),  # no radius
-        (("static_map",), [[0.0, 1.0, 0.0]]),  # zero radius
-        (("static_map",), [[0.0, float("nan"), 1.0]]),
-        (("static_map",), [[1.0e9, 0.0, 1.0]]),
+        (("static_map",), [[-1, 0.0, 1.0]]),  # no radius
+        (("static_map",), [[-1, 0.0, 1.0, 0.0]]),  # zero radius
+        (("static_map",), [[-1, 0.0, float("nan"), 1.0]]),
+        (("static_map",), [[-1, 1.0e9, 0.0, 1.0]]),
+        (("static_map",), [[-2, 0.0, 1.0, 1.0]]),  # not a known id
+        (("static_map",), [[1, 0.0, 1.0, 1.0]]),  # a robot's id
         (("static_map",), None),
     ]
     for path, value in mutations:

@@ -19,7 +19,8 @@ from world.sim.dynamics import integrate_unicycle
 def closed_wall(reach_m: float = 6.0) -> StaticMap:
     """Touching 0.6 m discs along x = 0 from -reach to reach: no doorway."""
     ys = np.arange(-reach_m, reach_m + 1e-9, 1.2)
-    return StaticMap(np.column_stack((np.zeros(ys.size), ys)), np.full(ys.size, 0.6))
+    return StaticMap(np.column_stack((np.zeros(ys.size), ys)), np.full(ys.size, 0.6),
+                     -(np.arange(ys.size) + 1))
 
 
 def cup() -> StaticMap:
@@ -29,13 +30,15 @@ def cup() -> StaticMap:
     xs = np.arange(-6.0, -0.1, 1.2)
     arms = np.concatenate((np.column_stack((xs, np.full(xs.size, 6.0))),
                            np.column_stack((xs, np.full(xs.size, -6.0)))))
+    n = len(wall) + arms.shape[0]
     return StaticMap(np.concatenate((wall.center_m, arms)),
-                     np.concatenate((wall.radius_m, np.full(arms.shape[0], 0.6))))
+                     np.concatenate((wall.radius_m, np.full(arms.shape[0], 0.6))),
+                     -(np.arange(n) + 1))
 
 
 def as_others(static: StaticMap) -> Others:
     n = len(static)
-    return Others(ids=-(np.arange(n) + 1), position_m=static.center_m,
+    return Others(ids=static.ids, position_m=static.center_m,
                   velocity_mps=np.zeros((n, 2)), radius_m=static.radius_m,
                   linearity=np.zeros(n), track_start_m=static.center_m,
                   is_robot=np.zeros(n, dtype=bool))
@@ -103,3 +106,29 @@ def test_eifp_mpc_leaves_a_cup_that_traps_eifp_without_a_route() -> None:
     # eIFP (no routes; otherwise the same via-points) stays in the cup's local minimum
     path, _ = drive("eifp", static, (-3.0, 0.0, 0.0), goal, seconds=60.0)
     assert (path[:, 0] < 0.0).all() and (np.abs(path[:, 1]) < 6.0).all()
+
+
+def test_a_robot_held_in_place_yields_to_a_moving_lower_id_and_never_to_a_higher() -> None:
+    """The planner's side of rule 2: a robot that makes no progress for `stuck_after_s`
+    stands (status YIELD, v = 0) while a lower id moves near it; with a higher id there it
+    keeps planning."""
+    def run(other_id: int) -> list[PlanStatus]:
+        planner = make_planner("eifp-mpc", PlannerConfig())
+        statuses = []
+        for k in range(60):
+            t = 0.1 * k
+            # an other crossing 3 m ahead of the robot, which is held still (no progress)
+            other = Others(ids=np.array([other_id]), position_m=np.array([[3.0, -2.0 + 0.05 * k]]),
+                           velocity_mps=np.array([[0.0, 0.5]]), radius_m=np.array([0.5]),
+                           linearity=np.ones(1), track_start_m=np.array([[3.0, -2.5]]),
+                           is_robot=np.array([True]))
+            res = planner.plan(observation(0.0, 0.0, 0.0, 0.0, (10.0, 0.0), other, robot_id=5), t)
+            statuses.append(res.status)
+            if res.status == PlanStatus.YIELD:
+                assert res.v_mps == 0.0 and res.omega_radps == 0.0
+        return statuses
+
+    lower = run(2)
+    assert PlanStatus.YIELD not in lower[:40]  # not stuck before 4 s
+    assert PlanStatus.YIELD in lower[40:]
+    assert PlanStatus.YIELD not in run(9)

@@ -158,16 +158,19 @@ def test_the_follower_looks_ahead_to_the_farthest_visible_waypoint_and_never_bac
     assert route is not None and route.waypoints_m.shape[0] >= 4
     follower = RouteFollower(route, static)
     first = follower.intermediate_goal(np.array([-4.0, 0.0]))
-    assert not np.allclose(first, route.waypoints_m[-1])  # the goal is behind the wall
+    # the goal is behind the wall
+    assert first is not None and not np.allclose(first, route.waypoints_m[-1])
     left0 = follower.progress_left_m(np.array([-4.0, 0.0]))
     assert left0 == pytest.approx(route.length_m)
     # past the wall's end the goal itself is in sight
     top = route.waypoints_m[np.argmax(np.abs(route.waypoints_m[:, 1]))]
     beyond = top + np.array([1.5, 0.0])
-    assert np.allclose(follower.intermediate_goal(beyond), route.waypoints_m[-1])
-    # and back at the start, the follower does not go back along the route
-    assert np.allclose(follower.intermediate_goal(np.array([-4.0, 0.0])),
-                       route.waypoints_m[-1])
+    end = follower.intermediate_goal(beyond)
+    assert end is not None and np.allclose(end, route.waypoints_m[-1])
+    # and back at the start, the follower does not go back along the route: nothing
+    # ahead is in sight from there (the caller re-routes)
+    assert follower.intermediate_goal(np.array([-4.0, 0.0])) is None
+    assert np.allclose(follower.remaining_m, route.waypoints_m[-1:])
 
 
 def test_static_map_of_a_scenario_keeps_only_still_obstacles() -> None:
