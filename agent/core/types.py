@@ -257,8 +257,6 @@ class Observation:
             forward to now (0: fresh poses, as in an undisturbed lockstep run) [s].
         goal_distance_m: how far the robot still has to go when `goal_m` is an intermediate
             goal on a route (`with_goal`); None: straight to `goal_m` [m].
-        map_ids: ids of the sensed others that are on the static map the robot routes over
-            (`agent.planning.routing`): eIFP leaves those to the route.
     """
 
     robot_id: int
@@ -270,7 +268,6 @@ class Observation:
     others: Others = field(default_factory=Others.empty)
     pose_age_s: float = 0.0
     goal_distance_m: float | None = None
-    map_ids: frozenset[int] = frozenset()
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "goal_m", _as_array("goal_m", self.goal_m, (2,)))
@@ -294,12 +291,6 @@ class Observation:
         obj = copy.copy(self)
         object.__setattr__(obj, "goal_m", goal_m)
         object.__setattr__(obj, "goal_distance_m", float(goal_distance_m))
-        return obj
-
-    def with_map(self, map_ids: frozenset[int]) -> Observation:
-        """The same observation with `map_ids` set, skipping validation."""
-        obj = copy.copy(self)
-        object.__setattr__(obj, "map_ids", map_ids)
         return obj
 
     def with_others(self, others: Others) -> Observation:

@@ -70,10 +70,6 @@ class RouteGuide:
         self.static = static
         self.d_safety_m = float(d_safety_m)
         self.routes = routes and static.routable
-        self.map_ids: frozenset[int] = (
-            frozenset(static.ids.tolist()) if self.routes and static.ids is not None
-            else frozenset())
-        """Obstacle ids of the map's discs, when routes are planned on it (else empty)."""
         self.liveness = Liveness(liveness) if liveness is not None else None
         self._follower: RouteFollower | None = None
         self._goal: tuple[float, float] | None = None

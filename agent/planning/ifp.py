@@ -65,6 +65,7 @@ import numpy as np
 
 from agent.core.config import PlannerConfig
 from agent.core.types import Observation, Others, PlanStatus, Side, Threat
+from agent.planning.decisive import TurnCommitmentConfig
 from agent.planning.liveness import LivenessConfig
 from agent.planning.threats import (
     as_complex,
@@ -184,14 +185,14 @@ class Mechanisms:
             replaced.
         routing: the robot routes round the scenario's static obstacles, known in
             advance (`agent.planning.routing`), and eIFP plans towards the farthest route
-            waypoint it can see (`agent.planning.guidance`). The static obstacles are then
-            the route's business: eIFP resolves only robots and moving obstacles, a
-            via-point whose legs would cross a static disc is infeasible
-            (`_off_the_map`), and a static disc the robot is already inside of counts
-            only as far as the robot is from it (`_keep_static_gap`).
+            waypoint it can see (`agent.planning.guidance`). eIFP still resolves the
+            static discs it meets on its legs like any other disc.
         liveness: with thresholds (not None), the robot monitors its progress and, when
             stuck, re-routes round the knot or yields to lower ids
             (`agent.planning.liveness`).
+        turn_commitment: with thresholds (not None), eIFP-MPC's command does not turn
+            against the direction the robot is turning in for a small correction
+            (`agent.planning.decisive`).
     """
 
     direct_leg_check: bool = False
@@ -208,6 +209,7 @@ class Mechanisms:
     keep_plan: bool = False
     routing: bool = False
     liveness: LivenessConfig | None = None
+    turn_commitment: TurnCommitmentConfig | None = None
 
 
 PAPER_MECHANISMS = Mechanisms()
@@ -224,7 +226,7 @@ EIFP_MPC_MECHANISMS = dataclasses.replace(
     EIFP_MECHANISMS, inflated_threats=True, commitment=True, via_margin_m=ARC_VIA_MARGIN_M,
     escape_band_m=ESCAPE_BAND_M, horizon_via_points=True, lines_arcs=True,
     clamp_heading=False, braking_guard=True, keep_plan=True, routing=True,
-    liveness=LivenessConfig())
+    liveness=LivenessConfig(), turn_commitment=TurnCommitmentConfig())
 """eifp-mpc in the default profile: every mechanism."""
 
 
@@ -411,11 +413,6 @@ def plan_via_points(
                            threats_cfg.max_neighbors)
     speed = float(observation.limits.v_max_mps)
     radius = inflated_radius(observation.radius_m, others.radius_m, config.safety.d_safety_m)
-    static = np.zeros(len(others), dtype=bool)
-    if mech.routing and observation.map_ids and len(others):
-        static = np.fromiter((i in observation.map_ids for i in others.ids.tolist()),
-                             dtype=bool, count=len(others))
-        radius = _keep_static_gap(p, others, radius, static)
 
     # Eqs. (3)-(6) at the measured velocity.
     t_start = timer() if timer is not None else 0.0
@@ -429,8 +426,6 @@ def plan_via_points(
         ignored_ids = ignored_ids | more_ignored
         committed_ids = committed_ids | more_committed
     select = make_selector(others)
-    if static.any():
-        select = _off_the_map(select, others.position_m[static], radius[static])
     if committed_ids and len(others):
         index = _with_committed(index, tcpa, others, committed_ids, t_max_s)
     threats = threat_records(index, tcpa, dcpa, others)
@@ -443,11 +438,10 @@ def plan_via_points(
             to_goal_m = math.hypot(goal[0] - p[0], goal[1] - p[1])
         to_goal_s = to_goal_m / float(observation.limits.v_max_mps)
         index = index[tcpa[index] <= to_goal_s + GOAL_TCPA_MARGIN_S]
-    ignored = static.copy()
+    ignored = np.zeros(len(others), dtype=bool)
     if ignored_ids and len(others):
-        ignored |= np.fromiter((i in ignored_ids for i in others.ids.tolist()), dtype=bool,
-                               count=len(others))
-    if ignored.any():
+        ignored = np.fromiter((i in ignored_ids for i in others.ids.tolist()), dtype=bool,
+                              count=len(others))
         index = index[~ignored[index]]
     if mech.commitment and primary_id is not None and index.size > 1:
         hit = (others.ids[index] == primary_id).nonzero()[0]
@@ -579,52 +573,6 @@ def plan_via_points(
         resolved_sides=resolved,
         threats_s=threats_s,
     )
-
-
-STATIC_GAP_TOL_M = 1.0e-3
-"""`_keep_static_gap` leaves this much of the robot's current distance to a static disc
-as slack [m], so that holding the distance is not a threat by rounding."""
-
-
-def _off_the_map(select: CandidateSelector, center_m: np.ndarray, keep_m: np.ndarray
-                 ) -> CandidateSelector:
-    """`select`, with a candidate whose legs (leg start -> candidate -> leg end) come
-    closer to a static disc than `keep_m` infeasible (`Mechanisms.routing`): the route
-    keeps the robot off the map, and a via-point round a robot must not lead into it."""
-    from agent.planning.routing import segment_clears
-
-    def off_map(k: int, points: tuple[complex, complex], times: tuple[float, float],
-                a: complex, b: complex) -> int | None:
-        ends = np.array([[a.real, a.imag], [b.real, b.imag]])
-        pts = np.array([[z.real, z.imag] for z in points])
-        clear = (segment_clears(np.repeat(ends[:1], 2, axis=0), pts, center_m, keep_m)
-                 & segment_clears(pts, np.repeat(ends[1:], 2, axis=0), center_m, keep_m))
-        times = (times[0] if clear[0] else math.inf, times[1] if clear[1] else math.inf)
-        if times == (math.inf, math.inf):
-            return None
-        return select(k, points, times, a, b)
-
-    return off_map
-
-
-def _keep_static_gap(p: np.ndarray, others: Others, radius: np.ndarray, static: np.ndarray
-                     ) -> np.ndarray:
-    """The inflated radii, with a static obstacle's (`static`, (K,) bool: on the robot's
-    map) cut to the robot's distance from it (less `STATIC_GAP_TOL_M`) when the robot is
-    already inside (`Mechanisms.routing`).
-
-    With routes, the static map is the route's business and eIFP's only job against it is
-    not to get closer. A robot that passing robots pushed inside a wall disc's inflated
-    radius would otherwise resolve that disc from its boundary, where the tangent
-    via-points lie along the wall or in the next disc: it turns to the wall, the braking
-    guard stops it, and the plan, still holding, keeps it there. Cut to the present
-    distance, a static disc is a threat only to a leg that goes closer still, and is
-    never escaped from: the robot keeps what clearance it has and follows its route.
-    """
-    if not static.any():
-        return radius
-    here = np.hypot(*(others.position_m - p).T) - STATIC_GAP_TOL_M
-    return np.where(static, np.minimum(radius, np.maximum(here, 0.0)), radius)
 
 
 def _keep_previous(previous: ViaPlan, new_wps: list[complex], speed: float,

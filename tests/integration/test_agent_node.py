@@ -149,6 +149,26 @@ def test_make_controller_builds_the_planner_for_the_control_period(planner: str)
     assert controller.planner.name == planner and controller.planner.control_period_s == 0.05
 
 
+def test_a_distributed_robot_routes_over_the_map_the_world_sends() -> None:
+    """The static map of the world's `RunConfigMsg` reaches the robot's planner, which
+    routes over it (a wall it has not sensed yet)."""
+    from orchestrator.experiments.families import resolve
+    from world.node import run_configs
+
+    scenario = resolve("wall_door", agents=6, seed=3)
+    options = type("Options", (), dict(run_id="r-1", control_rate_hz=10.0, rate_hz=50.0,
+                                       time_scale=1.0, cmd_timeout_s=0.5))()
+    spec = scenario.robots[0]
+    config = RunConfigMsg.decode(run_configs(scenario, options)[spec.id])
+    static = [o for o in scenario.obstacles if o.velocity == (0.0, 0.0)]
+    assert len(config.static_map) == len(static) > 0
+    controller = make_controller(config, 0.1)
+    guide = controller.planner.guide
+    assert guide is not None and guide.routes
+    assert set(guide.static.ids.tolist()) == {o.id for o in static}
+    np.testing.assert_allclose(guide.static.center_m, [o.center for o in static])
+
+
 def test_schedule_with_a_phase_plans_on_absolute_slots() -> None:
     schedule = PlanSchedule(0.1, phase_s=0.04)
     planned = []
