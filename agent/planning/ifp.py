@@ -65,7 +65,6 @@ import numpy as np
 
 from agent.core.config import PlannerConfig
 from agent.core.types import Observation, Others, PlanStatus, Side, Threat
-from agent.planning.decisive import TurnCommitmentConfig
 from agent.planning.liveness import LivenessConfig
 from agent.planning.threats import (
     as_complex,
@@ -190,9 +189,6 @@ class Mechanisms:
         liveness: with thresholds (not None), the robot monitors its progress and, when
             stuck, re-routes round the knot or yields to lower ids
             (`agent.planning.liveness`).
-        turn_commitment: with thresholds (not None), eIFP-MPC's command does not turn
-            against the direction the robot is turning in for a small correction
-            (`agent.planning.decisive`).
     """
 
     direct_leg_check: bool = False
@@ -209,7 +205,6 @@ class Mechanisms:
     keep_plan: bool = False
     routing: bool = False
     liveness: LivenessConfig | None = None
-    turn_commitment: TurnCommitmentConfig | None = None
 
 
 PAPER_MECHANISMS = Mechanisms()
@@ -226,7 +221,7 @@ EIFP_MPC_MECHANISMS = dataclasses.replace(
     EIFP_MECHANISMS, inflated_threats=True, commitment=True, via_margin_m=ARC_VIA_MARGIN_M,
     escape_band_m=ESCAPE_BAND_M, horizon_via_points=True, lines_arcs=True,
     clamp_heading=False, braking_guard=True, keep_plan=True, routing=True,
-    liveness=LivenessConfig(), turn_commitment=TurnCommitmentConfig())
+    liveness=LivenessConfig())
 """eifp-mpc in the default profile: every mechanism."""
 
 

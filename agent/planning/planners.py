@@ -40,7 +40,6 @@ import numpy as np
 
 from agent.core.config import PLANNER_NAMES, PlannerConfig
 from agent.core.types import Observation, PlanDebug, PlanResult, PlanStatus, Side, StageTimes
-from agent.planning.decisive import TurnCommitment
 from agent.planning.estimation import ESTIMATION_WINDOW_S
 from agent.planning.guidance import RouteGuide
 from agent.planning.liveness import Strategy
@@ -166,8 +165,6 @@ class ViaPointPlanner:
         self._selector = EifpSelector(config, self.mech) if name != "ifp" else None
         self._plan_ifp = plan_ifp
         self._trackers: dict[object, object] = {}
-        self.turns = (TurnCommitment(self.mech.turn_commitment)
-                      if self.mech.turn_commitment is not None else None)
         self.guide: RouteGuide | None = None
         if self.mech.routing or self.mech.liveness is not None:
             self.guide = RouteGuide(
@@ -181,8 +178,6 @@ class ViaPointPlanner:
             self._selector.reset()
         if self.guide is not None:
             self.guide.reset()
-        if self.turns is not None:
-            self.turns.reset()
         for tracker in self._trackers.values():
             tracker.reset()  # type: ignore[attr-defined]
 
@@ -258,11 +253,6 @@ class ViaPointPlanner:
             predicted = res
             if res.status != PlanStatus.OK:
                 status = res.status
-            if self.turns is not None:
-                if status == PlanStatus.OK:
-                    omega = self.turns.filter(omega)
-                else:
-                    self.turns.release()
             if mech.braking_guard and len(observation.others):
                 v = self._braking_guard(observation, v, omega)
         else:
