@@ -49,11 +49,11 @@ from collections.abc import Sequence
 from pathlib import Path
 from types import FrameType
 
-from agent.process import PARENT_PID_ENV, die_with_launcher, die_with_parent
+from agent.process import PARENT_PID_ENV, STOP_SIGNALS, die_with_launcher, die_with_parent
 
 log = logging.getLogger("fleet")
 
-FORWARDED = (signal.SIGTERM, signal.SIGINT)
+FORWARDED = STOP_SIGNALS
 MAX_STARTING = 8
 """Robots starting at once (connect, fetch the configuration, warm up, declare): 128 started
 together starve the router's and each other's Zenoh threads past the 1 s transport lease."""

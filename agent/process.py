@@ -60,7 +60,7 @@ class ExitCode(enum.IntEnum):
     ERROR = 7
     """An unexpected internal error; the traceback is in the log."""
     INTERRUPTED = 130
-    """Stopped by SIGINT or SIGTERM."""
+    """Stopped by SIGINT, SIGTERM or SIGHUP (`STOP_SIGNALS`)."""
 
     @classmethod
     def of_run(cls, *, contacts: int, all_arrived: bool, robots_lost: bool,
@@ -76,8 +76,32 @@ class ExitCode(enum.IntEnum):
         return cls.OK if all_arrived else cls.INCOMPLETE
 
 
+STOP_SIGNALS = (signal.SIGTERM, signal.SIGINT, signal.SIGHUP)
+"""The signals that stop a process cleanly: Ctrl-C, ``kill``/systemd/Docker, and a closed
+terminal. Each is handled like SIGINT by every process of a run and the orchestrator."""
+
+
+@contextlib.contextmanager
+def interrupt_on_stop_signals() -> Iterator[None]:
+    """Inside the block, SIGTERM and SIGHUP raise `KeyboardInterrupt` in the main thread, as
+    SIGINT does: the orchestrator's interrupted-run path (status ``interrupted``, partial
+    metrics, exit `ExitCode.INTERRUPTED`) then serves all three. Handlers restored after."""
+    previous = {s: signal.signal(s, _raise_interrupt) for s in STOP_SIGNALS
+                if s != signal.SIGINT}
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+
+
+def _raise_interrupt(signum: int, frame: FrameType | None) -> None:
+    raise KeyboardInterrupt(signal.Signals(signum).name)
+
+
 class StopFlag:
-    """Set by SIGTERM/SIGINT; loops poll it and leave, so sessions and files are closed."""
+    """Set by a stop signal (`STOP_SIGNALS`); loops poll it and leave, so sessions and files
+    are closed."""
 
     def __init__(self) -> None:
         self.signum: int | None = None
@@ -93,7 +117,7 @@ class StopFlag:
 
 @contextlib.contextmanager
 def stop_on_signals(
-        signums: tuple[signal.Signals, ...] = (signal.SIGTERM, signal.SIGINT),
+        signums: tuple[signal.Signals, ...] = STOP_SIGNALS,
 ) -> Iterator[StopFlag]:
     """Route `signums` to a fresh `StopFlag` inside the block; restore the handlers after.
 

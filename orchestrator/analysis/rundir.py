@@ -10,9 +10,7 @@ from __future__ import annotations
 import csv
 import json
 import math
-import os
 import re
-import uuid
 from collections.abc import Iterable
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -21,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from agent.core.scenario import Scenario
+from agent.files import replace_file
 from orchestrator.analysis.metrics import (
     Commands,
     RunMetrics,
@@ -267,18 +266,9 @@ def read_timing(run_dir: Path) -> np.ndarray:
 
 
 def write_json(path: Path, content: Any) -> Path:
-    """Write JSON atomically (readers never see half a file)."""
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp")
-    try:
-        with open(tmp, "w", encoding="utf-8") as f:
-            json.dump(content, f, indent=2)
-            f.write("\n")
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-    return path
+    """Write JSON atomically (readers never see half a file), never through a symlink
+    (`agent.files.replace_file`)."""
+    return replace_file(path, (json.dumps(content, indent=2) + "\n").encode("utf-8"))
 
 
 END_FIELDS = ("reason", "lost", "rejected", "stale", "stale_poses", "cmd_timeouts",

@@ -103,8 +103,14 @@ def tls_ca(args: argparse.Namespace) -> Path | None:
         return None
     if getattr(args, "insecure", False):
         raise BadInput("--tls-ca and --insecure exclude each other")
+    from agent.security import PkiError, RunCA
+
     ca = Path(args.tls_ca)
     missing = [n for n in ("ca.pem", "ca.key") if not (ca / n).is_file()]
     if missing:
         raise BadInput(f"--tls-ca {ca}: missing {', '.join(missing)}")
+    try:
+        RunCA.load(ca, "check")  # unreadable, not PEM, encrypted, not EC: say so now
+    except PkiError as exc:
+        raise BadInput(str(exc)) from None
     return ca

@@ -12,9 +12,10 @@ from typing import Any
 
 from agent.core.config import PLANNER_NAMES, PROFILES
 from agent.core.scenario import Scenario
+from agent.flags import non_negative_int
 from agent.process import ExitCode
 from orchestrator.analysis.console import ProgressLine, run_summary
-from orchestrator.analysis.plots import write_run_plots
+from orchestrator.analysis.plots import profile_note, write_run_plots
 from orchestrator.analysis.rundir import end_event, safe_name
 from orchestrator.cli.common import (
     DEFAULT_RUNS_DIR,
@@ -23,7 +24,6 @@ from orchestrator.cli.common import (
     add_fault_args,
     add_tls_args,
     fault_plan,
-    make_dir,
     planner_label,
     tls_ca,
 )
@@ -66,7 +66,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--planner", choices=PLANNER_NAMES,
                    help="every robot uses this planner (default: the scenario's)")
     p.add_argument("--mode", choices=MODES, default="distributed")
-    p.add_argument("--seed", type=int, default=0, help="seeds the random family and jitter")
+    p.add_argument("--seed", type=non_negative_int, default=0,
+                   help="seeds the random family and jitter")
     p.add_argument("--start-jitter-m", type=float, default=0.0,
                    help="move each start by up to this much (uniform in a disc)")
     p.add_argument("--time-scale", type=float, default=None,
@@ -93,9 +94,25 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def default_out_dir(scenario: Scenario, planner: str, seed: int) -> Path:
+def default_run_name(scenario: Scenario, planner: str, seed: int) -> str:
+    """``<scenario>-<planner>[-paper]-<seed>-<time>``: the paper profile is in the name."""
     stamp = dt.datetime.now().strftime("%Y%m%d-%H%M%S")
-    return DEFAULT_RUNS_DIR / f"{safe_name(scenario.name)}-{planner}-{seed}-{stamp}"
+    profile = "-paper" if scenario.planner_config.is_paper else ""
+    return f"{safe_name(scenario.name)}-{planner}{profile}-{seed}-{stamp}"
+
+
+def new_run_dir(out: str | None, scenario: Scenario, planner: str, seed: int) -> Path:
+    """The run's directory, made 0700 for this run alone (`agent.files`): ``--out`` if it
+    is new or an empty directory of this user, else a fresh ``runs/<default_run_name>``
+    (``-2``, ``-3``, ... when two runs start in the same second)."""
+    from agent.files import UnsafePathError, create_run_dir, unique_dir
+
+    try:
+        if out:
+            return create_run_dir(Path(out))
+        return unique_dir(DEFAULT_RUNS_DIR, default_run_name(scenario, planner, seed))
+    except UnsafePathError as exc:
+        raise BadInput(str(exc)) from None
 
 
 def run(args: argparse.Namespace) -> int:
@@ -114,14 +131,12 @@ def run(args: argparse.Namespace) -> int:
         if (why := mp4_available()) is not None:
             raise BadInput(f"--mp4: {why}")
     faults = fault_plan(args, scenario)
+    ca_dir = tls_ca(args) if args.mode == "distributed" else None  # checked before any file
     launcher = choose_launcher(args.launcher, len(scenario.robots), faults)
     planner = planner_label(scenario)
-    out_dir = Path(args.out) if args.out else default_out_dir(scenario, planner, args.seed)
-    if (out_dir / "trajectory.csv").exists() or (out_dir / "metrics.json").exists():
-        raise BadInput(f"--out: {out_dir} already holds a run; choose another directory")
-    make_dir(out_dir)
-    label = f"{scenario.name} {planner} {args.mode}"
-    write_json(out_dir / "run.json", {
+    out_dir = new_run_dir(args.out, scenario, planner, args.seed)
+    label = run_label(scenario, planner, args.mode)
+    claim_run_dir(out_dir, {
         "setup": args.setup, "scenario": scenario.name, "planner": planner,
         "seed": args.seed, "mode": args.mode, "profile": args.profile,
         "agents": len(scenario.robots),
@@ -146,7 +161,7 @@ def run(args: argparse.Namespace) -> int:
                                    ).metrics
         else:
             metrics, world_status = _run_distributed(scenario, out_dir, args, progress, faults,
-                                                     live, launcher)
+                                                     live, launcher, ca_dir)
     except KeyboardInterrupt:
         interrupted = True
         metrics = _partial_metrics(out_dir)
@@ -187,6 +202,25 @@ def run(args: argparse.Namespace) -> int:
     return code
 
 
+def run_label(scenario: Scenario, planner: str, mode: str) -> str:
+    """What the summary header and the plot title call a run: scenario, planner (with
+    ``(paper profile)`` when the paper's method as written is run) and mode."""
+    return f"{scenario.name} {planner}{profile_note(scenario)} {mode}"
+
+
+def claim_run_dir(out_dir: Path, started: dict[str, Any]) -> None:
+    """Write the first ``run.json`` as a new file: a second run given the same empty
+    ``--out`` at the same moment finds it there and stops (`BadInput`)."""
+    import json
+
+    from agent.files import write_new
+
+    try:
+        write_new(out_dir / "run.json", (json.dumps(started, indent=2) + "\n").encode())
+    except FileExistsError:
+        raise BadInput(f"--out: {out_dir} is taken by another run") from None
+
+
 def _partial_metrics(out_dir: Path) -> Any:
     """The metrics of what an interrupted run recorded (written, marked partial), or None."""
     from orchestrator.analysis.rundir import RunDirError, metrics_from_run_dir, write_metrics
@@ -216,12 +250,13 @@ def _start_live(args: argparse.Namespace, scenario: Scenario) -> Any:
 
 def _run_distributed(scenario: Scenario, out_dir: Path, args: argparse.Namespace,
                      progress: ProgressLine, faults: Any = None,
-                     live: Any = None, launcher: str = "spawn") -> tuple[Any, int]:
+                     live: Any = None, launcher: str = "spawn",
+                     ca_dir: Path | None = None) -> tuple[Any, int]:
     """Run the real processes; (metrics or None, the world's exit status)."""
     from orchestrator.experiments.distributed import run_scenario_distributed
 
     return run_scenario_distributed(scenario, out_dir, args.seed,
                                     time_scale=args.time_scale or 1.0,
                                     on_progress=progress, faults=faults, live=live,
-                                    tls=not args.insecure, tls_ca=tls_ca(args),
+                                    tls=not args.insecure, tls_ca=ca_dir,
                                     robot_launcher=launcher)

@@ -42,9 +42,10 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import FrameType
-from typing import IO, TYPE_CHECKING
+from typing import IO, TYPE_CHECKING, Any
 
 from agent.core.scenario import Scenario
+from agent.files import append_line, open_new, replace_file
 from agent.process import PARENT_PID_ENV
 from orchestrator.analysis.metrics import RunMetrics
 from protocol import OBSERVER_CN, TlsFiles, tls_endpoint, validate_run_id
@@ -272,9 +273,9 @@ class ProcessFaultScheduler:
         return bool(self.todo or self.resume)
 
     def _log(self, sim_t_s: float, robot_id: int, action: str) -> None:
-        with open(self.log_path, "a") as f:
-            f.write(json.dumps({"t": round(sim_t_s, 4), "wall": time.time(),
-                                "robot": robot_id, "action": action}) + "\n")
+        line = json.dumps({"t": round(sim_t_s, 4), "wall": time.time(), "robot": robot_id,
+                           "action": action}) + "\n"
+        append_line(self.log_path, line)
 
     def poll(self, sim_t_s: float) -> None:
         """Send every fault due by sim time `sim_t_s`."""
@@ -343,7 +344,7 @@ def fleet_command(run_id: str, robot_ids: Sequence[int], endpoint: str, log_dir:
 
 def spawn_logged(args: list[str], log_path: Path) -> subprocess.Popen:
     """Start `args` in its own process group, stdout and stderr into `log_path`."""
-    log: IO[bytes] = open(log_path, "wb")
+    log: IO[bytes] = open_new(log_path, "wb")
     try:
         return subprocess.Popen(
             args, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
@@ -470,11 +471,12 @@ def run_distributed(
                      + EXIT_MARGIN_S)
 
     in_main = threading.current_thread() is threading.main_thread()
-    previous_term = None
+    previous: dict[int, Any] = {}
     if in_main:
-        def _on_term(signum: int, frame: FrameType | None) -> None:
-            raise SystemExit(128 + signum)  # unwinds through the teardown below
-        previous_term = signal.signal(signal.SIGTERM, _on_term)
+        def _on_stop(signum: int, frame: FrameType | None) -> None:
+            # Unwinds through the teardown below, then the caller's interrupted-run path.
+            raise KeyboardInterrupt(signal.Signals(signum).name)
+        previous = {s: signal.signal(s, _on_stop) for s in (signal.SIGTERM, signal.SIGHUP)}
 
     world: subprocess.Popen | None = None
     robots: list[subprocess.Popen] = []
@@ -541,10 +543,10 @@ def run_distributed(
     finally:
         # Teardown is bounded (WORLD_TERM_GRACE_S + ROBOT_EXIT_GRACE_S + ROBOT_TERM_GRACE_S);
         # a second Ctrl-C or SIGTERM must not cut it short and leave orphans.
-        previous_int = None
         if in_main:
-            previous_int = signal.signal(signal.SIGINT, signal.SIG_IGN)
-            signal.signal(signal.SIGTERM, signal.SIG_IGN)
+            previous[signal.SIGINT] = signal.signal(signal.SIGINT, signal.SIG_IGN)
+            for signum in (signal.SIGTERM, signal.SIGHUP):
+                signal.signal(signum, signal.SIG_IGN)
         try:
             if bridge is not None:
                 bridge.stop()
@@ -554,12 +556,11 @@ def run_distributed(
                 scheduler.release()
             stop_processes(robots, ROBOT_EXIT_GRACE_S, ROBOT_TERM_GRACE_S)
             with contextlib.suppress(OSError):
-                (out_dir / "robots.json").write_text(
-                    json.dumps(collect_robot_exits(out_dir), indent=1) + "\n")
+                replace_file(out_dir / "robots.json",
+                             (json.dumps(collect_robot_exits(out_dir), indent=1) + "\n").encode())
         finally:
-            if in_main:
-                signal.signal(signal.SIGINT, previous_int or signal.SIG_DFL)
-                signal.signal(signal.SIGTERM, previous_term or signal.SIG_DFL)
+            for signum, handler in previous.items():
+                signal.signal(signum, handler if handler is not None else signal.SIG_DFL)
 
 
 def _record_transport(out_dir: Path, info: dict) -> None:

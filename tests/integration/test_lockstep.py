@@ -164,7 +164,7 @@ def test_faulty_runs_are_repeatable_per_seed(tmp_path):
         return (tmp_path / name / "trajectory.csv").read_text()
 
     assert traj(3, "a") == traj(3, "b")
-    assert traj(3, "a") != traj(4, "c")
+    assert traj(3, "a-again") != traj(4, "c")  # a run directory is written once
 
 
 def test_latency_compensation_makes_a_measurable_difference(tmp_path):

@@ -6,7 +6,8 @@ Layers, lowest first (a module may import its own layer and the layers below it)
 1. planning: threats, via-points, encounters, reference paths, MPC, ORCA, controller
    (`agent.planning`)
 2. simulation: dynamics, link faults, fault plans, schedule, the lockstep loop (`world.sim`)
-3. wire: keys, messages, codec (`protocol`), the scenario file format (`world.scenario_file`)
+3. wire: keys, messages, codec (`protocol`), the scenario file format (`world.scenario_file`),
+   run directories and files made safely (`agent.files`)
 4. runtime: the robot and world processes and their plumbing (`agent.node`, `agent.fleet`,
    `agent.process`, `agent.flags`, `world.node`, `world.router`, `world.recorder`,
    `world.mcap_log`)
@@ -27,7 +28,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("agent.core",),
     ("agent.planning",),
     ("world.sim",),
-    ("protocol", "world.scenario_file"),
+    ("protocol", "world.scenario_file", "agent.files"),
     ("agent.node", "agent.fleet", "agent.process", "agent.flags", "agent.security",
      "agent.__main__",
      "world.node", "world.router", "world.recorder", "world.mcap_log", "world.__main__"),
