@@ -264,12 +264,14 @@ def test_a_scenario_larger_than_the_cap_is_refused_before_parsing(tmp_path):
 
 def test_error_messages_show_a_bounded_part_of_a_huge_value(tmp_path):
     path = tmp_path / "s.yaml"
-    path.write_text("name: s\ntime_limit: 10\ndefaults: {planner: " + "x" * 100_000 + "}\n"
-                    "robots:\n  - {id: 0, start: [0, 0, 0], goal: [1, 0], v_max: ["
-                    + ", ".join(["1"] * 50_000) + "]}\n")
-    with pytest.raises(ScenarioError) as err:
-        load_scenario(path)
-    assert len(str(err.value)) < 400
+    for huge in ("defaults: {planner: " + "x" * 20_000 + "}\n",
+                 "defaults: {v_max: [" + ", ".join(["[1, 2, 3]"] * 5_000) + "]}\n",
+                 "x" * 20_000 + ": 1\n"):
+        path.write_text(f"name: s\ntime_limit: 10\n{huge}"
+                        "robots:\n  - {id: 0, start: [0, 0, 0], goal: [1, 0]}\n")
+        with pytest.raises(ScenarioError) as err:
+            load_scenario(path)
+        assert len(str(err.value)) < 400, str(err.value)[:500]
 
 
 def test_world_out_that_is_a_file_is_one_line_exit_2(tmp_path):
@@ -300,6 +302,7 @@ def test_garbage_endpoints_are_usage_errors(argv, capsys):
 # --- every entry point's parser, driven with generated values ---------------------------------
 
 def _parsers():
+    from agent.fleet import build_parser as fleet_parser
     from agent.node import parse_args as agent_args
     from world.node import parse_args as world_args
     from world.router import parse_args as router_args
@@ -309,6 +312,8 @@ def _parsers():
         "agent": (agent_args, ["--run", "r", "--id", "0", "--connect", "tcp/127.0.0.1:1"]),
         "router": (router_args, ["--run", "r", "--name", "b", "--robots", "1", "--listen",
                                  "tcp/127.0.0.1:1", "--connect", "tcp/127.0.0.1:2"]),
+        "fleet": (fleet_parser().parse_args, ["--run", "r", "--ids", "0,1", "--connect",
+                                              "tcp/127.0.0.1:1", "--log-dir", "/nonexistent"]),
     }
 
 
@@ -328,15 +333,18 @@ VALUES = st.one_of(
           suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(data=st.data())
 def test_process_parsers_give_a_value_or_one_line_exit_2(data, capsys):
-    """python -m world, python -m agent, python -m world.router: any value for any flag is
-    parsed or refused in one line with exit 2; never a traceback."""
-    which = data.draw(st.sampled_from(["world", "agent", "router"]))
+    """python -m world, python -m agent, python -m world.router (and python -m agent.fleet):
+    any value for any flag is parsed or refused in one line with exit 2; never a
+    traceback."""
+    which = data.draw(st.sampled_from(["world", "agent", "router", "fleet"]))
     parse, base = _parsers()[which]
     flag = data.draw(st.sampled_from(["--run", "--id", "--name", "--robots", "--listen",
                                       "--connect", "--rate-hz", "--time-scale", "--seed",
                                       "--fault-seed", "--drop", "--latency-ms", "--relay",
                                       "--zid", "--world-zid", "--tls", "--control-rate-hz",
-                                      "--startup-timeout-s", "--wait-world-s"]))
+                                      "--startup-timeout-s", "--wait-world-s", "--ids",
+                                      "--connect-id", "--max-starting", "--cpu-tokens",
+                                      "--nice"]))
     value = data.draw(VALUES)
     capsys.readouterr()
     try:
