@@ -91,6 +91,15 @@ def every_interface(text: str) -> bool:
     return any(_unspecified(str(info[4][0]).split("%")[0]) for info in infos)
 
 
+def unspecified_literal(host: str) -> bool:
+    """Whether `host` is an IP literal of every interface (no name is resolved: False for
+    names, which may resolve only on another host)."""
+    try:
+        return _unspecified(host)
+    except ValueError:
+        return False
+
+
 def _unspecified(address: str) -> bool:
     """Whether the IP literal `address` is unspecified (IPv4-mapped ``::ffff:0.0.0.0``
     too); ValueError if it is not an IP literal."""

@@ -86,7 +86,7 @@ def interrupt_on_stop_signals() -> Iterator[None]:
     """Inside the block, SIGTERM and SIGHUP raise `KeyboardInterrupt` in the main thread, as
     SIGINT does: the orchestrator's interrupted-run path (status ``interrupted``, partial
     metrics, exit `ExitCode.INTERRUPTED`) then serves all three. Handlers restored after."""
-    previous = {s: signal.signal(s, _raise_interrupt) for s in STOP_SIGNALS
+    previous = {s: signal.signal(s, raise_interrupt) for s in STOP_SIGNALS
                 if s != signal.SIGINT}
     try:
         yield
@@ -95,7 +95,8 @@ def interrupt_on_stop_signals() -> Iterator[None]:
             signal.signal(signum, handler)
 
 
-def _raise_interrupt(signum: int, frame: FrameType | None) -> None:
+def raise_interrupt(signum: int, frame: FrameType | None = None) -> None:
+    """A signal handler: raise `KeyboardInterrupt` (named after the signal), as SIGINT does."""
     raise KeyboardInterrupt(signal.Signals(signum).name)
 
 

@@ -41,12 +41,12 @@ import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from types import FrameType
 from typing import IO, TYPE_CHECKING, Any
 
 from agent.core.scenario import Scenario
 from agent.files import append_line, open_new, replace_file
-from agent.process import PARENT_PID_ENV
+from agent.flags import endpoint_host, every_interface, unspecified_literal
+from agent.process import PARENT_PID_ENV, raise_interrupt
 from orchestrator.analysis.metrics import RunMetrics
 from protocol import OBSERVER_CN, TlsFiles, tls_endpoint, validate_run_id
 from world.scenario_file import load_scenario
@@ -188,19 +188,13 @@ def robot_command(run_id: str, robot_id: int, endpoint: str, *,
     ]
 
 
-def endpoint_host(endpoint: str) -> str:
-    """The host of ``proto/HOST:PORT`` (brackets of an IPv6 literal removed)."""
-    host = endpoint.partition("/")[2].rpartition(":")[0]
-    return host.strip("[]")
-
-
 def prepare_tls(out_dir: Path, run_id: str, robot_ids: Sequence[int],
                 endpoints: Iterable[str], ca_dir: Path | None = None) -> Path:
     """The run's certificates in ``<out_dir>/tls`` (`agent.security.make_run_pki`); the world's
     certificate names every host of `endpoints`. Returns the directory."""
     from agent.security import make_run_pki
 
-    hosts = [h for h in map(endpoint_host, endpoints) if h and h not in ("0.0.0.0", "::")]
+    hosts = [h for h in map(endpoint_host, endpoints) if h and not unspecified_literal(h)]
     tls_dir = Path(out_dir) / TLS_DIR
     make_run_pki(tls_dir, run_id, robot_ids, world_hosts=hosts, ca_dir=ca_dir)
     return tls_dir
@@ -454,7 +448,7 @@ def run_distributed(
     if tls:
         endpoint = tls_endpoint(endpoint)
         robot_endpoints = {rid: tls_endpoint(ep) for rid, ep in (robot_endpoints or {}).items()}
-    elif endpoint_host(endpoint) in ("0.0.0.0", "::"):
+    elif every_interface(endpoint):
         raise ValueError(f"{endpoint}: listening on every interface needs TLS")
     joined = [*(robot_endpoints or {}).values()] or [endpoint]
     if tls:
@@ -473,10 +467,8 @@ def run_distributed(
     in_main = threading.current_thread() is threading.main_thread()
     previous: dict[int, Any] = {}
     if in_main:
-        def _on_stop(signum: int, frame: FrameType | None) -> None:
-            # Unwinds through the teardown below, then the caller's interrupted-run path.
-            raise KeyboardInterrupt(signal.Signals(signum).name)
-        previous = {s: signal.signal(s, _on_stop) for s in (signal.SIGTERM, signal.SIGHUP)}
+        # Unwinds through the teardown below, then the caller's interrupted-run path.
+        previous = {s: signal.signal(s, raise_interrupt) for s in (signal.SIGTERM, signal.SIGHUP)}
 
     world: subprocess.Popen | None = None
     robots: list[subprocess.Popen] = []
@@ -490,7 +482,7 @@ def run_distributed(
 
             # Read-only: the observer's certificate (the access control lets it subscribe).
             bridge = LiveBridge(
-                run_id, endpoint if endpoint_host(endpoint) not in ("0.0.0.0", "::")
+                run_id, endpoint if not every_interface(endpoint)
                 else joined[0], scenario, live,
                 tls=TlsFiles.in_dir(tls_dir, OBSERVER_CN) if tls_dir is not None else None,
             ).start()
