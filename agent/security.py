@@ -4,7 +4,8 @@ The orchestrator calls `make_run_pki` before it starts the world and the robots;
 then opens its Zenoh session with its own files (`protocol.TlsFiles`, `protocol.tls_settings`)
 and the world's router enforces `protocol.access_control`, which tells processes apart by the
 common name (CN) of their certificate: ``world``, ``robot-<id>``, ``orchestrator``,
-``observer``.
+``observer``, each scoped to the run (`protocol.scoped_cn`: ``robot-3@<run tag>``), so a
+certificate of another run, even from the same CA, holds no right in this one.
 
 EC P-256 keys, SHA-256 signatures. The CA is made fresh for each run and, by default, its
 key is never written: once every certificate is issued, nobody can mint another identity
