@@ -5,6 +5,7 @@ same processes the containers run, without Docker)."""
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 import uuid
@@ -134,7 +135,13 @@ def test_await_follows_a_real_run_and_writes_the_report(tmp_path: Path) -> None:
     assert metrics["success"] is True and metrics["arrived"] == 2 and metrics["contacts"] == 0
     run = json.loads((run_dir / "run.json").read_text())
     assert run["mode"] == "docker-compose" and run["run_id"] == run_id
-    assert "end reason all_arrived" in (run_dir / "report.txt").read_text()
+    # The same ending fields as `orchestrator run` writes (`rundir.run_ending`).
+    assert (run["status"], run["exit_code"], run["end_reason"], run["lost"]) == (
+        "complete", 0, "all_arrived", [])
+    report = (run_dir / "report.txt").read_text()
+    assert "end reason all_arrived" in report
+    # The summary table reads the ending from metrics.json, as a local run's summary does.
+    assert re.search(r"end reason\s+all_arrived", report.split("\n\n")[0]), report
 
 
 def test_compose_certs_writes_one_directory_per_service_with_only_its_key(tmp_path) -> None:
