@@ -311,6 +311,10 @@ def test_stress_writes_table_rows_and_envelope(tmp_path, capsys):
     faults = json.loads((out / run["dir"] / "events.jsonl").read_text().splitlines()[0])
     assert faults["faults"]["links"]["jitter_ms"] == pytest.approx(12.0)  # 0.3 x 40 ms
     assert faults["faults"]["seed"] == 1
+    # At latency 0 the links change nothing; seed 1's start jitter still tells it from 0.
+    zero = {r["seed"]: out / r["dir"] / "scenario.yaml" for r in content["rows"]
+            if r["latency_ms"] == 0.0}
+    assert zero[0].read_text() != zero[1].read_text()
 
 
 def test_stress_applies_robot_faults_to_every_run(tmp_path, capsys):
