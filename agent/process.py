@@ -18,7 +18,7 @@ import signal
 import threading
 import time
 import zlib
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from types import FrameType
 from typing import Any
 
@@ -74,6 +74,30 @@ class ExitCode(enum.IntEnum):
         if interrupted:
             return cls.INTERRUPTED
         return cls.OK if all_arrived else cls.INCOMPLETE
+
+    @classmethod
+    def worst(cls, codes: Iterable[int]) -> ExitCode:
+        """The worst of several runs' endings (`ENDING_SEVERITY`), OK for none.
+
+        A status outside the table (a child killed by a signal: negative) counts as
+        INTERRUPTED, so a batch never reports ERROR unless one of its runs did (and that
+        run's log has the traceback).
+        """
+        worst = cls.OK
+        for code in codes:
+            known = cls(code) if code in cls._value2member_map_ else cls.INTERRUPTED
+            if ENDING_SEVERITY.index(known) > ENDING_SEVERITY.index(worst):
+                worst = known
+        return worst
+
+
+ENDING_SEVERITY = (ExitCode.OK, ExitCode.INCOMPLETE, ExitCode.INTERRUPTED, ExitCode.ROBOT_LOST,
+                   ExitCode.CONTACT, ExitCode.BAD_INPUT, ExitCode.TRANSPORT, ExitCode.WORLD_LOST,
+                   ExitCode.ERROR)
+"""Endings from best to worst, for a batch of runs (`ExitCode.worst`): within a run's own
+outcomes the order of `ExitCode.of_run` (a contact outranks a lost robot, which outranks
+an interruption, which outranks a time-out); then the runs that could not be judged (bad
+input, no transport, no world), and last an internal error."""
 
 
 STOP_SIGNALS = (signal.SIGTERM, signal.SIGINT, signal.SIGHUP)

@@ -20,8 +20,10 @@ Lifecycle:
    (``poses/<tick mod K>``, `protocol.pose_slot_count`) and records the tick. The robots'
    plan internals (``debug/<id>``, `PlanDebugMsg`, through a ring) are validated and
    recorded into ``run.mcap`` (`RunRecorder.record_plan`).
-4. The run ends when every robot has arrived (``all_arrived``), at the scenario's time limit
-   (``time_limit``) or on SIGTERM/SIGINT (``signal``): publish an ``end`` `ControlMsg`, write
+4. The run ends when every robot has arrived (``all_arrived``), when every robot has
+   arrived or been lost for ``--lost-grace-s`` (``arrived_or_lost``: a lost robot does not
+   hold the run to its limit), at the scenario's time limit (``time_limit``) or on
+   SIGTERM/SIGINT (``signal``): publish an ``end`` `ControlMsg`, write
    the ``end`` event, give robots a moment (``--linger-s``) to leave, close everything.
 
 Faults: a malformed command or plan-debug message is rejected (`ProtocolError`), counted
@@ -105,6 +107,11 @@ MAX_TALLY_KEYS = 64
 """Distinct keys (and reasons) tallied in the ``end`` event; the rest count as ``other``."""
 IDLE_POLL_S = 0.01
 """Wall period of the waiting and lingering loops."""
+LOST_GRACE_S = 5.0
+"""Default sim time a lost robot is waited for (`WorldOptions.lost_grace_s`) before it no
+longer holds the run open: once every robot has arrived or been lost this long, the run
+ends (``arrived_or_lost``) instead of running on to its time limit. Five lease periods: a
+robot whose link merely dropped is back well within it."""
 
 log = logging.getLogger("world")
 
@@ -136,6 +143,9 @@ class WorldOptions:
             robots only (`protocol.access_control`).
         zid: the session's Zenoh id (None: random). Robots behind a relay check the source
             of poses against it (``python -m agent --world-zid``).
+        lost_grace_s: sim time a lost robot may still come back (a stopped process that
+            resumes, a restarted one); a robot lost longer than this, like one that
+            arrived, no longer holds the run open (`LOST_GRACE_S`).
     """
 
     run_id: str
@@ -154,6 +164,7 @@ class WorldOptions:
     tls_dir: Path | None = None
     relays: tuple[tuple[str, tuple[int, ...]], ...] = ()
     zid: str | None = None
+    lost_grace_s: float = LOST_GRACE_S
 
 
 def parse_args(argv: list[str] | None = None) -> WorldOptions:
@@ -193,6 +204,10 @@ def parse_args(argv: list[str] | None = None) -> WorldOptions:
     parser.add_argument("--zid", type=argtypes.zid, default=None, metavar="HEX",
                         help="the session's Zenoh id (robots behind a relay are given it "
                              "with --world-zid); default: random")
+    parser.add_argument("--lost-grace-s", type=argtypes.positive, default=LOST_GRACE_S,
+                        help="sim seconds a lost robot may still come back; once every robot "
+                             "has arrived or been lost this long the run ends "
+                             f"(default {LOST_GRACE_S:g})")
     args = parser.parse_args(argv)
     listen = None if args.connect else (args.listen or DEFAULT_ENDPOINT)
     return WorldOptions(
@@ -212,6 +227,7 @@ def parse_args(argv: list[str] | None = None) -> WorldOptions:
         tls_dir=args.tls,
         relays=tuple(args.relay),
         zid=args.zid,
+        lost_grace_s=args.lost_grace_s,
     )
 
 
@@ -260,6 +276,7 @@ class WorldNode:
         self.configs = run_configs(scenario, options)
         self.alive: set[int] = set()
         self.lost: set[int] = set()
+        self.lost_at_s: dict[int, float] = {}  # sim time each lost robot was lost
         self.last_seq: dict[int, int] = {}
         self.ended = False
         self.counts = {"commands": 0, "rejected": 0, "stale": 0, "queries": 0,
@@ -335,6 +352,7 @@ class WorldNode:
                 self.alive.add(rid)
                 if rid in self.lost:
                     self.lost.discard(rid)
+                    self.lost_at_s.pop(rid, None)
                     # The same process, or a new one: either numbers on from the time of
                     # its poses (`protocol.next_seq`), so its last seq stays the bar (an old
                     # command replayed now is still stale).
@@ -350,6 +368,7 @@ class WorldNode:
                     self._event("robot_left", robot=rid, wall=time.time())
                     continue
                 self.lost.add(rid)
+                self.lost_at_s[rid] = self.sim.t_s
                 self.sim.set_offline(rid, True)
                 self._event("robot_lost", robot=rid, wall=time.time())
                 log.warning("robot %d lost (liveliness token gone): braking it", rid)
@@ -521,8 +540,16 @@ class WorldNode:
             self.tick_s.append(time.perf_counter() - t0)
             if self.sim.all_arrived():
                 return "all_arrived"
+            if self.lost and self.arrived_or_gone():
+                return "arrived_or_lost"
             if self.sim.t_s >= self.scenario.time_limit_s - 1e-9:
                 return "time_limit"
+
+    def arrived_or_gone(self) -> bool:
+        """Every robot has arrived or has been lost for `WorldOptions.lost_grace_s`."""
+        gone_before = self.sim.t_s - self.options.lost_grace_s + 1e-9
+        waiting = [int(r) for r in self.sim.robot_ids[~self.sim.arrived]]
+        return all(self.lost_at_s.get(r, math.inf) <= gone_before for r in waiting)
 
     def finish(self, reason: str) -> int:
         """Announce the end, record the summary, let robots leave; return the exit status."""

@@ -313,9 +313,34 @@ def write_run_plots(out_dir: Path, *, gif: bool, mp4: bool = False) -> None:
         print(f"warning: plotting failed: {type(exc).__name__}: {exc}", file=sys.stderr)
 
 
+LATENCY_AXIS_MARGIN = 1.15
+"""latency.png's x axes end this factor past each stage's p99 (`latency_axis_ms`)."""
+
+
+def latency_axis_ms(ms: np.ndarray) -> tuple[float, float, int]:
+    """The x range of one latency histogram and what falls past it.
+
+    The axis ends just past the p99 (`LATENCY_AXIS_MARGIN`), not at the largest value: one
+    stall of a second would otherwise squash every distribution into its first bin. The
+    samples past the end are counted (and the panel says so, with the largest).
+
+    Args:
+        ms: (K,) latencies [ms], K >= 1.
+
+    Returns:
+        (low, high) of the axis [ms] and how many samples lie above `high`.
+    """
+    ms = np.asarray(ms, dtype=float)
+    low = float(ms.min())
+    high = max(float(np.percentile(ms, 99)) * LATENCY_AXIS_MARGIN, low + 1e-3)
+    return low, high, int(np.count_nonzero(ms > high))
+
+
 def plot_wall_latency(stamps: np.ndarray, path: Path) -> Path | None:
     """latency.png: a histogram per wall-clock stage (`metrics.WALL_STAGES`), p50 and p99
-    marked; None (nothing written) if no stage could be measured.
+    marked, each x axis clipped just past the p99 (`latency_axis_ms`; the panel says how
+    many samples lie beyond, and the largest); None (nothing written) if no stage could be
+    measured.
 
     Args:
         stamps: (K, 9) timing.csv stamps (`protocol.TIMING_COLUMNS`).
@@ -337,11 +362,16 @@ def plot_wall_latency(stamps: np.ndarray, path: Path) -> Path | None:
     fig = _figure(5.0 * cols, 2.4 * rows)
     axes = fig.subplots(rows, cols, squeeze=False).ravel()
     for ax, (stage, ms) in zip(axes, panels):
-        ax.hist(ms, bins=min(60, max(10, ms.size // 20)), color="tab:blue", alpha=0.8)
+        low, high, above = latency_axis_ms(ms)
+        ax.hist(ms[ms <= high], bins=min(60, max(10, ms.size // 20)), range=(low, high),
+                color="tab:blue", alpha=0.8)
+        ax.set_xlim(low, high)
         for q, style in ((50, "-"), (99, "--")):
             v = float(np.percentile(ms, q))
             ax.axvline(v, color="black", ls=style, lw=0.8, label=f"p{q} {v:.2f} ms")
-        ax.set_title(stage, fontsize=9)
+        clipped = (f"; axis to p99, {above} above (max {float(ms.max()):.1f} ms)"
+                   if above else "")
+        ax.set_title(f"{stage}{clipped}", fontsize=9)
         ax.set_xlabel("wall ms")
         ax.legend(fontsize=7)
     for ax in axes[len(panels):]:

@@ -16,15 +16,17 @@ from agent.flags import non_negative_int
 from agent.process import ExitCode
 from orchestrator.analysis.console import ProgressLine, run_summary
 from orchestrator.analysis.plots import profile_note, write_run_plots
-from orchestrator.analysis.rundir import end_event, safe_name
+from orchestrator.analysis.rundir import end_event, run_ending, safe_name
 from orchestrator.cli.common import (
     DEFAULT_RUNS_DIR,
+    JITTER_HELP,
     MODES,
     BadInput,
     add_fault_args,
     add_tls_args,
     fault_plan,
     planner_label,
+    start_jitter_m,
     tls_ca,
 )
 
@@ -68,8 +70,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--mode", choices=MODES, default="distributed")
     p.add_argument("--seed", type=non_negative_int, default=0,
                    help="seeds the random family and jitter")
-    p.add_argument("--start-jitter-m", type=float, default=0.0,
-                   help="move each start by up to this much (uniform in a disc)")
+    p.add_argument("--start-jitter-m", type=float, default=None, help=JITTER_HELP)
     p.add_argument("--time-scale", type=float, default=None,
                    help="sim seconds per wall second (distributed mode, and lockstep with "
                         "--live; default 1)")
@@ -122,8 +123,13 @@ def run(args: argparse.Namespace) -> int:
     if args.time_scale is not None and not (math.isfinite(args.time_scale)
                                             and args.time_scale > 0):
         raise BadInput(f"--time-scale: must be > 0, got {args.time_scale}")
+    jitter_m = start_jitter_m(args.setup, args.seed, args.start_jitter_m, agents=args.agents)
+    if args.start_jitter_m is None and jitter_m > 0.0:
+        print(f"run: seed {args.seed} moves each start by up to {jitter_m:g} m ({args.setup} "
+              "does not draw from the seed; --start-jitter-m 0 runs it as written)",
+              file=sys.stderr)
     scenario = resolve(args.setup, agents=args.agents, seed=args.seed,
-                       start_jitter_m=args.start_jitter_m, planner=args.planner,
+                       start_jitter_m=jitter_m, planner=args.planner,
                        profile=args.profile)
     if args.mp4:
         from orchestrator.analysis.plots import mp4_available
@@ -140,7 +146,7 @@ def run(args: argparse.Namespace) -> int:
         "setup": args.setup, "scenario": scenario.name, "planner": planner,
         "seed": args.seed, "mode": args.mode, "profile": args.profile,
         "agents": len(scenario.robots),
-        "start_jitter_m": args.start_jitter_m, "time_scale": args.time_scale,
+        "start_jitter_m": jitter_m, "time_scale": args.time_scale,
         "launcher": launcher if args.mode == "distributed" else None,
         "faults": faults.to_json() if faults is not None else None,
         "started": dt.datetime.now().isoformat(timespec="seconds"),
@@ -172,18 +178,11 @@ def run(args: argparse.Namespace) -> int:
     wall_s = time.monotonic() - wall0
     end = end_event(out_dir)
     crashed = metrics is None or (world_status is not None and world_status not in RUN_ENDINGS)
-    content = metrics.to_json_dict() if metrics is not None else {}
-    code = (ExitCode.INTERRUPTED if interrupted else ExitCode.WORLD_LOST if crashed
-            else ExitCode.of_run(contacts=int(content.get("contacts") or 0),
-                                 all_arrived=content.get("arrived") == content.get("robots"),
-                                 robots_lost=bool(end.get("lost")),
-                                 interrupted=end.get("reason") == "signal"))
-    status = ("interrupted" if interrupted or end.get("reason") == "signal"
-              else "crashed" if crashed
-              else "timed-out" if end.get("reason") == "time_limit" else "complete")
+    content = metrics.to_json_dict() if metrics is not None else None
+    ending = run_ending(content, end, interrupted=interrupted, crashed=crashed)
+    code, status = ExitCode(ending.exit_code), ending.status
     write_json(out_dir / "run.json", {
-        **read_json(out_dir / "run.json"), "status": status, "exit_code": int(code),
-        "end_reason": end.get("reason"), "lost": end.get("lost", []),
+        **read_json(out_dir / "run.json"), **ending.as_json(),
         "world_exit_status": world_status, "wall_s": round(wall_s, 2),
         "finished": dt.datetime.now().isoformat(timespec="seconds")})
     if metrics is None:
@@ -193,7 +192,7 @@ def run(args: argparse.Namespace) -> int:
         return code
     write_run_plots(out_dir, gif=args.gif, mp4=args.mp4)
     if not args.quiet:
-        print(run_summary(read_json(out_dir / "metrics.json") or content, label))
+        print(run_summary(read_json(out_dir / "metrics.json") or content or {}, label))
         print(f"\nstatus {status}, wall time {wall_s:.1f} s")
     print(out_dir)
     if crashed:

@@ -225,6 +225,19 @@ def world_fault_args(plan: FaultPlan | None) -> list[str]:
     return [] if plan is None else _link_args(plan)
 
 
+def world_lost_grace_args(plan: FaultPlan | None, *, time_scale: float,
+                          startup_timeout_s: float) -> list[str]:
+    """``--lost-grace-s`` of ``python -m world`` for a plan whose robots come back: a
+    stopped robot is lost from the lease until it resumes (its stop's duration), a restarted
+    one until its new process is up (at most the start-up deadline, in sim time). Without
+    such faults the world's default (`world.node.LOST_GRACE_S`) stands."""
+    if plan is None:
+        return []
+    back_s = [f.duration_s + 1.0 for f in plan.process if f.kind == "stop"]
+    back_s += [startup_timeout_s * time_scale for f in plan.process if f.kind == "restart"]
+    return ["--lost-grace-s", repr(float(max(back_s)))] if back_s else []
+
+
 def robot_fault_args(plan: FaultPlan | None, robot_id: int) -> list[str]:
     """Options of ``python -m agent`` for the plan's pose-link and timing faults."""
     if plan is None:
@@ -456,7 +469,11 @@ def run_distributed(
     _record_transport(out_dir, transport_info(joined, tls_dir))
     world_cmd = world_command(run_id, scenario_path, out_dir, endpoint, rate_hz=rate_hz,
                               time_scale=time_scale, wait_robots_s=startup_timeout_s,
-                              extra_args=[*world_fault_args(faults), *extra_world_args],
+                              extra_args=[*world_fault_args(faults),
+                                          *world_lost_grace_args(
+                                              faults, time_scale=time_scale,
+                                              startup_timeout_s=startup_timeout_s),
+                                          *extra_world_args],
                               tls_dir=tls_dir)
     if faults is not None:
         faults.check(robot_ids)
