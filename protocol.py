@@ -306,10 +306,12 @@ ROUTER_CN_PREFIX = "router-"
 """CNs of relay routers are ``router-<name>`` (`router_cn`)."""
 _ROUTER_NAME_RE = re.compile(r"[a-z0-9][a-z0-9-]{0,31}")
 _ZID_RE = re.compile(r"[1-9a-f][0-9a-f]{0,31}")
-MAX_SEQ_JUMP = 64
-"""Largest step a command's ``seq`` may take above the last one the world accepted from that
-robot (6.4 s of lost commands at 10 Hz); a robot's first command has ``seq <= MAX_SEQ_JUMP``.
-A forged ``seq = 2**63 - 1`` would otherwise make every genuine command stale."""
+SEQ_PER_S = 1000
+"""A command's ``seq`` is on a clock: the sim time [ms] of the poses it was planned on, or one
+more than the robot's previous seq if that is larger (`next_seq`). The world refuses a seq
+beyond what its own time allows (`max_seq`), so no burst of forged commands can push a
+robot's seq out of the genuine robot's reach: once a forger stops, the robot's seq, taken
+from time, passes the forged ones within `MAX_CMD_AHEAD_S`."""
 MAX_POSE_AHEAD_S = 1.0
 """A pose stamped more than this [sim s] (times the time scale, if > 1) ahead of the
 receiving robot's clock is rejected: a forged far-future pose would otherwise move the clock
@@ -325,6 +327,27 @@ rate from 0)."""
 def robot_cn(robot_id: int) -> str:
     """Certificate common name of robot `robot_id` (``robot-<id>``)."""
     return f"robot-{_check_robot_id(robot_id)}"
+
+
+RUN_TAG_HEX = 12
+"""Hex digits of a run's tag (`run_tag`): 48 bits of SHA-256 of the run id."""
+
+
+def run_tag(run_id: str) -> str:
+    """A short, fixed-length tag of `run_id` (the first `RUN_TAG_HEX` hex digits of its
+    SHA-256): a certificate's CN carries it, since a CN holds at most 64 characters and a run
+    id alone may be 64."""
+    import hashlib
+
+    return hashlib.sha256(validate_run_id(run_id).encode("ascii")).hexdigest()[:RUN_TAG_HEX]
+
+
+def scoped_cn(cn: str, run_id: str) -> str:
+    """The CN of identity `cn` (``world``, ``robot-3``, ...) in a certificate of run
+    `run_id`: ``<cn>@<run tag>`` (`run_tag`). The access lists name these, so a certificate
+    issued for another run, even by the same CA (``--tls-ca``), matches no subject and is
+    refused everything. File names keep the plain `cn`."""
+    return f"{cn}@{run_tag(run_id)}"
 
 
 def router_cn(name: str) -> str:
@@ -417,20 +440,23 @@ def _own_key_rules(p: str, tag: str, ids: Iterable[int]) -> list[dict[str, Any]]
     ]
 
 
-def _robots_acl(p: str, ids: list[int]
+def _robots_acl(p: str, ids: list[int], run_id: str
                 ) -> tuple[list[dict[str, Any]], list[dict[str, Any]], list[dict[str, Any]]]:
-    """(rules, subjects, policies) of robots `ids`: each its own keys, all the shared rules."""
+    """(rules, subjects, policies) of robots `ids` of run `run_id`: each its own keys, all the
+    shared rules."""
     rules = _robot_side_rules(p)
     subjects: list[dict[str, Any]] = []
     policies: list[dict[str, Any]] = []
     for i in ids:
         own = _own_key_rules(p, str(i), [i])
         rules += own
-        subjects.append({"id": f"s-robot-{i}", "cert_common_names": [robot_cn(i)]})
+        subjects.append({"id": f"s-robot-{i}",
+                         "cert_common_names": [scoped_cn(robot_cn(i), run_id)]})
         policies.append({"id": f"p-robot-{i}", "subjects": [f"s-robot-{i}"],
                          "rules": [r["id"] for r in own]})
     if ids:
-        subjects.append({"id": "s-robots", "cert_common_names": [robot_cn(i) for i in ids]})
+        subjects.append({"id": "s-robots",
+                         "cert_common_names": [scoped_cn(robot_cn(i), run_id) for i in ids]})
         policies.append({"id": "p-robots", "subjects": ["s-robots"],
                          "rules": list(_ROBOT_SIDE_RULES)})
     return rules, subjects, policies
@@ -461,7 +487,7 @@ def access_control(run_id: str, robot_ids: Iterable[int],
     """
     p = f"{KEY_ROOT}/{validate_run_id(run_id)}"
     ids = sorted({_check_robot_id(i) for i in robot_ids})
-    rules, subjects, policies = _robots_acl(p, ids)
+    rules, subjects, policies = _robots_acl(p, ids, run_id)
     rules += [
         _acl_rule("obs-sub", ["declare_subscriber"], ["ingress"], [f"{p}/**"]),
         _acl_rule("obs-recv", ["put", "delete"], ["egress"], [f"{p}/**"]),
@@ -478,11 +504,12 @@ def access_control(run_id: str, robot_ids: Iterable[int],
             behind[i] = cn
         own = _own_key_rules(p, cn, mine)
         rules += own
-        subjects.append({"id": f"s-{cn}", "cert_common_names": [cn]})
+        subjects.append({"id": f"s-{cn}", "cert_common_names": [scoped_cn(cn, run_id)]})
         policies.append({"id": f"p-{cn}", "subjects": [f"s-{cn}"],
                          "rules": [r["id"] for r in own] + list(_ROBOT_SIDE_RULES)})
-    subjects += [{"id": "s-observer", "cert_common_names": [OBSERVER_CN]},
-                 {"id": "s-orchestrator", "cert_common_names": [ORCHESTRATOR_CN]}]
+    subjects += [{"id": "s-observer", "cert_common_names": [scoped_cn(OBSERVER_CN, run_id)]},
+                 {"id": "s-orchestrator",
+                  "cert_common_names": [scoped_cn(ORCHESTRATOR_CN, run_id)]}]
     policies += [
         {"id": "p-observer", "subjects": ["s-observer"],
          "rules": ["obs-sub", "obs-recv", "alive-watch", "alive-see"]},
@@ -509,9 +536,9 @@ def relay_access_control(run_id: str, robot_ids: Iterable[int],
     ids = sorted({_check_robot_id(i) for i in robot_ids})
     if not ids:
         raise ValueError("a relay needs at least one robot behind it")
-    rules, subjects, policies = _robots_acl(p, ids)
+    rules, subjects, policies = _robots_acl(p, ids, run_id)
     rules.append(_acl_rule("upstream", list(ACL_MESSAGES), ["ingress", "egress"], [f"{p}/**"]))
-    subjects.append({"id": "s-upstream", "cert_common_names": [upstream_cn]})
+    subjects.append({"id": "s-upstream", "cert_common_names": [scoped_cn(upstream_cn, run_id)]})
     policies.append({"id": "p-upstream", "subjects": ["s-upstream"], "rules": ["upstream"]})
     return {"enabled": True, "default_permission": "deny", "rules": rules,
             "subjects": subjects, "policies": policies}
@@ -541,23 +568,34 @@ def tls_settings(mode: Literal["router", "client"], tls: TlsFiles) -> dict[str, 
     return out
 
 
-def check_seq(seq: int, last_seq: int | None, *, before_loss: int | None = None) -> str | None:
-    """Why a command's `seq` is refused given the last accepted one (None: it is not).
+def next_seq(previous: int, pose_stamp_s: float) -> int:
+    """The ``seq`` of a robot's next command: the sim time [ms] of the poses it was planned
+    on (`SEQ_PER_S`), or `previous` + 1 if that is larger (several plans on one pose).
 
-    ``stale``: not above `last_seq`; ``seq_jump``: more than `MAX_SEQ_JUMP` above it (or,
-    for a robot's first command, above `MAX_SEQ_JUMP`). `before_loss`: for the first
-    command of a robot the world lost and saw rejoin, the last seq accepted before the
-    loss: a robot whose link the lease closed is the same process and numbers on from
-    there, so a seq up to `MAX_SEQ_JUMP` above it passes too (a restarted one numbers from
-    0 again).
+    A robot whose commands were refused as stale because a forger pushed its seq up
+    re-synchronises this way: its seq follows time, which the forger's could not outrun."""
+    return max(int(previous) + 1, math.floor(pose_stamp_s * SEQ_PER_S))
+
+
+def max_seq(world_t_s: float) -> int:
+    """The largest ``seq`` the world accepts at its sim time `world_t_s`: the time of a pose
+    `MAX_CMD_AHEAD_S` ahead of it (`SEQ_PER_S`). A genuine robot plans on poses the world
+    already published, and at `SEQ_PER_S` plans per second it would still be below."""
+    return math.floor((world_t_s + MAX_CMD_AHEAD_S) * SEQ_PER_S)
+
+
+def check_seq(seq: int, last_seq: int | None, *, world_t_s: float) -> str | None:
+    """Why a command's `seq` is refused (None: it is not), given the last one the world
+    applied for that robot and the world's sim time.
+
+    ``seq_jump``: beyond what the time allows (`max_seq`): how far a seq may advance is
+    bounded by elapsed time, not by step, so a walk of small steps cannot carry it off;
+    ``stale``: not above `last_seq`.
     """
-    last = -1 if last_seq is None else last_seq
-    if seq <= last:
-        return "stale"
-    if seq - last > MAX_SEQ_JUMP + (1 if last_seq is None else 0):
-        if last_seq is None and before_loss is not None and 0 < seq - before_loss <= MAX_SEQ_JUMP:
-            return None
+    if seq > max_seq(world_t_s):
         return "seq_jump"
+    if last_seq is not None and seq <= last_seq:
+        return "stale"
     return None
 
 

@@ -2,16 +2,110 @@
 `orchestrator ...`): argparse types and the one definition of the link-fault flags.
 
 Each raises `argparse.ArgumentTypeError`, so a bad flag is a usage error (exit status 2)
-naming the flag and the value.
+naming the flag and the value. Every entry point builds its parser with `Parser`: a usage
+error is one line (the value cut to `MAX_SHOWN_CHARS`), never a traceback.
 """
 
 from __future__ import annotations
 
 import argparse
+import ipaddress
 import math
+import re
+import socket
+import sys
+from typing import NoReturn
 
 from protocol import ProtocolError, router_cn, validate_run_id, validate_zid
 from world.sim.link import LinkFaults
+
+MAX_SHOWN_CHARS = 200
+"""A usage error's message is cut to this many characters (a flag's value may be huge)."""
+USAGE_ERROR = 2
+"""Exit status of a usage error: `agent.process.ExitCode.BAD_INPUT` (not imported here:
+this module stays free of zenoh)."""
+
+
+class Parser(argparse.ArgumentParser):
+    """An `argparse.ArgumentParser` whose usage errors are one line on stderr and exit
+    status 2 (BAD_INPUT): ``<prog>: error: <message> (see --help)``. Subparsers are made
+    of the same class."""
+
+    def error(self, message: str) -> NoReturn:
+        message = " ".join(message.split())
+        if len(message) > MAX_SHOWN_CHARS:
+            message = message[:MAX_SHOWN_CHARS - 3] + "..."
+        sys.stderr.write(f"{self.prog}: error: {message} (see --help)\n")
+        sys.exit(USAGE_ERROR)
+
+
+def non_negative_int(text: str) -> int:
+    """An integer >= 0 (seeds)."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be an integer >= 0, got {text!r}")
+    return value
+
+
+_ENDPOINT_RE = re.compile(r"(tcp|tls)/(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_.-]+):([0-9]{1,5})")
+
+
+def endpoint(text: str) -> str:
+    """A Zenoh endpoint ``tcp/HOST:PORT`` or ``tls/HOST:PORT`` (HOST a name, an IPv4
+    address or a bracketed IPv6 address; PORT 0..65535), returned unchanged."""
+    m = _ENDPOINT_RE.fullmatch(text)
+    ok = m is not None and int(m.group(3)) <= 65535
+    if ok and m is not None and m.group(2).startswith("["):
+        try:
+            ipaddress.IPv6Address(m.group(2)[1:-1])
+        except ValueError:
+            ok = False
+    if not ok:
+        raise argparse.ArgumentTypeError(
+            f"expected tcp/HOST:PORT or tls/HOST:PORT (e.g. tcp/127.0.0.1:7447), got {text!r}")
+    return text
+
+
+def endpoint_host(text: str) -> str:
+    """The host of ``proto/HOST:PORT`` (brackets of an IPv6 literal removed)."""
+    return text.partition("/")[2].rpartition(":")[0].strip("[]")
+
+
+def every_interface(text: str) -> bool:
+    """Whether listening on the endpoint `text` listens on every interface: its host is an
+    unspecified address however spelt (``0.0.0.0``, ``0``, ``::``, ``[::0]``,
+    ``[0:0:0:0:0:0:0:0]``, ``0x0``, ...) or a name that resolves to one. A name that does not
+    resolve counts as every interface too: nothing says where it would listen."""
+    host = endpoint_host(text)
+    try:
+        return _unspecified(host)
+    except ValueError:
+        pass
+    try:  # inet_aton's spellings ("0", "0x0", "0.0") and names, as the OS resolves them
+        infos = socket.getaddrinfo(host, None, type=socket.SOCK_STREAM)
+    except (OSError, UnicodeError):
+        return True
+    return any(_unspecified(str(info[4][0]).split("%")[0]) for info in infos)
+
+
+def unspecified_literal(host: str) -> bool:
+    """Whether `host` is an IP literal of every interface (no name is resolved: False for
+    names, which may resolve only on another host)."""
+    try:
+        return _unspecified(host)
+    except ValueError:
+        return False
+
+
+def _unspecified(address: str) -> bool:
+    """Whether the IP literal `address` is unspecified (IPv4-mapped ``::ffff:0.0.0.0``
+    too); ValueError if it is not an IP literal."""
+    ip = ipaddress.ip_address(address)
+    mapped = getattr(ip, "ipv4_mapped", None)
+    return ip.is_unspecified or (mapped is not None and mapped.is_unspecified)
 
 
 def positive(text: str) -> float:

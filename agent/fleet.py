@@ -49,11 +49,12 @@ from collections.abc import Sequence
 from pathlib import Path
 from types import FrameType
 
-from agent.process import PARENT_PID_ENV, die_with_launcher, die_with_parent
+from agent.flags import Parser
+from agent.process import PARENT_PID_ENV, STOP_SIGNALS, die_with_launcher, die_with_parent
 
 log = logging.getLogger("fleet")
 
-FORWARDED = (signal.SIGTERM, signal.SIGINT)
+FORWARDED = STOP_SIGNALS
 MAX_STARTING = 8
 """Robots starting at once (connect, fetch the configuration, warm up, declare): 128 started
 together starve the router's and each other's Zenoh threads past the 1 s transport lease."""
@@ -79,7 +80,7 @@ def _override(text: str) -> tuple[int, str]:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="python -m agent.fleet",
+    parser = Parser(prog="python -m agent.fleet",
                                      description=__doc__.split("\n")[0])
     parser.add_argument("--run", required=True, help="run id")
     parser.add_argument("--ids", required=True, type=_ids, help="robot ids, comma-separated")

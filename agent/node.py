@@ -40,7 +40,7 @@ for when its command will leave (the sim clock plus `RobotNode.compute_s`, its r
 times), and sends a brake for a plan that took longer than that plus the command hold.
 ``--plan-delay-ms`` holds every command back that long (a CPU-starved robot),
 ``--control-phase-s`` shifts the planning slots. It
-exits 0 on the ``end`` `ControlMsg` and on SIGTERM/SIGINT. On exit it logs one line
+exits 0 on the ``end`` `ControlMsg` and on SIGTERM/SIGINT/SIGHUP. On exit it logs one line
 ``robot <id> exit: reason='...' code=N rejected=N stale=N skipped=N plans=N overruns=N
 plan_errors=N stale_plans=N late_plans=N link_dropped=N suspended=N seq=N`` to stderr
 (``rejected``: malformed messages; ``stale``: poses the controller dropped as old or out of order;
@@ -105,6 +105,7 @@ from agent.process import (
     use_one_zenoh_thread,
 )
 from protocol import (
+    MAX_ROBOT_ID,
     ControlMsg,
     PlanDebugMsg,
     PoseDecoder,
@@ -115,6 +116,7 @@ from protocol import (
     TlsFiles,
     check_pose_time,
     encode_command,
+    next_seq,
     plan_pose_slot,
     pose_slot_count,
     robot_cn,
@@ -215,18 +217,22 @@ class AgentOptions:
 
 
 def _robot_id(text: str) -> int:
-    value = int(text)
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"robot id must be >= 0, got {value}")
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if not 0 <= value <= MAX_ROBOT_ID:
+        raise argparse.ArgumentTypeError(f"robot id must be in 0..{MAX_ROBOT_ID}, got {text!r}")
     return value
 
 
 def parse_args(argv: list[str] | None = None) -> AgentOptions:
     """Parse ``python -m agent`` arguments."""
-    parser = argparse.ArgumentParser(prog="python -m agent", description=__doc__.split("\n")[0])
+    parser = argtypes.Parser(prog="python -m agent", description=__doc__.split("\n")[0])
     parser.add_argument("--run", required=True, type=argtypes.run_id, help="run id")
     parser.add_argument("--id", required=True, type=_robot_id, help="robot id")
-    parser.add_argument("--connect", required=True, help="router endpoint (tcp/HOST:PORT)")
+    parser.add_argument("--connect", required=True, type=argtypes.endpoint,
+                        help="router endpoint (tcp/HOST:PORT or tls/HOST:PORT)")
     parser.add_argument("--control-rate-hz", type=argtypes.positive, default=None,
                         help="planning rate [1/sim s] (default: as served by the world, 10)")
     parser.add_argument("--startup-timeout-s", type=argtypes.positive, default=30.0,
@@ -234,7 +240,8 @@ def parse_args(argv: list[str] | None = None) -> AgentOptions:
     parser.add_argument("--pose-timeout-s", type=argtypes.positive, default=5.0,
                         help="wall time without poses after which the world is gone")
     faults = argtypes.add_link_fault_flags(parser, "the pose link")
-    faults.add_argument("--fault-seed", type=int, default=0, help="seeds the pose link")
+    faults.add_argument("--fault-seed", type=argtypes.non_negative_int, default=0,
+                        help="seeds the pose link")
     faults.add_argument("--control-phase-s", type=argtypes.non_negative, default=0.0,
                         help="offset of the planning slots [sim s]")
     faults.add_argument("--plan-delay-ms", type=argtypes.non_negative, default=0.0,
@@ -501,7 +508,7 @@ class RobotNode:
                        "token_timeouts": 0, "refused_poses": 0, "refused_control": 0,
                        "refused_config": refused_config}
         self.world_zid = world_zid
-        self.seq = 0
+        self.seq = -1  # the last command's seq (`protocol.next_seq`); none yet
         # How long [sim s] the robot expects its next plan to take, from sensing to sending:
         # the longest recent plan time, decaying by COMPUTE_DECAY per plan. The robot plans
         # for the time its command will leave (`plan_and_send`).
@@ -740,6 +747,9 @@ class RobotNode:
         # plan seconds ahead for the rest of the run (the controller caps the age there too).
         self.compute_s = min(max(took_s, COMPUTE_DECAY * self.compute_s), STALE_PLAN_S)
         # The fields of a `CommandMsg`, its `WallStamps` in their wire order.
+        # On the clock of the poses (`protocol.next_seq`): a robot whose seq a forger pushed
+        # up catches up as time passes.
+        self.seq = next_seq(self.seq, msg.t_s)
         self.cmd_pub.put(encode_command(
             self.robot_id, self.seq, msg.t_s, float(result.v_mps), float(result.omega_radps),
             max(0.0, float(result.times.total_ms)), result.status, int(result.side),
@@ -751,7 +761,6 @@ class RobotNode:
         if debug is not None:
             self.debug_pub.put(debug.encode())
         self.cpu_s["send"] += time.thread_time() - cpu1
-        self.seq += 1
         self.counts["plans"] += 1
         self.counts["overruns"] += self.schedule.planned(msg.t_s)
 

@@ -18,7 +18,7 @@ import signal
 import threading
 import time
 import zlib
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from types import FrameType
 from typing import Any
 
@@ -60,7 +60,7 @@ class ExitCode(enum.IntEnum):
     ERROR = 7
     """An unexpected internal error; the traceback is in the log."""
     INTERRUPTED = 130
-    """Stopped by SIGINT or SIGTERM."""
+    """Stopped by SIGINT, SIGTERM or SIGHUP (`STOP_SIGNALS`)."""
 
     @classmethod
     def of_run(cls, *, contacts: int, all_arrived: bool, robots_lost: bool,
@@ -75,9 +75,58 @@ class ExitCode(enum.IntEnum):
             return cls.INTERRUPTED
         return cls.OK if all_arrived else cls.INCOMPLETE
 
+    @classmethod
+    def worst(cls, codes: Iterable[int]) -> ExitCode:
+        """The worst of several runs' endings (`ENDING_SEVERITY`), OK for none.
+
+        A status outside the table (a child killed by a signal: negative) counts as
+        INTERRUPTED, so a batch never reports ERROR unless one of its runs did (and that
+        run's log has the traceback).
+        """
+        worst = cls.OK
+        for code in codes:
+            known = cls(code) if code in cls._value2member_map_ else cls.INTERRUPTED
+            if ENDING_SEVERITY.index(known) > ENDING_SEVERITY.index(worst):
+                worst = known
+        return worst
+
+
+ENDING_SEVERITY = (ExitCode.OK, ExitCode.INCOMPLETE, ExitCode.INTERRUPTED, ExitCode.ROBOT_LOST,
+                   ExitCode.CONTACT, ExitCode.BAD_INPUT, ExitCode.TRANSPORT, ExitCode.WORLD_LOST,
+                   ExitCode.ERROR)
+"""Endings from best to worst, for a batch of runs (`ExitCode.worst`): within a run's own
+outcomes the order of `ExitCode.of_run` (a contact outranks a lost robot, which outranks
+an interruption, which outranks a time-out); then the runs that could not be judged (bad
+input, no transport, no world), and last an internal error."""
+
+
+STOP_SIGNALS = (signal.SIGTERM, signal.SIGINT, signal.SIGHUP)
+"""The signals that stop a process cleanly: Ctrl-C, ``kill``/systemd/Docker, and a closed
+terminal. Each is handled like SIGINT by every process of a run and the orchestrator."""
+
+
+@contextlib.contextmanager
+def interrupt_on_stop_signals() -> Iterator[None]:
+    """Inside the block, SIGTERM and SIGHUP raise `KeyboardInterrupt` in the main thread, as
+    SIGINT does: the orchestrator's interrupted-run path (status ``interrupted``, partial
+    metrics, exit `ExitCode.INTERRUPTED`) then serves all three. Handlers restored after."""
+    previous = {s: signal.signal(s, raise_interrupt) for s in STOP_SIGNALS
+                if s != signal.SIGINT}
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+
+
+def raise_interrupt(signum: int, frame: FrameType | None = None) -> None:
+    """A signal handler: raise `KeyboardInterrupt` (named after the signal), as SIGINT does."""
+    raise KeyboardInterrupt(signal.Signals(signum).name)
+
 
 class StopFlag:
-    """Set by SIGTERM/SIGINT; loops poll it and leave, so sessions and files are closed."""
+    """Set by a stop signal (`STOP_SIGNALS`); loops poll it and leave, so sessions and files
+    are closed."""
 
     def __init__(self) -> None:
         self.signum: int | None = None
@@ -93,7 +142,7 @@ class StopFlag:
 
 @contextlib.contextmanager
 def stop_on_signals(
-        signums: tuple[signal.Signals, ...] = (signal.SIGTERM, signal.SIGINT),
+        signums: tuple[signal.Signals, ...] = STOP_SIGNALS,
 ) -> Iterator[StopFlag]:
     """Route `signums` to a fresh `StopFlag` inside the block; restore the handlers after.
 

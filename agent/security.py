@@ -4,14 +4,16 @@ The orchestrator calls `make_run_pki` before it starts the world and the robots;
 then opens its Zenoh session with its own files (`protocol.TlsFiles`, `protocol.tls_settings`)
 and the world's router enforces `protocol.access_control`, which tells processes apart by the
 common name (CN) of their certificate: ``world``, ``robot-<id>``, ``orchestrator``,
-``observer``.
+``observer``, each scoped to the run (`protocol.scoped_cn`: ``robot-3@<run tag>``), so a
+certificate of another run, even from the same CA, holds no right in this one.
 
 EC P-256 keys, SHA-256 signatures. The CA is made fresh for each run and, by default, its
 key is never written: once every certificate is issued, nobody can mint another identity
 for the run (the only "revocation" there is: a new run has a new CA). With a user-supplied
 CA (``--tls-ca DIR`` holding ``ca.pem`` and ``ca.key``) the certificates are signed by it
 instead, so that hosts which share that CA can join. Keys are written 0600 from the start
-(never world-readable, not even for a moment), directories 0700.
+(never world-readable, not even for a moment), directories 0700, every file created new
+without following symlinks (`agent.files`).
 
 Only routers' certificates have subjectAltNames: the names they are dialled by. The world's:
 ``world`` in compose, ``localhost``, ``127.0.0.1``, and any ``--hosts``; a relay router's
@@ -24,7 +26,6 @@ from __future__ import annotations
 
 import datetime as dt
 import ipaddress
-import os
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 
@@ -33,7 +34,16 @@ from cryptography.hazmat.primitives import hashes, serialization
 from cryptography.hazmat.primitives.asymmetric import ec
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
-from protocol import OBSERVER_CN, ORCHESTRATOR_CN, WORLD_CN, TlsFiles, robot_cn, router_cn
+from agent.files import PRIVATE_FILE_MODE, create_run_dir, replace_file, reuse_dir, write_new
+from protocol import (
+    OBSERVER_CN,
+    ORCHESTRATOR_CN,
+    WORLD_CN,
+    TlsFiles,
+    robot_cn,
+    router_cn,
+    scoped_cn,
+)
 
 CA_CERT = "ca.pem"
 CA_KEY = "ca.key"
@@ -49,15 +59,6 @@ class PkiError(RuntimeError):
     """A CA directory that cannot be used (missing or unreadable files)."""
 
 
-def _write_private(path: Path, data: bytes) -> None:
-    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-    try:
-        os.write(fd, data)
-    finally:
-        os.close(fd)
-    os.chmod(path, 0o600)
-
-
 def _key_pem(key: ec.EllipticCurvePrivateKey) -> bytes:
     return key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8,
                              serialization.NoEncryption())
@@ -67,7 +68,7 @@ def _name(cn: str, run_id: str) -> x509.Name:
     return x509.Name([
         x509.NameAttribute(NameOID.ORGANIZATION_NAME, "eifp-swarm"),
         x509.NameAttribute(NameOID.ORGANIZATIONAL_UNIT_NAME, f"run {run_id}"),
-        x509.NameAttribute(NameOID.COMMON_NAME, cn),
+        x509.NameAttribute(NameOID.COMMON_NAME, cn),  # scoped_cn for a leaf
     ])
 
 
@@ -137,10 +138,11 @@ class RunCA:
         return self.cert.public_bytes(serialization.Encoding.PEM)
 
     def issue(self, cn: str, sans: Iterable[str] = ()) -> tuple[bytes, bytes]:
-        """``(certificate PEM, private key PEM)`` of a leaf for `cn` (TLS server and client)."""
+        """``(certificate PEM, private key PEM)`` of a leaf for `cn` (TLS server and client),
+        whose CN is `cn` scoped to the run (`protocol.scoped_cn`: ``robot-3@<run tag>``)."""
         key = ec.generate_private_key(ec.SECP256R1())
         builder = (
-            x509.CertificateBuilder().subject_name(_name(cn, self.run_id))
+            x509.CertificateBuilder().subject_name(_name(scoped_cn(cn, self.run_id), self.run_id))
             .issuer_name(self.cert.subject).public_key(key.public_key())
             .serial_number(x509.random_serial_number())
             .not_valid_before(self.not_before).not_valid_after(self.not_after)
@@ -174,7 +176,11 @@ def make_run_pki(directory: Path, run_id: str, robot_ids: Iterable[int], *,
     """Make (or, with `ca_dir`, sign with a given CA) every certificate of a run.
 
     Args:
-        directory: where the files go (created 0700).
+        directory: where the files go: created 0700, or an empty directory of this user
+            (`agent.files.create_run_dir`), every file new (`agent.files.write_new`); with
+            `split`, existing directories are reused (`agent.files.reuse_dir`: compose
+            volumes) and files replaced (`agent.files.replace_file`). Never through a
+            symlink.
         run_id: the run.
         robot_ids: one ``robot-<id>`` certificate each.
         world_hosts: SANs of the world's certificate (every name clients and relays dial
@@ -190,9 +196,13 @@ def make_run_pki(directory: Path, run_id: str, robot_ids: Iterable[int], *,
     Returns:
         CN -> that process's `TlsFiles`.
     """
-    d = Path(directory)
-    d.mkdir(parents=True, exist_ok=True)
-    os.chmod(d, 0o700)
+    # A run's own TLS directory is new (or empty and this user's); compose's volumes are
+    # made by Docker and handed to the container's user, and may hold a previous run's files:
+    # those are replaced, never written through a symlink.
+    if split:
+        d, write = reuse_dir(Path(directory), flag="TLS directory"), replace_file
+    else:
+        d, write = create_run_dir(Path(directory), flag="TLS directory"), write_new
     ca = RunCA.load(Path(ca_dir), run_id) if ca_dir is not None else RunCA(run_id)
     out: dict[str, TlsFiles] = {}
     relays = dict(relays or {})
@@ -200,15 +210,17 @@ def make_run_pki(directory: Path, run_id: str, robot_ids: Iterable[int], *,
     for name, hosts in relays.items():
         cn = router_cn(name)
         sans[cn] = list(dict.fromkeys([cn, "localhost", "127.0.0.1", *hosts]))
+    if not split:
+        write(d / CA_CERT, ca.cert_pem)
     for cn in run_identities(robot_ids, relays):
-        where = d / cn if split else d
-        where.mkdir(exist_ok=True)
-        os.chmod(where, 0o700)
-        (where / CA_CERT).write_bytes(ca.cert_pem)
+        where = d
+        if split:
+            where = reuse_dir(d / cn, flag="TLS directory")
+            write(where / CA_CERT, ca.cert_pem)
         cert_pem, key_pem = ca.issue(cn, sans.get(cn, ()))
         files = TlsFiles.in_dir(where, cn)
-        Path(files.cert).write_bytes(cert_pem)
-        _write_private(Path(files.key), key_pem)
+        write(files.cert, cert_pem)
+        write(files.key, key_pem, file_mode=PRIVATE_FILE_MODE)
         out[cn] = files
     return out
 

@@ -4,12 +4,13 @@
 # (3.11) and its venv module, imported with `docker import`. The demo then builds with
 # BASE_IMAGE set to it (docker/demo.sh --offline does all of this).
 #
-# Usage: docker/build-base-image.sh [--rebuild]
+# Usage: docker/build-base-image.sh [--rebuild] [--install-debootstrap]
 #   An existing image is reused; --rebuild runs debootstrap again and replaces it.
+#   --install-debootstrap  install debootstrap with apt-get if it is missing (otherwise the
+#                          script stops and says so: it never installs packages unasked)
 # Environment: LOCAL_BASE_IMAGE (tag, default eifp-swarm-base:bookworm), ROOTFS_DIR (default
 #   /var/tmp/eifp-base/rootfs), DEBIAN_MIRROR (default http://deb.debian.org/debian).
-# Needs root (or password-less sudo) and debootstrap, which it installs with apt-get when
-# missing. Takes about a minute.
+# Needs root (or password-less sudo) and debootstrap. Takes about a minute.
 set -euo pipefail
 
 IMAGE=${LOCAL_BASE_IMAGE:-eifp-swarm-base:bookworm}
@@ -17,10 +18,11 @@ ROOTFS=${ROOTFS_DIR:-/var/tmp/eifp-base/rootfs}
 MIRROR=${DEBIAN_MIRROR:-http://deb.debian.org/debian}
 SUITE=bookworm  # its python3 is 3.11, the version docker/fetch-wheels.sh downloads for
 
-rebuild=0
+rebuild=0 install=0
 for arg in "$@"; do
   case "$arg" in
     --rebuild) rebuild=1 ;;
+    --install-debootstrap) install=1 ;;
     -h|--help) awk 'NR > 1 && /^#/ { sub(/^# ?/, ""); print; next } NR > 1 { exit }' "$0"; exit 0 ;;
     *) echo "build-base-image: unknown argument $arg" >&2; exit 2 ;;
   esac
@@ -41,8 +43,12 @@ if [ "$(id -u)" != 0 ]; then
   fi
 fi
 if ! command -v debootstrap >/dev/null 2>&1 && [ ! -x /usr/sbin/debootstrap ]; then
-  # Debian's package mirror is reachable where a registry is not: install it from there.
-  if command -v apt-get >/dev/null 2>&1; then
+  # Debian's package mirror is reachable where a registry is not: install it from there,
+  # when asked to.
+  if [ "$install" = 0 ]; then
+    echo "build-base-image: needs debootstrap (apt-get install debootstrap, or rerun with --install-debootstrap)" >&2
+    exit 1
+  elif command -v apt-get >/dev/null 2>&1; then
     echo "build-base-image: installing debootstrap (apt-get)"
     "${as_root[@]}" env DEBIAN_FRONTEND=noninteractive apt-get update -qq >/dev/null
     "${as_root[@]}" env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq debootstrap >/dev/null
@@ -66,6 +72,7 @@ if [ "$rebuild" = 1 ] || [ ! -f "$marker" ] || [ ! -x "$ROOTFS/usr/bin/python3" 
     echo "build-base-image: debootstrap failed (full log: $log)" >&2
     exit 1
   fi
+  rm -f "$log"
   # Package caches are of no use in the image.
   "${as_root[@]}" sh -c "rm -rf '$ROOTFS'/var/cache/apt/archives/*.deb '$ROOTFS'/var/lib/apt/lists/*"
   "${as_root[@]}" touch "$marker"

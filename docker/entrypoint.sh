@@ -13,10 +13,11 @@
 #                 ROUTER_ROBOTS, certificate router-ROUTER_NAME, listening on LISTEN and
 #                 dialling the world's router at CONNECT (compose.routers.yaml); it leaves
 #                 once the run is over
-#   orchestrator  `orchestrator compose await`: waits for every robot, follows the run,
-#                 writes metrics.json, trajectory.png and report.txt into the run directory
-#                 and exits with the run's status (0 all arrived without contact, 1 not,
-#                 2 bad input, 3 nothing to report)
+#   orchestrator  with no argument, or only options (compose.yaml, compose.live.yaml):
+#                 `orchestrator compose await`: waits for every robot, follows the run,
+#                 writes metrics.json, trajectory.png, report.txt and run.json into the run
+#                 directory and exits with the run's status (README, "Exit codes");
+#                 with a subcommand (`docker run IMAGE orchestrator list`): the CLI itself
 #   anything else is run as a command (e.g. `bash`, `orchestrator list`)
 #
 # Environment (defaults in brackets): RUN_ID [demo], SETUP [setup_d], ROBOTS (robot services
@@ -113,6 +114,10 @@ case "$role" in
       --wait-world-s "$STARTUP_TIMEOUT_S" "$@"
     ;;
   orchestrator)
+    case "${1:-}" in
+      ""|-*) ;;                          # the demo's role: follow the run (below)
+      *) exec orchestrator "$@" ;;       # a subcommand: run the CLI as given
+    esac
     IFS='
 '
     # shellcheck disable=SC2046

@@ -524,7 +524,7 @@ class McapLog:
     """Writes ``run.mcap`` for one run, optionally teeing every message to a `LiveView`.
 
     Args:
-        path: the file (overwritten).
+        path: the file; created new (an existing file or symlink there is an error).
         scenario: the run's scenario.
         live: a live server to publish the same channels to, or None.
         metadata: written as the MCAP metadata record ``run``.
@@ -540,7 +540,7 @@ class McapLog:
         # on a small machine, and output that does not depend on timing.
         options = MCAPWriteOptions(compression=MCAPCompression.Zstd, profile="",
                                    compression_threads=0)
-        self._writer = foxglove.open_mcap(self.path, allow_overwrite=True,
+        self._writer = foxglove.open_mcap(self.path, allow_overwrite=False,
                                           context=self.context, writer_options=options)
         self._writer.write_metadata("run", {"scenario": scenario.name,
                                             "robots": str(len(scenario.robots)),

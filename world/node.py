@@ -20,8 +20,10 @@ Lifecycle:
    (``poses/<tick mod K>``, `protocol.pose_slot_count`) and records the tick. The robots'
    plan internals (``debug/<id>``, `PlanDebugMsg`, through a ring) are validated and
    recorded into ``run.mcap`` (`RunRecorder.record_plan`).
-4. The run ends when every robot has arrived (``all_arrived``), at the scenario's time limit
-   (``time_limit``) or on SIGTERM/SIGINT (``signal``): publish an ``end`` `ControlMsg`, write
+4. The run ends when every robot has arrived (``all_arrived``), when every robot has
+   arrived or been lost for ``--lost-grace-s`` (``arrived_or_lost``: a lost robot does not
+   hold the run to its limit), at the scenario's time limit (``time_limit``) or on
+   SIGTERM/SIGINT (``signal``): publish an ``end`` `ControlMsg`, write
    the ``end`` event, give robots a moment (``--linger-s``) to leave, close everything.
 
 Faults: a malformed command or plan-debug message is rejected (`ProtocolError`), counted
@@ -47,7 +49,6 @@ bad scenario, TRANSPORT when the session could not be opened.
 
 from __future__ import annotations
 
-import argparse
 import logging
 import math
 import os
@@ -61,6 +62,7 @@ import zenoh
 
 from agent import flags as argtypes
 from agent.core.scenario import Scenario
+from agent.files import UnsafePathError
 from agent.planning.routing import StaticMap
 from agent.process import (
     ExitCode,
@@ -86,6 +88,7 @@ from protocol import (
     TlsFiles,
     access_control,
     check_seq,
+    max_seq,
     pose_slot_count,
     pose_slot_of_tick,
     router_cn,
@@ -105,6 +108,11 @@ MAX_TALLY_KEYS = 64
 """Distinct keys (and reasons) tallied in the ``end`` event; the rest count as ``other``."""
 IDLE_POLL_S = 0.01
 """Wall period of the waiting and lingering loops."""
+LOST_GRACE_S = 5.0
+"""Default sim time a lost robot is waited for (`WorldOptions.lost_grace_s`) before it no
+longer holds the run open: once every robot has arrived or been lost this long, the run
+ends (``arrived_or_lost``) instead of running on to its time limit. Five lease periods: a
+robot whose link merely dropped is back well within it."""
 
 log = logging.getLogger("world")
 
@@ -136,6 +144,9 @@ class WorldOptions:
             robots only (`protocol.access_control`).
         zid: the session's Zenoh id (None: random). Robots behind a relay check the source
             of poses against it (``python -m agent --world-zid``).
+        lost_grace_s: sim time a lost robot may still come back (a stopped process that
+            resumes, a restarted one); a robot lost longer than this, like one that
+            arrived, no longer holds the run open (`LOST_GRACE_S`).
     """
 
     run_id: str
@@ -154,17 +165,19 @@ class WorldOptions:
     tls_dir: Path | None = None
     relays: tuple[tuple[str, tuple[int, ...]], ...] = ()
     zid: str | None = None
+    lost_grace_s: float = LOST_GRACE_S
 
 
 def parse_args(argv: list[str] | None = None) -> WorldOptions:
     """Parse ``python -m world`` arguments."""
-    parser = argparse.ArgumentParser(prog="python -m world", description=__doc__.split("\n")[0])
+    parser = argtypes.Parser(prog="python -m world", description=__doc__.split("\n")[0])
     parser.add_argument("--run", required=True, type=argtypes.run_id, help="run id")
     parser.add_argument("--scenario", required=True, type=Path, help="scenario YAML file")
     where = parser.add_mutually_exclusive_group()
-    where.add_argument("--listen",
+    where.add_argument("--listen", type=argtypes.endpoint,
                        help=f"router endpoint to listen on (default {DEFAULT_ENDPOINT})")
-    where.add_argument("--connect", help="join an existing router at this endpoint, as a client")
+    where.add_argument("--connect", type=argtypes.endpoint,
+                       help="join an existing router at this endpoint, as a client")
     parser.add_argument("--rate-hz", type=argtypes.positive, default=50.0,
                         help="tick rate [1/sim s]")
     parser.add_argument("--time-scale", type=argtypes.positive, default=1.0,
@@ -179,7 +192,8 @@ def parse_args(argv: list[str] | None = None) -> WorldOptions:
     parser.add_argument("--linger-s", type=float, default=3.0,
                         help="wall time to wait for robots to leave after the end")
     faults = argtypes.add_link_fault_flags(parser, "the command links")
-    faults.add_argument("--fault-seed", type=int, default=0, help="seeds the command links")
+    faults.add_argument("--fault-seed", type=argtypes.non_negative_int, default=0,
+                        help="seeds the command links")
     parser.add_argument("--tls", type=Path, default=None, metavar="DIR",
                         help="mutual TLS with DIR/ca.pem, DIR/world.pem, DIR/world.key, and "
                              "the run's access control (endpoints tls/HOST:PORT)")
@@ -191,6 +205,10 @@ def parse_args(argv: list[str] | None = None) -> WorldOptions:
     parser.add_argument("--zid", type=argtypes.zid, default=None, metavar="HEX",
                         help="the session's Zenoh id (robots behind a relay are given it "
                              "with --world-zid); default: random")
+    parser.add_argument("--lost-grace-s", type=argtypes.positive, default=LOST_GRACE_S,
+                        help="sim seconds a lost robot may still come back; once every robot "
+                             "has arrived or been lost this long the run ends "
+                             f"(default {LOST_GRACE_S:g})")
     args = parser.parse_args(argv)
     listen = None if args.connect else (args.listen or DEFAULT_ENDPOINT)
     return WorldOptions(
@@ -210,6 +228,7 @@ def parse_args(argv: list[str] | None = None) -> WorldOptions:
         tls_dir=args.tls,
         relays=tuple(args.relay),
         zid=args.zid,
+        lost_grace_s=args.lost_grace_s,
     )
 
 
@@ -260,10 +279,8 @@ class WorldNode:
         self.configs = run_configs(scenario, options)
         self.alive: set[int] = set()
         self.lost: set[int] = set()
+        self.lost_at_s: dict[int, float] = {}  # sim time each lost robot was lost
         self.last_seq: dict[int, int] = {}
-        self.rx_seq: dict[int, int] = {}  # newest seq passed into each robot's command link
-        # Robots that rejoined, until their first command: the newest seq before the loss.
-        self.rejoined_seq: dict[int, int] = {}
         self.ended = False
         self.counts = {"commands": 0, "rejected": 0, "stale": 0, "queries": 0,
                        "bad_queries": 0, "overruns": 0, "plans": 0, "seq_jumps": 0,
@@ -338,12 +355,10 @@ class WorldNode:
                 self.alive.add(rid)
                 if rid in self.lost:
                     self.lost.discard(rid)
-                    # A new process numbers from 0 again; the same one, whose link the lease
-                    # closed, goes on from where it was (`protocol.check_seq`).
-                    self.last_seq.pop(rid, None)
-                    old = self.rx_seq.pop(rid, None)
-                    if old is not None:
-                        self.rejoined_seq[rid] = old
+                    self.lost_at_s.pop(rid, None)
+                    # The same process, or a new one: either numbers on from the time of
+                    # its poses (`protocol.next_seq`), so its last seq stays the bar (an old
+                    # command replayed now is still stale).
                     self.cmd_links[rid].clear()
                     self.sim.set_offline(rid, False)
                     self._event("robot_rejoined", robot=rid, wall=time.time())
@@ -356,6 +371,7 @@ class WorldNode:
                     self._event("robot_left", robot=rid, wall=time.time())
                     continue
                 self.lost.add(rid)
+                self.lost_at_s[rid] = self.sim.t_s
                 self.sim.set_offline(rid, True)
                 self._event("robot_lost", robot=rid, wall=time.time())
                 log.warning("robot %d lost (liveliness token gone): braking it", rid)
@@ -403,21 +419,19 @@ class WorldNode:
             except ProtocolError as exc:
                 self._reject(str(exc), key)
                 continue
-            # Bounds a forged but well-formed command cannot pass: a seq far above the
-            # robot's (which would make its genuine commands stale), a plan from the future.
-            if check_seq(msg.seq, self.rx_seq.get(rid),
-                         before_loss=self.rejoined_seq.get(rid)) == "seq_jump":
+            # Bounds a forged but well-formed command cannot pass: a seq beyond what the time
+            # allows (which would make the robot's genuine commands stale), a plan from the
+            # future.
+            if check_seq(msg.seq, None, world_t_s=self.sim.t_s) == "seq_jump":
                 self.counts["seq_jumps"] += 1
-                self._reject(f"cmd.seq: {msg.seq} jumps more than the bound above "
-                             f"{self.rx_seq.get(rid)}", key)
+                self._reject(f"cmd.seq: {msg.seq} is beyond {max_seq(self.sim.t_s)}, the "
+                             f"bound at {self.sim.t_s:.3f} s", key)
                 continue
             if msg.pose_stamp_s > self.sim.t_s + MAX_CMD_AHEAD_S:
                 self.counts["future_cmds"] += 1
                 self._reject(f"cmd.pose_stamp: {msg.pose_stamp_s:.3f} s is ahead of the "
                              f"world's {self.sim.t_s:.3f} s", key)
                 continue
-            self.rx_seq[rid] = max(msg.seq, self.rx_seq.get(rid, -1))
-            self.rejoined_seq.pop(rid, None)
             self.cmd_links[rid].send(self.sim.t_s, (rx_ns, msg))
         for rid, link in self.cmd_links.items():
             for rx_ns, msg in link.receive(self.sim.t_s):
@@ -444,7 +458,7 @@ class WorldNode:
 
     def _hold(self, rid: int, msg: CommandMsg, rx_ns: int) -> None:
         """Apply one released command unless its ``seq`` is not newer."""
-        if check_seq(msg.seq, self.last_seq.get(rid)) == "stale":
+        if check_seq(msg.seq, self.last_seq.get(rid), world_t_s=self.sim.t_s) is not None:
             self.counts["stale"] += 1
             return
         self.last_seq[rid] = msg.seq
@@ -529,8 +543,16 @@ class WorldNode:
             self.tick_s.append(time.perf_counter() - t0)
             if self.sim.all_arrived():
                 return "all_arrived"
+            if self.lost and self.arrived_or_gone():
+                return "arrived_or_lost"
             if self.sim.t_s >= self.scenario.time_limit_s - 1e-9:
                 return "time_limit"
+
+    def arrived_or_gone(self) -> bool:
+        """Every robot has arrived or has been lost for `WorldOptions.lost_grace_s`."""
+        gone_before = self.sim.t_s - self.options.lost_grace_s + 1e-9
+        waiting = [int(r) for r in self.sim.robot_ids[~self.sim.arrived]]
+        return all(self.lost_at_s.get(r, math.inf) <= gone_before for r in waiting)
 
     def finish(self, reason: str) -> int:
         """Announce the end, record the summary, let robots leave; return the exit status."""
@@ -629,8 +651,7 @@ def world_settings(options: WorldOptions, scenario: Scenario) -> dict[str, str]:
                                 connect_timeout_ms=int(options.wait_robots_s * 1e3),
                                 zid=options.zid)
     listen = options.listen or DEFAULT_ENDPOINT
-    host = listen.partition("/")[2].rpartition(":")[0].strip("[]")
-    if tls is None and host in ("0.0.0.0", "::"):
+    if tls is None and argtypes.every_interface(listen):
         raise ValueError(f"--listen {listen}: every interface only with --tls (mutual TLS "
                          "and access control); plain TCP listens on one address")
     acl = None
@@ -652,7 +673,15 @@ def run_world(options: WorldOptions) -> int:
         log.error("%s", exc)
         return ExitCode.BAD_INPUT
     with stop_on_signals() as stop:
-        recorder = RunRecorder(options.out_dir, scenario)
+        try:
+            recorder = RunRecorder(options.out_dir, scenario)
+        except UnsafePathError as exc:
+            log.error("%s", exc)
+            return ExitCode.BAD_INPUT
+        except OSError as exc:  # a file of the run there already (or a symlink), unwritable
+            log.error("--out %s: cannot write %s: %s", options.out_dir,
+                      Path(exc.filename or "").name or "the run", exc.strerror or exc)
+            return ExitCode.BAD_INPUT
         try:
             try:
                 settings = world_settings(options, scenario)

@@ -26,6 +26,7 @@ import numpy as np
 
 from agent.core.scenario import Scenario
 from agent.core.types import PlanDebug
+from agent.files import check_own_dir, open_new
 from protocol import TIMING_COLUMNS
 
 if TYPE_CHECKING:
@@ -40,7 +41,9 @@ class RunRecorder:
     """Writes one run directory; line-buffered enough that a killed run leaves usable files.
 
     Args:
-        out_dir: the run directory (created).
+        out_dir: the run directory: created 0700 if it does not exist, else it must be this
+            user's and writable by no one else (`agent.files.check_own_dir`); every file is
+            new (`agent.files.open_new`: a file or symlink already there is an error).
         scenario: the resolved scenario (written as scenario.yaml).
         mcap: also write ``run.mcap``.
         live: a live Foxglove server that gets every message ``run.mcap`` gets (needs
@@ -51,8 +54,7 @@ class RunRecorder:
                  live: LiveView | None = None) -> None:
         from world.scenario_file import dump_scenario
 
-        self.out_dir = Path(out_dir)
-        self.out_dir.mkdir(parents=True, exist_ok=True)
+        self.out_dir = check_own_dir(Path(out_dir))
         dump_scenario(scenario, self.out_dir / "scenario.yaml")
         self.mcap = None
         if mcap:
@@ -61,13 +63,13 @@ class RunRecorder:
             self.mcap = McapLog(
                 self.out_dir / "run.mcap", scenario, live=live,
                 attachments={"scenario.yaml": (self.out_dir / "scenario.yaml").read_bytes()})
-        self._traj: IO[str] = open(self.out_dir / "trajectory.csv", "w", buffering=1 << 16)
+        self._traj: IO[str] = open_new(self.out_dir / "trajectory.csv", "w", buffering=1 << 16)
         self._traj.write(TRAJECTORY_HEADER)
-        self._cmds: IO[str] = open(self.out_dir / "commands.csv", "w", buffering=1 << 16)
+        self._cmds: IO[str] = open_new(self.out_dir / "commands.csv", "w", buffering=1 << 16)
         self._cmds.write(COMMANDS_HEADER)
-        self._timing: IO[str] = open(self.out_dir / "timing.csv", "w", buffering=1 << 16)
+        self._timing: IO[str] = open_new(self.out_dir / "timing.csv", "w", buffering=1 << 16)
         self._timing.write(TIMING_HEADER)
-        self._events: IO[str] = open(self.out_dir / "events.jsonl", "w", buffering=1)
+        self._events: IO[str] = open_new(self.out_dir / "events.jsonl", "w", buffering=1)
         self.event_counts: dict[str, int] = {}
         self._closed = False
 

@@ -24,7 +24,6 @@ TLS files.
 
 from __future__ import annotations
 
-import argparse
 import logging
 import os
 import sys
@@ -87,16 +86,16 @@ class RouterOptions:
 
 def parse_args(argv: list[str] | None = None) -> RouterOptions:
     """Parse ``python -m world.router`` arguments."""
-    parser = argparse.ArgumentParser(prog="python -m world.router",
+    parser = argtypes.Parser(prog="python -m world.router",
                                      description=__doc__.split("\n")[0])
     parser.add_argument("--run", required=True, type=argtypes.run_id, help="run id")
     parser.add_argument("--name", required=True,
                         help="the relay's name (its certificate: router-NAME)")
     parser.add_argument("--robots", required=True, type=argtypes.robot_ids, metavar="IDS",
                         help="the robots behind this relay, e.g. 2,3 or 8-15")
-    parser.add_argument("--listen", required=True,
+    parser.add_argument("--listen", required=True, type=argtypes.endpoint,
                         help="endpoint the robots dial, e.g. tls/0.0.0.0:7447")
-    parser.add_argument("--connect", required=True,
+    parser.add_argument("--connect", required=True, type=argtypes.endpoint,
                         help="the world's router, e.g. tls/<world host>:7447")
     parser.add_argument("--tls", type=Path, default=None, metavar="DIR",
                         help="mutual TLS with DIR/ca.pem, DIR/router-NAME.pem, "
@@ -129,8 +128,7 @@ def router_settings(options: RouterOptions) -> dict[str, str]:
         if problem:
             raise ValueError(f"--tls {options.tls_dir}: {problem}")
         acl = relay_access_control(options.run_id, options.robot_ids)
-    host = options.listen.partition("/")[2].rpartition(":")[0].strip("[]")
-    if tls is None and host in ("0.0.0.0", "::"):
+    if tls is None and argtypes.every_interface(options.listen):
         raise ValueError(f"--listen {options.listen}: every interface only with --tls (mutual "
                          "TLS and access control); plain TCP listens on one address")
     # A router dials its connect endpoints in the background and redials a lost link

@@ -59,8 +59,8 @@ import dataclasses
 import functools
 import math
 import os
+import reprlib
 import typing
-import uuid
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -78,6 +78,7 @@ from agent.core.config import (
     profile_config,
 )
 from agent.core.scenario import ObstacleSpec, RobotSpec, Scenario
+from agent.files import replace_file
 from agent.planning.routing import StaticMap, unreachable_reason
 from protocol import (
     MAX_COORD_M,
@@ -134,11 +135,26 @@ def _join(path: str, key: str | int) -> str:
     return f"{path}.{key}" if path else key
 
 
+MAX_SCENARIO_BYTES = 4 << 20
+"""Largest scenario file read [bytes] (4 MiB): `MAX_ROBOTS` robots with every override fit
+in about a quarter of it; anything larger is refused before it is parsed."""
+MAX_SHOWN_CHARS = 80
+"""Values in error messages are cut to this many characters."""
+_SHORT_REPR = reprlib.Repr()
+_SHORT_REPR.maxlevel = 2
+_SHORT_REPR.maxdict = _SHORT_REPR.maxlist = _SHORT_REPR.maxtuple = _SHORT_REPR.maxset = 4
+_SHORT_REPR.maxstring = _SHORT_REPR.maxother = _SHORT_REPR.maxlong = MAX_SHOWN_CHARS
+
+
+def shown(value: object) -> str:
+    """A bounded `repr` of `value` for an error message: depth, items and length capped
+    before anything is formatted, so a huge value (a YAML alias bomb) costs nothing."""
+    text = _SHORT_REPR.repr(value)
+    return text if len(text) <= MAX_SHOWN_CHARS else text[:MAX_SHOWN_CHARS - 3] + "..."
+
+
 def _got(value: object) -> str:
-    text = repr(value)
-    if len(text) > 80:
-        text = text[:77] + "..."
-    return f"got {text} ({type(value).__name__})"
+    return f"got {shown(value)} ({type(value).__name__})"
 
 
 class _Ctx:
@@ -205,7 +221,7 @@ def _planner_name(ctx: _Ctx, path: str, value: object) -> str:
     name = _string(ctx, path, value)
     if name not in PLANNER_NAMES:
         known = ", ".join(PLANNER_NAMES)
-        raise ctx.error(path, f"unknown planner {name!r}; expected one of {known}")
+        raise ctx.error(path, f"unknown planner {shown(name)}; expected one of {known}")
     return name
 
 
@@ -219,7 +235,7 @@ def _mapping(ctx: _Ctx, path: str, value: object, allowed: typing.Iterable[str],
         if not isinstance(key, str):
             raise ctx.error(path, f"keys must be strings, {_got(key)}")
         if key not in allowed:
-            raise ctx.error(_join(path, key),
+            raise ctx.error(_join(path, key[:MAX_SHOWN_CHARS]),
                             f"unknown key; expected one of {', '.join(sorted(allowed))}")
     for key in required:
         if key not in value:
@@ -570,13 +586,23 @@ def _yaml_loader() -> type:
     import yaml
 
     class Loader(yaml.SafeLoader):
+        def compose_node(self, parent: Any, index: Any) -> Any:
+            # An alias re-uses a node: a few hundred bytes of nested aliases expand to
+            # billions of values. No scenario needs one; refuse it where it appears.
+            if self.check_event(yaml.events.AliasEvent):
+                event = self.peek_event()
+                raise yaml.composer.ComposerError(
+                    None, None, "YAML aliases (*name) are not allowed in a scenario file",
+                    event.start_mark)
+            return super().compose_node(parent, index)
+
         def construct_mapping(self, node: Any, deep: bool = False) -> dict[Any, Any]:
             seen: set[Any] = set()
             for key_node, _value_node in node.value:
                 key = self.construct_object(key_node, deep=deep)
                 if key in seen:
                     raise yaml.constructor.ConstructorError(
-                        None, None, f"duplicate key {key!r}", key_node.start_mark)
+                        None, None, f"duplicate key {shown(key)}", key_node.start_mark)
                 seen.add(key)
             return super().construct_mapping(node, deep=deep)
 
@@ -599,9 +625,14 @@ def load_scenario(path: str | os.PathLike[str]) -> Scenario:
 
     source = str(path)
     try:
-        text = Path(path).read_text(encoding="utf-8")
+        with open(path, "rb") as f:
+            raw = f.read(MAX_SCENARIO_BYTES + 1)
+        if len(raw) > MAX_SCENARIO_BYTES:
+            raise ScenarioError(f"{source}: larger than {MAX_SCENARIO_BYTES >> 20} MiB; not read")
+        text = raw.decode("utf-8")
     except (OSError, UnicodeDecodeError) as exc:
-        raise ScenarioError(f"{source}: cannot read: {exc}") from exc
+        why = exc.strerror if isinstance(exc, OSError) else "not UTF-8 text"
+        raise ScenarioError(f"{source}: cannot read: {why or type(exc).__name__}") from exc
     try:
         data = yaml.load(text, Loader=_yaml_loader())
     except yaml.YAMLError as exc:
@@ -622,12 +653,6 @@ def dump_scenario(scenario: Scenario, path: str | os.PathLike[str]) -> None:
                           default_flow_style=None, width=100)
     target = Path(path)
     target.parent.mkdir(parents=True, exist_ok=True)
-    # Write a uniquely named sibling, then rename: readers never see half a file.
-    tmp = target.with_name(f".{target.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp")
-    try:
-        with open(tmp, "w", encoding="utf-8") as f:
-            f.write(f"# eifp-swarm scenario (SI units: m, s, rad)\n{text}")
-        os.replace(tmp, target)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    # A fresh sibling, then rename: readers never see half a file, and a symlink planted at
+    # `target` is replaced, never written through.
+    replace_file(target, f"# eifp-swarm scenario (SI units: m, s, rad)\n{text}".encode())

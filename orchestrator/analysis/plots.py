@@ -5,6 +5,7 @@ display, no global state.
 
 from __future__ import annotations
 
+import io
 import sys
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -16,12 +17,22 @@ from matplotlib.collections import PatchCollection
 from matplotlib.figure import Figure
 from matplotlib.patches import Circle
 
+from agent.core.scenario import Scenario
+from agent.files import replace_file
 from orchestrator.analysis.metrics import WALL_STAGES, RunSpec, contact_episodes
 from orchestrator.analysis.rundir import RunData, read_run_dir, read_timing
 from protocol import TIMING_COLUMNS
 
 DISC_INTERVAL_S = 10.0
 """Robot discs are drawn every this many seconds along the paths."""
+
+
+def save_figure(fig: Figure, path: Path, dpi: int) -> Path:
+    """Render `fig` as the image format of `path`'s suffix and write it atomically, never
+    through a symlink (`agent.files.replace_file`)."""
+    buf = io.BytesIO()
+    fig.savefig(buf, dpi=dpi, format=Path(path).suffix.lstrip(".") or "png")
+    return replace_file(path, buf.getvalue())
 
 
 def _figure(width_in: float, height_in: float) -> Figure:
@@ -56,6 +67,12 @@ def _draw_scene(ax: Axes, data: RunData) -> None:
         ax.plot(*r.goal, marker="*", ms=11, c=c, mec="black", mew=0.4, zorder=4)
 
 
+def profile_note(scenario: Scenario) -> str:
+    """`` (paper profile)`` for a run of the paper's method as written, else empty: titles
+    and summary headers tell such a run from a default one."""
+    return " (paper profile)" if scenario.planner_config.is_paper else ""
+
+
 def _finish_axes(ax: Axes, data: RunData, title: str | None) -> None:
     s = data.scenario
     ax.set_aspect("equal", adjustable="datalim")
@@ -63,7 +80,8 @@ def _finish_axes(ax: Axes, data: RunData, title: str | None) -> None:
     ax.set_ylabel("y [m]")
     ax.grid(True, lw=0.3, alpha=0.5)
     planners = sorted({r.planner for r in s.robots})
-    ax.set_title(title or f"{s.name} - {', '.join(planners)} - {len(s.robots)} robots",
+    ax.set_title(title or f"{s.name} - {', '.join(planners)}{profile_note(s)} - "
+                          f"{len(s.robots)} robots",
                  fontsize=10)
 
 
@@ -100,7 +118,7 @@ def plot_trajectories(data: RunData, path: Path, *, disc_interval_s: float = DIS
         ax.legend(fontsize=7, loc="best", framealpha=0.7)
     _finish_axes(ax, data, title)
     path = Path(path)
-    fig.savefig(path, dpi=dpi)
+    save_figure(fig, path, dpi)
     return path
 
 
@@ -216,8 +234,10 @@ def animate(data: RunData, path: Path, *, fps: int = 10, max_frames: int = 200,
     if writer is not None:
         writer.close()
         return path
-    images[0].save(path, format="GIF", save_all=True, append_images=images[1:],
+    buf = io.BytesIO()
+    images[0].save(buf, format="GIF", save_all=True, append_images=images[1:],
                    duration=max(20, round(1000 / fps)), loop=0)
+    replace_file(path, buf.getvalue())
     return path
 
 
@@ -248,12 +268,12 @@ def plot_report_bars(stats: Mapping[tuple[str, str], Mapping[str, tuple[float, f
         for ax in (single.add_subplot(), axes[k]):
             _bars(ax, stats, setups, planners, key, label)
         path = out_dir / f"{prefix}_{key}.png"
-        single.savefig(path, dpi=110)
+        save_figure(single, path, 110)
         written.append(path)
     for ax in axes[len(metrics):]:
         ax.set_visible(False)
     path = out_dir / f"{prefix}_all.png"
-    combined.savefig(path, dpi=110)
+    save_figure(combined, path, 110)
     written.append(path)
     return written
 
@@ -293,9 +313,34 @@ def write_run_plots(out_dir: Path, *, gif: bool, mp4: bool = False) -> None:
         print(f"warning: plotting failed: {type(exc).__name__}: {exc}", file=sys.stderr)
 
 
+LATENCY_AXIS_MARGIN = 1.15
+"""latency.png's x axes end this factor past each stage's p99 (`latency_axis_ms`)."""
+
+
+def latency_axis_ms(ms: np.ndarray) -> tuple[float, float, int]:
+    """The x range of one latency histogram and what falls past it.
+
+    The axis ends just past the p99 (`LATENCY_AXIS_MARGIN`), not at the largest value: one
+    stall of a second would otherwise squash every distribution into its first bin. The
+    samples past the end are counted (and the panel says so, with the largest).
+
+    Args:
+        ms: (K,) latencies [ms], K >= 1.
+
+    Returns:
+        (low, high) of the axis [ms] and how many samples lie above `high`.
+    """
+    ms = np.asarray(ms, dtype=float)
+    low = float(ms.min())
+    high = max(float(np.percentile(ms, 99)) * LATENCY_AXIS_MARGIN, low + 1e-3)
+    return low, high, int(np.count_nonzero(ms > high))
+
+
 def plot_wall_latency(stamps: np.ndarray, path: Path) -> Path | None:
     """latency.png: a histogram per wall-clock stage (`metrics.WALL_STAGES`), p50 and p99
-    marked; None (nothing written) if no stage could be measured.
+    marked, each x axis clipped just past the p99 (`latency_axis_ms`; the panel says how
+    many samples lie beyond, and the largest); None (nothing written) if no stage could be
+    measured.
 
     Args:
         stamps: (K, 9) timing.csv stamps (`protocol.TIMING_COLUMNS`).
@@ -317,17 +362,22 @@ def plot_wall_latency(stamps: np.ndarray, path: Path) -> Path | None:
     fig = _figure(5.0 * cols, 2.4 * rows)
     axes = fig.subplots(rows, cols, squeeze=False).ravel()
     for ax, (stage, ms) in zip(axes, panels):
-        ax.hist(ms, bins=min(60, max(10, ms.size // 20)), color="tab:blue", alpha=0.8)
+        low, high, above = latency_axis_ms(ms)
+        ax.hist(ms[ms <= high], bins=min(60, max(10, ms.size // 20)), range=(low, high),
+                color="tab:blue", alpha=0.8)
+        ax.set_xlim(low, high)
         for q, style in ((50, "-"), (99, "--")):
             v = float(np.percentile(ms, q))
             ax.axvline(v, color="black", ls=style, lw=0.8, label=f"p{q} {v:.2f} ms")
-        ax.set_title(stage, fontsize=9)
+        clipped = (f"; axis to p99, {above} above (max {float(ms.max()):.1f} ms)"
+                   if above else "")
+        ax.set_title(f"{stage}{clipped}", fontsize=9)
         ax.set_xlabel("wall ms")
         ax.legend(fontsize=7)
     for ax in axes[len(panels):]:
         ax.set_visible(False)
     path = Path(path)
-    fig.savefig(path, dpi=100)
+    save_figure(fig, path, 100)
     return path
 
 
@@ -401,5 +451,5 @@ def plot_benchmark(rows: Sequence[Mapping], path: Path, *, title: str = "") -> P
     if title:
         axes[0].set_title(title, fontsize=9)
     path = Path(path)
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, 110)
     return path

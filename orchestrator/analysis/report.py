@@ -5,6 +5,7 @@ Table I beside ours, and text tables (the CLI's `report` and `sweep` print these
 from __future__ import annotations
 
 import csv
+import hashlib
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
@@ -109,6 +110,42 @@ def collect(paths: Iterable[Path], by_dir: bool = False) -> list[RunRecord]:
                                  seed if isinstance(seed, int) else None,
                                  str(info.get("mode", "?")), metrics))
     return records
+
+
+def identical_runs(records: Sequence[RunRecord]) -> dict[tuple[str, str], tuple[int, int]]:
+    """Groups (setup, planner) of two or more runs whose ground truth repeats: runs that
+    recorded byte-identical ``trajectory.csv`` files (seeds that changed nothing, e.g. a
+    lockstep sweep of a fixed setup without start jitter or link faults).
+
+    Returns:
+        (setup, planner) -> (distinct trajectories, runs), for the groups with fewer
+        distinct trajectories than runs; its std over such runs says nothing.
+    """
+    groups: dict[tuple[str, str], list[Path]] = {}
+    for r in records:
+        groups.setdefault((r.setup, r.planner), []).append(r.path / "trajectory.csv")
+    out = {}
+    for key in sorted(groups):
+        files = [p for p in groups[key] if p.is_file()]
+        if len(files) < 2:
+            continue
+        by_size: dict[int, list[Path]] = {}
+        for p in files:
+            by_size.setdefault(p.stat().st_size, []).append(p)
+        # Only files of one size can be equal: hash those, not every file.
+        distinct = sum(len({_digest(p) for p in same}) if len(same) > 1 else 1
+                       for same in by_size.values())
+        if distinct < len(files):
+            out[key] = (distinct, len(files))
+    return out
+
+
+def _digest(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
 
 
 def _value(metrics: Mapping[str, Any], key: str) -> float:

@@ -10,9 +10,7 @@ from __future__ import annotations
 import csv
 import json
 import math
-import os
 import re
-import uuid
 from collections.abc import Iterable
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -21,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from agent.core.scenario import Scenario
+from agent.files import replace_file
 from orchestrator.analysis.metrics import (
     Commands,
     RunMetrics,
@@ -267,18 +266,9 @@ def read_timing(run_dir: Path) -> np.ndarray:
 
 
 def write_json(path: Path, content: Any) -> Path:
-    """Write JSON atomically (readers never see half a file)."""
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp")
-    try:
-        with open(tmp, "w", encoding="utf-8") as f:
-            json.dump(content, f, indent=2)
-            f.write("\n")
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-    return path
+    """Write JSON atomically (readers never see half a file), never through a symlink
+    (`agent.files.replace_file`)."""
+    return replace_file(path, (json.dumps(content, indent=2) + "\n").encode("utf-8"))
 
 
 END_FIELDS = ("reason", "lost", "rejected", "stale", "stale_poses", "cmd_timeouts",
@@ -333,3 +323,52 @@ def end_event(run_dir: Path) -> dict[str, Any]:
     """The run's ``end`` event from events.jsonl ({} if there is none)."""
     events = read_events(Path(run_dir) / "events.jsonl")
     return next((e for e in reversed(events) if e.get("kind") == "end"), {})
+
+
+@dataclass(frozen=True)
+class RunEnding:
+    """How a run ended, as `run.json` records it (the same for every way of running).
+
+    Args:
+        status: ``complete``, ``timed-out``, ``interrupted`` or ``crashed``.
+        exit_code: the run's `agent.process.ExitCode`.
+        end_reason: the ``end`` event's reason (``all_arrived``, ``arrived_or_lost``,
+            ``time_limit``, ``signal``, ``startup_timeout``), None without an end event.
+        lost: robots lost at the end.
+    """
+
+    status: str
+    exit_code: int
+    end_reason: str | None
+    lost: tuple[int, ...]
+
+    def as_json(self) -> dict[str, Any]:
+        """The `run.json` fields: ``status``, ``exit_code``, ``end_reason``, ``lost``."""
+        return {"status": self.status, "exit_code": int(self.exit_code),
+                "end_reason": self.end_reason, "lost": list(self.lost)}
+
+
+def run_ending(metrics: dict[str, Any] | None, end: dict[str, Any], *,
+               interrupted: bool = False, crashed: bool = False) -> RunEnding:
+    """The ending of a run from its metrics (`RunMetrics.to_json_dict`) and ``end`` event.
+
+    Args:
+        metrics: the run's metrics; None when it left none (crashed).
+        end: its ``end`` event ({} if none).
+        interrupted: the launcher was interrupted before the run ended.
+        crashed: the world was lost (or left no trajectory).
+    """
+    from agent.process import ExitCode
+
+    reason = end.get("reason")
+    lost = tuple(int(r) for r in end.get("lost") or ())
+    if interrupted:
+        return RunEnding("interrupted", ExitCode.INTERRUPTED, reason, lost)
+    if crashed or metrics is None:
+        return RunEnding("crashed", ExitCode.WORLD_LOST, reason, lost)
+    code = ExitCode.of_run(contacts=int(metrics.get("contacts") or 0),
+                           all_arrived=metrics.get("arrived") == metrics.get("robots"),
+                           robots_lost=bool(lost), interrupted=reason == "signal")
+    status = ("interrupted" if reason == "signal" else
+              "timed-out" if reason == "time_limit" else "complete")
+    return RunEnding(status, code, reason, lost)

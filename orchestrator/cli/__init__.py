@@ -10,12 +10,16 @@ import argparse
 import io
 import logging
 import sys
+import threading
 import traceback
 from collections.abc import Sequence
 from types import ModuleType
 from typing import Any
 
-from agent.process import ExitCode
+from agent.files import UnsafePathError
+from agent.flags import Parser
+from agent.process import ExitCode, interrupt_on_stop_signals
+from agent.security import PkiError
 from orchestrator.cli import (
     bench,
     benchmark,
@@ -48,7 +52,7 @@ COMMANDS: dict[str, ModuleType] = {
 
 def build_parser() -> argparse.ArgumentParser:
     """The parser of every subcommand in `COMMANDS`."""
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="orchestrator",
         description="Run, sweep and report decentralised multi-robot collision avoidance "
                     "(IFP, eIFP, eIFP-MPC, ORCA).")
@@ -69,15 +73,28 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SystemExit as exc:  # argparse: --help (0) or a usage error (2)
         return int(exc.code or 0)
     args.argv = argv
-    return guarded(args.func, args)
+    if threading.current_thread() is not threading.main_thread():
+        return guarded(args.func, args)
+    with interrupt_on_stop_signals():  # SIGTERM, SIGHUP: as Ctrl-C (exit 130, partial run)
+        return guarded(args.func, args)
+
+
+MAX_ERROR_CHARS = 300
+"""A bad-input message is cut to this many characters, on one line."""
+
+
+def one_line(text: str) -> str:
+    """`text` on one line, cut to `MAX_ERROR_CHARS`."""
+    text = " ".join(text.split())
+    return text if len(text) <= MAX_ERROR_CHARS else text[:MAX_ERROR_CHARS - 3] + "..."
 
 
 def guarded(func: Any, args: argparse.Namespace) -> int:
     """Run a subcommand and map its failure to an exit status (a traceback only for bugs)."""
     try:
         return int(func(args))
-    except (ScenarioError, BadInput) as exc:
-        print(f"error: {exc}", file=sys.stderr)
+    except (ScenarioError, BadInput, PkiError, UnsafePathError) as exc:
+        print(f"error: {one_line(str(exc))}", file=sys.stderr)
         return ExitCode.BAD_INPUT
     except KeyboardInterrupt:
         print("\ninterrupted", file=sys.stderr)

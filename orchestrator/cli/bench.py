@@ -11,7 +11,7 @@ import time
 from pathlib import Path
 
 from agent.core.config import PLANNER_NAMES
-from agent.flags import positive, positive_int, robot_counts
+from agent.flags import non_negative_int, positive, positive_int, robot_counts
 from orchestrator.cli.common import BadInput, make_dir
 from orchestrator.experiments.bench import (
     DEFAULT_CYCLES,
@@ -63,7 +63,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                              "control, as orchestrator run)")
     parser.add_argument("--cycles", type=positive_int, default=DEFAULT_CYCLES,
                         help=f"planning cycles to time per row (default {DEFAULT_CYCLES})")
-    parser.add_argument("--seed", type=int, default=0, help="seeds the start jitter")
+    parser.add_argument("--seed", type=non_negative_int, default=0, help="seeds the start jitter")
     parser.add_argument("--json", action="store_true",
                         help="also print one JSON object per row; the last line is the "
                              "row (one row) or {\"rows\": [...]}")

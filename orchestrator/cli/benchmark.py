@@ -146,4 +146,8 @@ def run(args: argparse.Namespace) -> int:
     for r in broken:
         print(f"error: {r['case']} {r['planner']} s{r['seed']}: {r['error']} ({r['dir']})",
               file=sys.stderr)
-    return ExitCode.ERROR if broken else ExitCode.OK
+    worst = ExitCode.worst(r.get("exit", ExitCode.ERROR) for r in records)
+    if worst != ExitCode.OK:
+        print(f"benchmark: exit {int(worst)} ({worst.name}), the worst ending of its runs",
+              file=sys.stderr)
+    return worst

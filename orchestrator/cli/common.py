@@ -18,6 +18,35 @@ class BadInput(Exception):
     """A bad option value (exit status 2)."""
 
 
+SEED_JITTER_M = 0.05
+"""Start jitter [m] a nonzero seed gives by default where the scenario does not draw from the
+seed (setups A-G, scenario files, the fixed families): without it every seed of such a
+scenario would run the same (in lockstep, byte for byte). Seed 0 runs the scenario as
+written."""
+JITTER_HELP = (f"move each start by up to this much, uniform in a disc, drawn from the seed "
+               f"(default: 0 for seed 0; for other seeds {SEED_JITTER_M:g} where the scenario "
+               "does not draw from the seed, so that every seed differs; 0 for the seeded "
+               "families)")
+
+
+def start_jitter_m(setup: str, seed: int, requested: float | None, *,
+                   agents: int | None = None) -> float:
+    """The start jitter of a run: `requested` if given, else `SEED_JITTER_M` for a nonzero
+    seed of a scenario that does not draw from the seed, else 0.
+
+    Raises:
+        ScenarioError: an unknown setup or a bad size (as `families.resolve`).
+    """
+    if requested is not None:  # checked where it is used (`families.jitter_starts`)
+        return requested
+    if seed == 0:
+        return 0.0
+    from orchestrator.experiments.families import resolve
+
+    seeded = resolve(setup, agents=agents, seed=0) != resolve(setup, agents=agents, seed=1)
+    return 0.0 if seeded else SEED_JITTER_M
+
+
 def planner_label(scenario: Scenario) -> str:
     names = sorted({r.planner for r in scenario.robots})
     return names[0] if len(names) == 1 else "mixed"
@@ -103,8 +132,14 @@ def tls_ca(args: argparse.Namespace) -> Path | None:
         return None
     if getattr(args, "insecure", False):
         raise BadInput("--tls-ca and --insecure exclude each other")
+    from agent.security import PkiError, RunCA
+
     ca = Path(args.tls_ca)
     missing = [n for n in ("ca.pem", "ca.key") if not (ca / n).is_file()]
     if missing:
         raise BadInput(f"--tls-ca {ca}: missing {', '.join(missing)}")
+    try:
+        RunCA.load(ca, "check")  # unreadable, not PEM, encrypted, not EC: say so now
+    except PkiError as exc:
+        raise BadInput(str(exc)) from None
     return ca

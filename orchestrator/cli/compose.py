@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from agent.flags import positive, run_id
+from agent.flags import non_negative_int, positive, run_id
 from agent.process import ExitCode
 from orchestrator.cli.common import BadInput
 from orchestrator.experiments.compose import (
@@ -31,7 +31,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         help="setup_a..setup_g, a family or a scenario .yaml file")
     common.add_argument("--agents", type=int, help="robot count (scalable setups, families)")
     common.add_argument("--planner", help="every robot uses this planner")
-    common.add_argument("--seed", type=int, default=0, help="seeds the random family")
+    common.add_argument("--seed", type=non_negative_int, default=0, help="seeds the random family")
     common.add_argument("--robots", type=int,
                         help="robot services in the compose file; the scenario must match")
     common.add_argument("--run", required=True, type=run_id, help="run id")

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import argparse
+import datetime as dt
 import math
 from pathlib import Path
 
 from agent.process import ExitCode
 from orchestrator.cli.common import (
+    DEFAULT_RUNS_DIR,
     BadInput,
     make_dir,
 )
@@ -17,7 +19,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("report", help="mean ± std over seeds per setup and planner, plots")
     p.add_argument("dirs", nargs="+", help="run or sweep directories")
     p.add_argument("--paper", action="store_true", help="print the paper's Table I beside ours")
-    p.add_argument("--out", help="where plots and tables go (default: the one DIR, or ./report)")
+    p.add_argument("--out", help="where plots and tables go (default: the one DIR; with "
+                                 "several, runs/report-<time>, under the git-ignored runs/)")
     p.add_argument("--by-dir", action="store_true",
                    help="one row per setup, planner and DIR (compare variants of one setup "
                         "kept in different directories); default: runs are pooled by setup "
@@ -32,6 +35,7 @@ def run(args: argparse.Namespace) -> int:
         PAPER_METRICS,
         aggregate,
         collect,
+        identical_runs,
         paper_table,
         reversal_causes,
         reversal_table,
@@ -58,6 +62,11 @@ def run(args: argparse.Namespace) -> int:
     stats = aggregate(records, ALL_METRICS)
     print(f"{len(records)} runs")
     print(summary_table(stats))
+    same = identical_runs(records)
+    for (setup, planner), (distinct, n) in same.items():
+        print(f"warning: {setup} {planner}: {n} runs but only {distinct} distinct "
+              f"trajectories (byte-identical trajectory.csv): their seeds changed nothing, so "
+              f"± is not a spread over seeds (give --start-jitter-m or link faults)")
     causes = reversal_causes(records)
     if causes:
         print("\noscillations per robot by cause (README, \"Metrics\"):")
@@ -66,13 +75,15 @@ def run(args: argparse.Namespace) -> int:
         print()
         print(paper_table(stats))
     out = Path(args.out) if args.out else (paths[0] if len(paths) == 1 and paths[0].is_dir()
-                                           else Path("report"))
+                                           else default_report_dir())
     make_dir(out)
     bar_stats = {k: {m: (v[0], v[1]) for m, v in s.items()} for k, s in stats.items()}
     written = plot_report_bars(bar_stats, PAPER_METRICS, out)
     write_json(out / "report.json", {
         "runs": [str(r.path) for r in records],
         "partial_runs": [str(r.path) for r in partial],
+        "identical_runs": [{"setup": k[0], "planner": k[1], "distinct": d, "runs": n}
+                           for k, (d, n) in same.items()],
         "groups": [{"setup": k[0], "planner": k[1],
                     **{m: {"mean": _finite(v[0]), "std": _finite(v[1]), "n": v[2]}
                        for m, v in s.items()},
@@ -82,6 +93,13 @@ def run(args: argparse.Namespace) -> int:
     print(f"\nplots: {', '.join(str(p) for p in written)}")
     print(f"tables: {out / 'report.csv'}, {out / 'report.json'}")
     return ExitCode.OK
+
+
+def default_report_dir() -> Path:
+    """Where `report DIR DIR...` writes without ``--out``: a new directory under the
+    git-ignored ``runs/``, never the current directory."""
+    stamp = dt.datetime.now().strftime("%Y%m%d-%H%M%S")
+    return DEFAULT_RUNS_DIR / f"report-{stamp}"
 
 
 def _finite(x: float) -> float | None:

@@ -12,19 +12,21 @@ from typing import Any
 
 from agent.core.config import PLANNER_NAMES, PROFILES
 from agent.core.scenario import Scenario
+from agent.flags import non_negative_int
 from agent.process import ExitCode
 from orchestrator.analysis.console import ProgressLine, run_summary
-from orchestrator.analysis.plots import write_run_plots
-from orchestrator.analysis.rundir import end_event, safe_name
+from orchestrator.analysis.plots import profile_note, write_run_plots
+from orchestrator.analysis.rundir import end_event, run_ending, safe_name
 from orchestrator.cli.common import (
     DEFAULT_RUNS_DIR,
+    JITTER_HELP,
     MODES,
     BadInput,
     add_fault_args,
     add_tls_args,
     fault_plan,
-    make_dir,
     planner_label,
+    start_jitter_m,
     tls_ca,
 )
 
@@ -66,9 +68,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--planner", choices=PLANNER_NAMES,
                    help="every robot uses this planner (default: the scenario's)")
     p.add_argument("--mode", choices=MODES, default="distributed")
-    p.add_argument("--seed", type=int, default=0, help="seeds the random family and jitter")
-    p.add_argument("--start-jitter-m", type=float, default=0.0,
-                   help="move each start by up to this much (uniform in a disc)")
+    p.add_argument("--seed", type=non_negative_int, default=0,
+                   help="seeds the random family and jitter")
+    p.add_argument("--start-jitter-m", type=float, default=None, help=JITTER_HELP)
     p.add_argument("--time-scale", type=float, default=None,
                    help="sim seconds per wall second (distributed mode, and lockstep with "
                         "--live; default 1)")
@@ -93,9 +95,25 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def default_out_dir(scenario: Scenario, planner: str, seed: int) -> Path:
+def default_run_name(scenario: Scenario, planner: str, seed: int) -> str:
+    """``<scenario>-<planner>[-paper]-<seed>-<time>``: the paper profile is in the name."""
     stamp = dt.datetime.now().strftime("%Y%m%d-%H%M%S")
-    return DEFAULT_RUNS_DIR / f"{safe_name(scenario.name)}-{planner}-{seed}-{stamp}"
+    profile = "-paper" if scenario.planner_config.is_paper else ""
+    return f"{safe_name(scenario.name)}-{planner}{profile}-{seed}-{stamp}"
+
+
+def new_run_dir(out: str | None, scenario: Scenario, planner: str, seed: int) -> Path:
+    """The run's directory, made 0700 for this run alone (`agent.files`): ``--out`` if it
+    is new or an empty directory of this user, else a fresh ``runs/<default_run_name>``
+    (``-2``, ``-3``, ... when two runs start in the same second)."""
+    from agent.files import UnsafePathError, create_run_dir, unique_dir
+
+    try:
+        if out:
+            return create_run_dir(Path(out))
+        return unique_dir(DEFAULT_RUNS_DIR, default_run_name(scenario, planner, seed))
+    except UnsafePathError as exc:
+        raise BadInput(str(exc)) from None
 
 
 def run(args: argparse.Namespace) -> int:
@@ -105,8 +123,13 @@ def run(args: argparse.Namespace) -> int:
     if args.time_scale is not None and not (math.isfinite(args.time_scale)
                                             and args.time_scale > 0):
         raise BadInput(f"--time-scale: must be > 0, got {args.time_scale}")
+    jitter_m = start_jitter_m(args.setup, args.seed, args.start_jitter_m, agents=args.agents)
+    if args.start_jitter_m is None and jitter_m > 0.0:
+        print(f"run: seed {args.seed} moves each start by up to {jitter_m:g} m ({args.setup} "
+              "does not draw from the seed; --start-jitter-m 0 runs it as written)",
+              file=sys.stderr)
     scenario = resolve(args.setup, agents=args.agents, seed=args.seed,
-                       start_jitter_m=args.start_jitter_m, planner=args.planner,
+                       start_jitter_m=jitter_m, planner=args.planner,
                        profile=args.profile)
     if args.mp4:
         from orchestrator.analysis.plots import mp4_available
@@ -114,18 +137,16 @@ def run(args: argparse.Namespace) -> int:
         if (why := mp4_available()) is not None:
             raise BadInput(f"--mp4: {why}")
     faults = fault_plan(args, scenario)
+    ca_dir = tls_ca(args) if args.mode == "distributed" else None  # checked before any file
     launcher = choose_launcher(args.launcher, len(scenario.robots), faults)
     planner = planner_label(scenario)
-    out_dir = Path(args.out) if args.out else default_out_dir(scenario, planner, args.seed)
-    if (out_dir / "trajectory.csv").exists() or (out_dir / "metrics.json").exists():
-        raise BadInput(f"--out: {out_dir} already holds a run; choose another directory")
-    make_dir(out_dir)
-    label = f"{scenario.name} {planner} {args.mode}"
-    write_json(out_dir / "run.json", {
+    out_dir = new_run_dir(args.out, scenario, planner, args.seed)
+    label = run_label(scenario, planner, args.mode)
+    claim_run_dir(out_dir, {
         "setup": args.setup, "scenario": scenario.name, "planner": planner,
         "seed": args.seed, "mode": args.mode, "profile": args.profile,
         "agents": len(scenario.robots),
-        "start_jitter_m": args.start_jitter_m, "time_scale": args.time_scale,
+        "start_jitter_m": jitter_m, "time_scale": args.time_scale,
         "launcher": launcher if args.mode == "distributed" else None,
         "faults": faults.to_json() if faults is not None else None,
         "started": dt.datetime.now().isoformat(timespec="seconds"),
@@ -146,7 +167,7 @@ def run(args: argparse.Namespace) -> int:
                                    ).metrics
         else:
             metrics, world_status = _run_distributed(scenario, out_dir, args, progress, faults,
-                                                     live, launcher)
+                                                     live, launcher, ca_dir)
     except KeyboardInterrupt:
         interrupted = True
         metrics = _partial_metrics(out_dir)
@@ -157,18 +178,11 @@ def run(args: argparse.Namespace) -> int:
     wall_s = time.monotonic() - wall0
     end = end_event(out_dir)
     crashed = metrics is None or (world_status is not None and world_status not in RUN_ENDINGS)
-    content = metrics.to_json_dict() if metrics is not None else {}
-    code = (ExitCode.INTERRUPTED if interrupted else ExitCode.WORLD_LOST if crashed
-            else ExitCode.of_run(contacts=int(content.get("contacts") or 0),
-                                 all_arrived=content.get("arrived") == content.get("robots"),
-                                 robots_lost=bool(end.get("lost")),
-                                 interrupted=end.get("reason") == "signal"))
-    status = ("interrupted" if interrupted or end.get("reason") == "signal"
-              else "crashed" if crashed
-              else "timed-out" if end.get("reason") == "time_limit" else "complete")
+    content = metrics.to_json_dict() if metrics is not None else None
+    ending = run_ending(content, end, interrupted=interrupted, crashed=crashed)
+    code, status = ExitCode(ending.exit_code), ending.status
     write_json(out_dir / "run.json", {
-        **read_json(out_dir / "run.json"), "status": status, "exit_code": int(code),
-        "end_reason": end.get("reason"), "lost": end.get("lost", []),
+        **read_json(out_dir / "run.json"), **ending.as_json(),
         "world_exit_status": world_status, "wall_s": round(wall_s, 2),
         "finished": dt.datetime.now().isoformat(timespec="seconds")})
     if metrics is None:
@@ -178,13 +192,32 @@ def run(args: argparse.Namespace) -> int:
         return code
     write_run_plots(out_dir, gif=args.gif, mp4=args.mp4)
     if not args.quiet:
-        print(run_summary(read_json(out_dir / "metrics.json") or content, label))
+        print(run_summary(read_json(out_dir / "metrics.json") or content or {}, label))
         print(f"\nstatus {status}, wall time {wall_s:.1f} s")
     print(out_dir)
     if crashed:
         print(f"error: the world exited with status {world_status}; see {out_dir}/world.log",
               file=sys.stderr)
     return code
+
+
+def run_label(scenario: Scenario, planner: str, mode: str) -> str:
+    """What the summary header and the plot title call a run: scenario, planner (with
+    ``(paper profile)`` when the paper's method as written is run) and mode."""
+    return f"{scenario.name} {planner}{profile_note(scenario)} {mode}"
+
+
+def claim_run_dir(out_dir: Path, started: dict[str, Any]) -> None:
+    """Write the first ``run.json`` as a new file: a second run given the same empty
+    ``--out`` at the same moment finds it there and stops (`BadInput`)."""
+    import json
+
+    from agent.files import write_new
+
+    try:
+        write_new(out_dir / "run.json", (json.dumps(started, indent=2) + "\n").encode())
+    except FileExistsError:
+        raise BadInput(f"--out: {out_dir} is taken by another run") from None
 
 
 def _partial_metrics(out_dir: Path) -> Any:
@@ -216,12 +249,13 @@ def _start_live(args: argparse.Namespace, scenario: Scenario) -> Any:
 
 def _run_distributed(scenario: Scenario, out_dir: Path, args: argparse.Namespace,
                      progress: ProgressLine, faults: Any = None,
-                     live: Any = None, launcher: str = "spawn") -> tuple[Any, int]:
+                     live: Any = None, launcher: str = "spawn",
+                     ca_dir: Path | None = None) -> tuple[Any, int]:
     """Run the real processes; (metrics or None, the world's exit status)."""
     from orchestrator.experiments.distributed import run_scenario_distributed
 
     return run_scenario_distributed(scenario, out_dir, args.seed,
                                     time_scale=args.time_scale or 1.0,
                                     on_progress=progress, faults=faults, live=live,
-                                    tls=not args.insecure, tls_ca=tls_ca(args),
+                                    tls=not args.insecure, tls_ca=ca_dir,
                                     robot_launcher=launcher)

@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 from agent.core.config import PLANNER_NAMES
-from agent.flags import positive, robot_counts
+from agent.flags import non_negative_int, positive, robot_counts
 from orchestrator.cli.common import BadInput, add_tls_args, make_dir, tls_ca
 from orchestrator.experiments.scale import (
     DEFAULT_FAMILY,
@@ -42,7 +42,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         help=f"scenario family (default {DEFAULT_FAMILY})")
     parser.add_argument("--planner", choices=PLANNER_NAMES, default=None,
                         help="every robot uses this planner (default: the family's, eifp-mpc)")
-    parser.add_argument("--seed", type=int, default=0, help="seeds the random family")
+    parser.add_argument("--seed", type=non_negative_int, default=0, help="seeds the random family")
     parser.add_argument("--time-scale", type=positive, default=1.0,
                         help="sim seconds per wall second (default 1: real time)")
     parser.add_argument("--hosts", type=_hosts, default=["127.0.0.1"],

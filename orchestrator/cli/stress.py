@@ -13,12 +13,14 @@ from agent.flags import link_faults
 from agent.process import ExitCode
 from orchestrator.analysis.rundir import safe_name
 from orchestrator.cli.common import (
+    JITTER_HELP,
     MODES,
     BadInput,
     add_fault_args,
     fault_plan,
     make_dir,
     split_list,
+    start_jitter_m,
 )
 
 
@@ -38,7 +40,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--jitter-frac", type=float, default=0.3,
                    help="jitter = this x latency unless jitter_ms is set (default 0.3)")
     p.add_argument("--agents", type=int)
-    p.add_argument("--start-jitter-m", type=float, default=0.0)
+    p.add_argument("--start-jitter-m", type=float, default=None, help=JITTER_HELP)
     p.add_argument("--time-scale", type=float, default=None)
     p.add_argument("--out", required=True)
     add_fault_args(p)
@@ -65,12 +67,15 @@ def run(args: argparse.Namespace) -> int:
         raise BadInput(str(exc)) from None
     for planner in planners:  # fail before starting
         scenario = resolve(args.setup, agents=args.agents, seed=0,
-                           start_jitter_m=args.start_jitter_m, planner=planner,
+                           start_jitter_m=start_jitter_m(args.setup, 0, args.start_jitter_m),
+                           planner=planner,
                            profile=args.profile)
     robot_faults = fault_plan(args, scenario, links=False)
     out = Path(args.out)
     make_dir(out)
     keys = list(sweep)
+    jitter_m = {seed: start_jitter_m(args.setup, seed, args.start_jitter_m, agents=args.agents)
+                for seed in range(args.seeds)}
     jobs = []
     for level, planner, seed in itertools.product(stress.levels(sweep), planners,
                                                   range(args.seeds)):
@@ -79,7 +84,8 @@ def run(args: argparse.Namespace) -> int:
         jobs.append(stress.StressJob(
             setup=args.setup, planner=planner, seed=seed, level=tuple(level.items()),
             links=links, mode=args.mode, out_dir=str(out / name), agents=args.agents,
-            start_jitter_m=args.start_jitter_m, time_scale=args.time_scale or 1.0,
+            start_jitter_m=jitter_m[seed],
+            time_scale=args.time_scale or 1.0,
             compensate_latency=not args.no_latency_compensation, robot_faults=robot_faults,
             profile=args.profile))
     print(f"stress: {len(jobs)} runs ({args.mode}), {args.jobs} at a time, into {out}",
@@ -97,12 +103,13 @@ def run(args: argparse.Namespace) -> int:
     table = stress.aggregate(rows, keys)
     env = stress.envelope(table, keys)
     header = ["setup", "planner", *keys, "runs", "success_rate", "arrived_frac", "contacts",
-              "runs_with_contact", "min_gap_m", "time_ratio_mean"]
+              "runs_with_contact", "runs_incomplete", "min_gap_m", "time_ratio_mean"]
     print(f"\n{args.setup}, {args.mode}, jitter = {args.jitter_frac:g} x latency unless set, "
           f"seeds 0..{args.seeds - 1}")
     print(format_table(header, [[t[h] for h in header] for t in table]))
     env_header = ["setup", "planner", *[f"max_{k}" for k in keys]]
-    print("\nlargest contact-free level (every seed, every smaller level too):")
+    print("\nlargest level at which every run arrived without contact (every seed, every "
+          "smaller level too; '-': none):")
     print(format_table(env_header, [[e[h] for h in env_header] for e in env]))
     stress.write_csv(out / "stress.csv", rows)
     write_json(out / "stress.json", {
@@ -110,4 +117,4 @@ def run(args: argparse.Namespace) -> int:
         "wall_s": round(time.monotonic() - t0, 1), "rows": rows, "table": table,
         "envelope": env})
     print(f"\n{out / 'stress.csv'}, {out / 'stress.json'}")
-    return ExitCode.ERROR if any(r.get("error") for r in rows) else ExitCode.OK
+    return ExitCode.worst(r.get("exit", ExitCode.ERROR) for r in rows)

@@ -15,10 +15,12 @@ from agent.core.config import PLANNER_NAMES, PROFILES
 from agent.process import ExitCode
 from orchestrator.analysis.rundir import safe_name
 from orchestrator.cli.common import (
+    JITTER_HELP,
     MODES,
     BadInput,
     make_dir,
     split_list,
+    start_jitter_m,
 )
 
 SWEEP_RUN_TIMEOUT_S = 4 * 3600.0
@@ -36,7 +38,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--mode", choices=MODES, default="distributed")
     p.add_argument("--jobs", type=int, default=1, help="runs at a time (default 1)")
     p.add_argument("--agents", type=int)
-    p.add_argument("--start-jitter-m", type=float, default=0.0)
+    p.add_argument("--start-jitter-m", type=float, default=None, help=JITTER_HELP)
     p.add_argument("--time-scale", type=float, default=None)
     p.add_argument("--out", required=True)
     p.set_defaults(func=run)
@@ -56,16 +58,17 @@ def run(args: argparse.Namespace) -> int:
     if args.jobs < 1:
         raise BadInput(f"--jobs: must be >= 1, got {args.jobs}")
     for setup, planner in itertools.product(setups, planners):  # fail before starting
-        resolve(setup, agents=args.agents, seed=0, start_jitter_m=args.start_jitter_m,
-                planner=planner, profile=args.profile)
+        resolve(setup, agents=args.agents, seed=1, planner=planner, profile=args.profile,
+                start_jitter_m=start_jitter_m(setup, 1, args.start_jitter_m, agents=args.agents))
     out = Path(args.out)
     make_dir(out / "logs")
     jobs = []
     for setup, planner, seed in itertools.product(setups, planners, range(args.seeds)):
         name = f"{safe_name(setup)}-{planner}-{seed}"
         cmd = [sys.executable, "-m", "orchestrator", "run", setup, "--planner", planner,
-               "--seed", str(seed), "--mode", args.mode, "--out", str(out / name), "--quiet",
-               "--start-jitter-m", repr(args.start_jitter_m)]
+               "--seed", str(seed), "--mode", args.mode, "--out", str(out / name), "--quiet"]
+        if args.start_jitter_m is not None:  # else each run's default for its seed
+            cmd += ["--start-jitter-m", repr(args.start_jitter_m)]
         if args.agents is not None:
             cmd += ["--agents", str(args.agents)]
         if args.time_scale is not None:
@@ -83,7 +86,9 @@ def run(args: argparse.Namespace) -> int:
                 rc = subprocess.run(job[4], stdout=f, stderr=subprocess.STDOUT,
                                     timeout=SWEEP_RUN_TIMEOUT_S, check=False).returncode
             except subprocess.TimeoutExpired:
-                rc = ExitCode.ERROR
+                # Killed by the sweep, not broken: an interruption, said so in its log.
+                f.write(f"\nsweep: stopped this run after {SWEEP_RUN_TIMEOUT_S:.0f} s wall\n")
+                rc = ExitCode.INTERRUPTED
         return job, rc, time.monotonic() - t0
 
     results = []
@@ -113,5 +118,10 @@ def run(args: argparse.Namespace) -> int:
                                              if k not in ("func", "argv")},
                                     "runs": results})
     print(f"\n{out}  (orchestrator report {out} [--paper])")
-    worst = max(r["exit"] for r in results)
-    return worst if worst in (ExitCode.OK, ExitCode.CONTACT, ExitCode.BAD_INPUT) else ExitCode.ERROR
+    worst = ExitCode.worst(r["exit"] for r in results)
+    if worst != ExitCode.OK:
+        runs = [r["dir"] for r in results if ExitCode.worst([r["exit"]]) == worst]
+        print(f"sweep: exit {int(worst)} ({worst.name}), the worst ending of its runs: "
+              f"{', '.join(runs[:5])}{' ...' if len(runs) > 5 else ''} (logs in "
+              f"{out / 'logs'})", file=sys.stderr)
+    return worst

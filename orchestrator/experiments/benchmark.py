@@ -26,6 +26,7 @@ import csv
 import datetime as dt
 import math
 import time
+import traceback
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,7 +35,7 @@ from typing import Any
 import numpy as np
 
 from agent.core.scenario import Scenario
-from orchestrator.analysis.rundir import safe_name, write_json
+from orchestrator.analysis.rundir import end_event, run_ending, safe_name, write_json
 from orchestrator.experiments.families import SETUPS, resolve
 from orchestrator.experiments.scenario_blocks import ideal_time_s
 
@@ -273,11 +274,16 @@ def run_job(job: Job) -> dict[str, Any]:
             metrics, status = run_scenario_distributed(scenario, out_dir, job.seed,
                                                        time_scale=job.time_scale)
         content = metrics.to_json_dict() if metrics is not None else None
-        return run_record(job, content, wall_s=time.perf_counter() - t0,
-                          ideal_s=ideal_time_s(scenario.robots), world_status=status)
+        record = run_record(job, content, wall_s=time.perf_counter() - t0,
+                            ideal_s=ideal_time_s(scenario.robots), world_status=status)
+        record["exit"] = int(run_ending(content, end_event(out_dir)).exit_code)
+        return record
     except Exception as exc:  # noqa: BLE001 - one broken run must not end the suite
-        return run_record(job, None, wall_s=time.perf_counter() - t0,
-                          error=f"{type(exc).__name__}: {exc}")
+        traceback.print_exc()  # the ERROR exit of the suite points here
+        record = run_record(job, None, wall_s=time.perf_counter() - t0,
+                            error=f"{type(exc).__name__}: {exc}")
+        record["exit"] = 7  # agent.process.ExitCode.ERROR
+        return record
 
 
 def run_jobs(jobs: Sequence[Job], *, workers: int = 1,

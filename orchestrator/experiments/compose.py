@@ -277,6 +277,8 @@ def write_report(options: SetupOptions, scenario: Scenario, time_scale: float,
         RunDirError,
         metrics_from_run_dir,
         read_events,
+        read_json,
+        run_ending,
         write_json,
         write_metrics,
     )
@@ -284,26 +286,33 @@ def write_report(options: SetupOptions, scenario: Scenario, time_scale: float,
     run_dir = options.run_dir
     planners = sorted({r.planner for r in scenario.robots})
     planner = planners[0] if len(planners) == 1 else "mixed"
-    write_json(run_dir / "run.json", {
+    started_info = {
         "setup": options.setup, "scenario": scenario.name, "planner": planner,
         "seed": options.seed, "mode": "docker-compose", "agents": len(scenario.robots),
         "run_id": options.run_id, "time_scale": time_scale, "started": started,
         "zenoh": {"endpoints": [connect], "tls": tls_dir is not None,
                   **({"ca": str(Path(tls_dir) / "ca.pem"), "access_control": True}
                      if tls_dir is not None else {})},
-    })
+    }
+    write_json(run_dir / "run.json", started_info)
+    events = read_events(run_dir / "events.jsonl")
+    end = next((e for e in reversed(events) if e.get("kind") == "end"), {})
     try:
         metrics = metrics_from_run_dir(run_dir)
     except (RunDirError, OSError, ValueError) as exc:
         log.error("no metrics for %s: %s", run_dir, exc)
-        return ExitCode.WORLD_LOST
+        ending = run_ending(None, end, crashed=True)
+        write_json(run_dir / "run.json", {**started_info, **ending.as_json(),
+                                          "finished": _now()})
+        return ending.exit_code
     write_metrics(run_dir, metrics)
     write_run_plots(run_dir, gif=False)
-    content = metrics.to_json_dict()
-    events = read_events(run_dir / "events.jsonl")
-    end = next((e for e in reversed(events) if e.get("kind") == "end"), {})
+    content = read_json(run_dir / "metrics.json")
+    ending = run_ending(content, end)
+    write_json(run_dir / "run.json", {**started_info, **ending.as_json(), "finished": _now()})
     lines = [run_summary(content, f"{scenario.name} {planner} docker-compose"), "",
-             f"run {options.run_id}: end reason {end.get('reason', 'unknown (no end event)')}"]
+             f"run {options.run_id}: status {ending.status}, exit code {ending.exit_code}, "
+             f"end reason {end.get('reason', 'unknown (no end event)')}"]
     for e in events:
         if e.get("kind") == "startup_timeout":
             lines.append(f"robots never alive before the world's deadline: {e.get('missing')}")
@@ -313,10 +322,11 @@ def write_report(options: SetupOptions, scenario: Scenario, time_scale: float,
     text = "\n".join(lines) + "\n"
     (run_dir / "report.txt").write_text(text, encoding="utf-8")
     print(text, flush=True)
-    return ExitCode.of_run(contacts=int(content.get("contacts") or 0),
-                           all_arrived=bool(metrics.success or content.get("arrived")
-                                            == content.get("robots")),
-                           robots_lost=bool(end.get("lost")))
+    return ending.exit_code
+
+
+def _now() -> str:
+    return dt.datetime.now().isoformat(timespec="seconds")
 
 
 def await_and_report(options: SetupOptions, connect: str, startup_timeout_s: float,

@@ -41,11 +41,12 @@ import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from types import FrameType
-from typing import IO, TYPE_CHECKING
+from typing import IO, TYPE_CHECKING, Any
 
 from agent.core.scenario import Scenario
-from agent.process import PARENT_PID_ENV
+from agent.files import append_line, open_new, replace_file
+from agent.flags import endpoint_host, every_interface, unspecified_literal
+from agent.process import PARENT_PID_ENV, raise_interrupt
 from orchestrator.analysis.metrics import RunMetrics
 from protocol import OBSERVER_CN, TlsFiles, tls_endpoint, validate_run_id
 from world.scenario_file import load_scenario
@@ -187,19 +188,13 @@ def robot_command(run_id: str, robot_id: int, endpoint: str, *,
     ]
 
 
-def endpoint_host(endpoint: str) -> str:
-    """The host of ``proto/HOST:PORT`` (brackets of an IPv6 literal removed)."""
-    host = endpoint.partition("/")[2].rpartition(":")[0]
-    return host.strip("[]")
-
-
 def prepare_tls(out_dir: Path, run_id: str, robot_ids: Sequence[int],
                 endpoints: Iterable[str], ca_dir: Path | None = None) -> Path:
     """The run's certificates in ``<out_dir>/tls`` (`agent.security.make_run_pki`); the world's
     certificate names every host of `endpoints`. Returns the directory."""
     from agent.security import make_run_pki
 
-    hosts = [h for h in map(endpoint_host, endpoints) if h and h not in ("0.0.0.0", "::")]
+    hosts = [h for h in map(endpoint_host, endpoints) if h and not unspecified_literal(h)]
     tls_dir = Path(out_dir) / TLS_DIR
     make_run_pki(tls_dir, run_id, robot_ids, world_hosts=hosts, ca_dir=ca_dir)
     return tls_dir
@@ -228,6 +223,19 @@ def _link_args(plan: FaultPlan) -> list[str]:
 def world_fault_args(plan: FaultPlan | None) -> list[str]:
     """Options of ``python -m world`` for the plan's command-link faults."""
     return [] if plan is None else _link_args(plan)
+
+
+def world_lost_grace_args(plan: FaultPlan | None, *, time_scale: float,
+                          startup_timeout_s: float) -> list[str]:
+    """``--lost-grace-s`` of ``python -m world`` for a plan whose robots come back: a
+    stopped robot is lost from the lease until it resumes (its stop's duration), a restarted
+    one until its new process is up (at most the start-up deadline, in sim time). Without
+    such faults the world's default (`world.node.LOST_GRACE_S`) stands."""
+    if plan is None:
+        return []
+    back_s = [f.duration_s + 1.0 for f in plan.process if f.kind == "stop"]
+    back_s += [startup_timeout_s * time_scale for f in plan.process if f.kind == "restart"]
+    return ["--lost-grace-s", repr(float(max(back_s)))] if back_s else []
 
 
 def robot_fault_args(plan: FaultPlan | None, robot_id: int) -> list[str]:
@@ -272,9 +280,9 @@ class ProcessFaultScheduler:
         return bool(self.todo or self.resume)
 
     def _log(self, sim_t_s: float, robot_id: int, action: str) -> None:
-        with open(self.log_path, "a") as f:
-            f.write(json.dumps({"t": round(sim_t_s, 4), "wall": time.time(),
-                                "robot": robot_id, "action": action}) + "\n")
+        line = json.dumps({"t": round(sim_t_s, 4), "wall": time.time(), "robot": robot_id,
+                           "action": action}) + "\n"
+        append_line(self.log_path, line)
 
     def poll(self, sim_t_s: float) -> None:
         """Send every fault due by sim time `sim_t_s`."""
@@ -343,7 +351,7 @@ def fleet_command(run_id: str, robot_ids: Sequence[int], endpoint: str, log_dir:
 
 def spawn_logged(args: list[str], log_path: Path) -> subprocess.Popen:
     """Start `args` in its own process group, stdout and stderr into `log_path`."""
-    log: IO[bytes] = open(log_path, "wb")
+    log: IO[bytes] = open_new(log_path, "wb")
     try:
         return subprocess.Popen(
             args, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
@@ -453,7 +461,7 @@ def run_distributed(
     if tls:
         endpoint = tls_endpoint(endpoint)
         robot_endpoints = {rid: tls_endpoint(ep) for rid, ep in (robot_endpoints or {}).items()}
-    elif endpoint_host(endpoint) in ("0.0.0.0", "::"):
+    elif every_interface(endpoint):
         raise ValueError(f"{endpoint}: listening on every interface needs TLS")
     joined = [*(robot_endpoints or {}).values()] or [endpoint]
     if tls:
@@ -461,7 +469,11 @@ def run_distributed(
     _record_transport(out_dir, transport_info(joined, tls_dir))
     world_cmd = world_command(run_id, scenario_path, out_dir, endpoint, rate_hz=rate_hz,
                               time_scale=time_scale, wait_robots_s=startup_timeout_s,
-                              extra_args=[*world_fault_args(faults), *extra_world_args],
+                              extra_args=[*world_fault_args(faults),
+                                          *world_lost_grace_args(
+                                              faults, time_scale=time_scale,
+                                              startup_timeout_s=startup_timeout_s),
+                                          *extra_world_args],
                               tls_dir=tls_dir)
     if faults is not None:
         faults.check(robot_ids)
@@ -470,11 +482,10 @@ def run_distributed(
                      + EXIT_MARGIN_S)
 
     in_main = threading.current_thread() is threading.main_thread()
-    previous_term = None
+    previous: dict[int, Any] = {}
     if in_main:
-        def _on_term(signum: int, frame: FrameType | None) -> None:
-            raise SystemExit(128 + signum)  # unwinds through the teardown below
-        previous_term = signal.signal(signal.SIGTERM, _on_term)
+        # Unwinds through the teardown below, then the caller's interrupted-run path.
+        previous = {s: signal.signal(s, raise_interrupt) for s in (signal.SIGTERM, signal.SIGHUP)}
 
     world: subprocess.Popen | None = None
     robots: list[subprocess.Popen] = []
@@ -488,7 +499,7 @@ def run_distributed(
 
             # Read-only: the observer's certificate (the access control lets it subscribe).
             bridge = LiveBridge(
-                run_id, endpoint if endpoint_host(endpoint) not in ("0.0.0.0", "::")
+                run_id, endpoint if not every_interface(endpoint)
                 else joined[0], scenario, live,
                 tls=TlsFiles.in_dir(tls_dir, OBSERVER_CN) if tls_dir is not None else None,
             ).start()
@@ -541,10 +552,10 @@ def run_distributed(
     finally:
         # Teardown is bounded (WORLD_TERM_GRACE_S + ROBOT_EXIT_GRACE_S + ROBOT_TERM_GRACE_S);
         # a second Ctrl-C or SIGTERM must not cut it short and leave orphans.
-        previous_int = None
         if in_main:
-            previous_int = signal.signal(signal.SIGINT, signal.SIG_IGN)
-            signal.signal(signal.SIGTERM, signal.SIG_IGN)
+            previous[signal.SIGINT] = signal.signal(signal.SIGINT, signal.SIG_IGN)
+            for signum in (signal.SIGTERM, signal.SIGHUP):
+                signal.signal(signum, signal.SIG_IGN)
         try:
             if bridge is not None:
                 bridge.stop()
@@ -554,12 +565,11 @@ def run_distributed(
                 scheduler.release()
             stop_processes(robots, ROBOT_EXIT_GRACE_S, ROBOT_TERM_GRACE_S)
             with contextlib.suppress(OSError):
-                (out_dir / "robots.json").write_text(
-                    json.dumps(collect_robot_exits(out_dir), indent=1) + "\n")
+                replace_file(out_dir / "robots.json",
+                             (json.dumps(collect_robot_exits(out_dir), indent=1) + "\n").encode())
         finally:
-            if in_main:
-                signal.signal(signal.SIGINT, previous_int or signal.SIG_DFL)
-                signal.signal(signal.SIGTERM, previous_term or signal.SIG_DFL)
+            for signum, handler in previous.items():
+                signal.signal(signum, handler if handler is not None else signal.SIG_DFL)
 
 
 def _record_transport(out_dir: Path, info: dict) -> None:

@@ -43,7 +43,7 @@ class LockstepOutcome:
 
     Args:
         out_dir: the run directory.
-        reason: "all_arrived" or "time_limit".
+        reason: "all_arrived", "arrived_or_lost" or "time_limit" (`world.sim.lockstep`).
         success: every robot arrived and no contact (as `metrics.success`).
         sim_time_s: sim time at the end.
         ticks: world ticks run.

@@ -15,14 +15,17 @@ envelope) and the printed table: per planner and level, the success rate, the co
 
 The *envelope* of a planner, per swept key: the largest value v such that every level with
 that key <= v (the other keys at their smallest swept value) had zero contacts in every
-seed. None: contacts already at the smallest value.
+seed and every robot arrived (robots lost to a ``--kill-robot`` aside): a planner that
+deadlocks is never in contact, and is not in the envelope for it. None: contacts or robots
+short of their goals already at the smallest value.
 
 Robot faults (``--kill-robot``, ``--stop-robot``, ``--restart-robot``, ``--slow-robot``,
 ``--robot-rate``, as for ``orchestrator run``) apply unchanged to every run of the sweep:
 ``orchestrator stress setup_g --kill-robot 0@28 --sweep latency_ms=0,100 --drop 0.1``
 measures whether a crashed robot is avoided at each link level. A killed robot never
-arrives, so such runs end at the time limit and do not succeed; read their contacts and the
-arrived fraction (``arrived_frac``: robots arrived over robots, summed over the seeds).
+arrives, so such runs end once every other robot has arrived, and do not succeed; read
+their contacts and the arrived fraction (``arrived_frac``: robots arrived over robots,
+summed over the seeds).
 """
 
 from __future__ import annotations
@@ -117,7 +120,7 @@ def run_job(job: StressJob) -> dict[str, Any]:
     """Run one job (in a worker process); its result row."""
     import json
 
-    from orchestrator.analysis.rundir import metrics_from_run_dir, write_metrics
+    from orchestrator.analysis.rundir import metrics_from_run_dir, run_ending, write_metrics
     from orchestrator.experiments.families import resolve
 
     t0 = time.monotonic()
@@ -151,15 +154,18 @@ def run_job(job: StressJob) -> dict[str, Any]:
         end = [json.loads(line) for line in (out / "events.jsonl").read_text().splitlines()
                if '"end"' in line]
         end_event = end[-1] if end else {}
+        row["exit"] = int(run_ending(m, end_event).exit_code)
         row.update({
             "success": m.get("success"), "arrived": m.get("arrived"), "robots": m.get("robots"),
             "contacts": m.get("contacts"), "min_gap_m": m.get("min_gap_m"),
+            "lost": len(end_event.get("lost") or ()),
             "time_ratio_mean": m.get("time_ratio_mean"),
             "sim_latency_ms_p50": m.get("sim_latency_ms_p50"),
             "ego_error_m_mean": end_event.get("ego_error_m_mean"),
         })
     except Exception as exc:  # noqa: BLE001 - one failed run must not end the sweep
         row["error"] = f"{type(exc).__name__}: {exc}"
+        row["exit"] = 7  # agent.process.ExitCode.ERROR; the traceback follows on stderr
         traceback.print_exc(file=sys.stderr)
     row["wall_s"] = round(time.monotonic() - t0, 2)
     row["dir"] = Path(job.out_dir).name
@@ -205,6 +211,8 @@ def aggregate(rows: Sequence[dict[str, Any]], keys: Sequence[str]) -> list[dict[
             "success_rate": (sum(bool(r.get("success")) for r in ok) / len(ok)) if ok else None,
             "contacts": sum(int(r.get("contacts") or 0) for r in ok),
             "runs_with_contact": sum(1 for r in ok if (r.get("contacts") or 0) > 0),
+            "runs_incomplete": sum(1 for r in ok if int(r.get("arrived") or 0)
+                                   + int(r.get("lost") or 0) < int(r.get("robots") or 0)),
             "arrived_frac": (sum(int(r.get("arrived") or 0) for r in ok)
                              / max(1, sum(int(r.get("robots") or 0) for r in ok))) if ok else None,
             "min_gap_m": _min([r.get("min_gap_m") for r in ok]),
@@ -228,7 +236,10 @@ def envelope(table: Sequence[dict[str, Any]], keys: Sequence[str]
                           key=lambda t: t[key])
             best = None
             for t in line:
-                if t["errors"] or t["runs_with_contact"]:
+                # Contact-free only where every robot also arrived (or was lost to a
+                # robot fault): a planner that stands still is never in contact, and is
+                # not safe for it.
+                if t["errors"] or t["runs_with_contact"] or t["runs_incomplete"]:
                     break
                 best = t[key]
             row[f"max_{key}"] = best

@@ -164,6 +164,55 @@ def test_report_over_two_runs_prints_table_and_writes_plots(two_runs, tmp_path, 
     assert rows[0]["setup"] == "setup_a" and rows[0]["runs"] == "2"
 
 
+def test_report_flags_identical_runs_and_writes_under_runs_by_default(two_runs, tmp_path,
+                                                                    monkeypatch, capsys):
+    import shutil
+
+    shutil.copytree(two_runs / "s0", tmp_path / "copy" / "s0")  # the same run twice
+    monkeypatch.chdir(tmp_path)
+    assert main(["report", str(two_runs / "s0"), str(tmp_path / "copy")]) == 0
+    text = capsys.readouterr().out
+    assert "warning: setup_a ifp: 2 runs but only 1 distinct trajectories" in text
+    # Several DIRs and no --out: a new directory under the git-ignored runs/, not ./report.
+    assert not (tmp_path / "report").exists()
+    (written,) = (tmp_path / "runs").glob("report-*")
+    saved = json.loads((written / "report.json").read_text())
+    assert saved["identical_runs"] == [{"setup": "setup_a", "planner": "ifp", "distinct": 1,
+                                        "runs": 2}]
+    # Two different seeds (with start jitter) are not flagged.
+    assert main(["report", str(two_runs), "--out", str(tmp_path / "r2")]) == 0
+    assert "warning" not in capsys.readouterr().out
+
+
+def test_every_seed_changes_a_run_of_a_fixed_setup(tmp_path, capsys):
+    # setup_a does not draw from the seed: a nonzero seed gets a small start jitter drawn
+    # from it (`common.SEED_JITTER_M`), so seeds 1 and 2 differ; seed 0 runs it as written.
+    from orchestrator.cli.common import SEED_JITTER_M
+
+    for seed in (0, 1, 2):
+        assert main(["run", "setup_a", "--mode", "lockstep", "--planner", "ifp", "--seed",
+                     str(seed), "--out", str(tmp_path / f"s{seed}"), "--quiet"]) in (0, 1)
+    err = capsys.readouterr().err
+    assert f"seed 1 moves each start by up to {SEED_JITTER_M:g} m" in err
+    assert "seed 0" not in err
+    jitter = [json.loads((tmp_path / f"s{s}" / "run.json").read_text())["start_jitter_m"]
+              for s in (0, 1, 2)]
+    assert jitter == [0.0, SEED_JITTER_M, SEED_JITTER_M]
+    starts = [(tmp_path / f"s{s}" / "trajectory.csv").read_text().splitlines()[1:3]
+              for s in (0, 1, 2)]
+    assert len({tuple(x) for x in starts}) == 3, starts
+    # --start-jitter-m 0 still runs a seed as written; a seeded family gets no jitter.
+    assert main(["run", "setup_a", "--mode", "lockstep", "--planner", "ifp", "--seed", "1",
+                 "--start-jitter-m", "0", "--out", str(tmp_path / "s1as"), "--quiet"]) in (0, 1)
+    assert (tmp_path / "s1as" / "trajectory.csv").read_bytes() == \
+        (tmp_path / "s0" / "trajectory.csv").read_bytes()
+    from orchestrator.cli.common import start_jitter_m
+
+    assert start_jitter_m("random", 3, None) == 0.0  # its seed already moves every robot
+    assert start_jitter_m("setup_g", 3, None) == SEED_JITTER_M
+    assert start_jitter_m("setup_g", 3, 0.2) == 0.2
+
+
 def test_report_of_an_empty_directory_exits_2(tmp_path, capsys):
     assert main(["report", str(tmp_path)]) == 2
     assert main(["report", str(tmp_path / "missing")]) == 2
@@ -183,6 +232,24 @@ def test_sweep_runs_subprocesses_and_writes_tables(tmp_path, capsys):
     assert "a-ifp-0: exit" in captured.err and "ifp" in captured.out
     assert main(["sweep", "--setups", "setup_q", "--planners", "ifp", "--out",
                  str(tmp_path / "bad")]) == 2
+
+
+def test_sweep_of_runs_that_time_out_exits_incomplete_not_error(tmp_path, capsys):
+    # Two robots that cannot arrive in 1 s: every run times out (exit 3), and so does the
+    # sweep; it used to exit 7 ("internal error; the traceback is in the log") with none.
+    setup = tmp_path / "short.yaml"
+    setup.write_text("name: short\ntime_limit: 1\nrobots:\n"
+                     "  - {id: 0, start: [-5, 0, 0], goal: [5, 0]}\n"
+                     "  - {id: 1, start: [0, -5, 1.5708], goal: [0, 5]}\n")
+    out = tmp_path / "sweep"
+    rc = main(["sweep", "--setups", str(setup), "--planners", "ifp", "--seeds", "2",
+               "--mode", "lockstep", "--jobs", "2", "--out", str(out)])
+    assert rc == ExitCode.INCOMPLETE
+    rows = list(csv.DictReader((out / "sweep.csv").read_text().splitlines()))
+    assert [r["exit"] for r in rows] == ["3", "3"]
+    assert "exit 3 (INCOMPLETE), the worst ending of its runs" in capsys.readouterr().err
+    run = json.loads((out / rows[0]["dir"] / "run.json").read_text())
+    assert (run["status"], run["end_reason"]) == ("timed-out", "time_limit")
 
 
 def test_unexpected_errors_exit_error(monkeypatch, capsys):
@@ -232,7 +299,8 @@ def test_stress_writes_table_rows_and_envelope(tmp_path, capsys):
                "--seeds", "2", "--jobs", "2", "--out", str(out)])
     assert rc == 0
     text = capsys.readouterr().out
-    assert "largest contact-free level" in text and "max_latency_ms" in text
+    assert "largest level at which every run arrived without contact" in text
+    assert "max_latency_ms" in text
     with open(out / "stress.csv") as f:
         rows = list(csv.DictReader(f))
     assert len(rows) == 4 and {r["latency_ms"] for r in rows} == {"0.0", "40.0"}
@@ -243,6 +311,10 @@ def test_stress_writes_table_rows_and_envelope(tmp_path, capsys):
     faults = json.loads((out / run["dir"] / "events.jsonl").read_text().splitlines()[0])
     assert faults["faults"]["links"]["jitter_ms"] == pytest.approx(12.0)  # 0.3 x 40 ms
     assert faults["faults"]["seed"] == 1
+    # At latency 0 the links change nothing; seed 1's start jitter still tells it from 0.
+    zero = {r["seed"]: out / r["dir"] / "scenario.yaml" for r in content["rows"]
+            if r["latency_ms"] == 0.0}
+    assert zero[0].read_text() != zero[1].read_text()
 
 
 def test_stress_applies_robot_faults_to_every_run(tmp_path, capsys):
@@ -251,7 +323,7 @@ def test_stress_applies_robot_faults_to_every_run(tmp_path, capsys):
     out = tmp_path / "stress"
     rc = main(["stress", "setup_a", "--sweep", "latency_ms=0,50", "--planners", "eifp-mpc",
                "--seeds", "1", "--kill-robot", "1@8", "--out", str(out)])
-    assert rc == 0
+    assert rc == ExitCode.ROBOT_LOST  # the worst ending of its runs: a robot was lost
     content = json.loads((out / "stress.json").read_text())
     assert len(content["rows"]) == 2
     for row in content["rows"]:
@@ -262,7 +334,12 @@ def test_stress_applies_robot_faults_to_every_run(tmp_path, capsys):
         assert [e["robot"] for e in events if e["kind"] == "arrived"] == [0]
         assert events[0]["faults"]["process"][0]["kind"] == "kill"
         assert row["contacts"] == 0 and row["success"] is False and row["arrived"] == 1
+        assert row["exit"] == ExitCode.ROBOT_LOST and row["lost"] == 1
+        # The run ends once robot 0 has arrived: the killed robot does not hold it open.
+        assert events[-1]["reason"] == "arrived_or_lost"
     assert [t["arrived_frac"] for t in content["table"]] == [0.5, 0.5]
+    # The lost robot is the fault's, not the planner's: the levels are in the envelope.
+    assert content["envelope"][0]["max_latency_ms"] == 50.0
     assert "arrived_frac" in capsys.readouterr().out
 
 

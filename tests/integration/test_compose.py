@@ -5,6 +5,7 @@ same processes the containers run, without Docker)."""
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 import uuid
@@ -134,7 +135,13 @@ def test_await_follows_a_real_run_and_writes_the_report(tmp_path: Path) -> None:
     assert metrics["success"] is True and metrics["arrived"] == 2 and metrics["contacts"] == 0
     run = json.loads((run_dir / "run.json").read_text())
     assert run["mode"] == "docker-compose" and run["run_id"] == run_id
-    assert "end reason all_arrived" in (run_dir / "report.txt").read_text()
+    # The same ending fields as `orchestrator run` writes (`rundir.run_ending`).
+    assert (run["status"], run["exit_code"], run["end_reason"], run["lost"]) == (
+        "complete", 0, "all_arrived", [])
+    report = (run_dir / "report.txt").read_text()
+    assert "end reason all_arrived" in report
+    # The summary table reads the ending from metrics.json, as a local run's summary does.
+    assert re.search(r"end reason\s+all_arrived", report.split("\n\n")[0]), report
 
 
 def test_compose_certs_writes_one_directory_per_service_with_only_its_key(tmp_path) -> None:
@@ -162,3 +169,31 @@ def test_compose_certs_makes_a_relay_certificate_for_its_hosts(tmp_path) -> None
         assert {str(n.value) for n in sans} == {cn, "localhost", "127.0.0.1", *hosts}
     assert main(["compose", "certs", "--run", "r1", "--robots", "4", "--out", str(tmp_path),
                  "--relay", "B"]) == 2
+
+
+def test_entrypoint_runs_the_cli_for_a_subcommand_and_follows_the_run_without_one(tmp_path):
+    # `docker run IMAGE orchestrator list` runs the CLI; `orchestrator` alone (compose.yaml)
+    # or with options only (compose.live.yaml) is the demo's role, which first waits for its
+    # certificate. A stand-in `orchestrator` on PATH records how it was called.
+    import os
+
+    repo = Path(__file__).resolve().parents[2]
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    fake = bin_dir / "orchestrator"
+    fake.write_text('#!/bin/sh\necho "called: $*"\n')
+    fake.chmod(0o755)
+    env = {**os.environ, "PATH": f"{bin_dir}:{os.environ['PATH']}", "STARTUP_TIMEOUT_S": "0",
+           "TLS_DIR": str(tmp_path / "no-tls")}
+    entry = str(repo / "docker" / "entrypoint.sh")
+
+    def run(*args: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run(["sh", entry, *args], env=env, capture_output=True, text=True,
+                              timeout=30, check=False)
+
+    listed = run("orchestrator", "list")
+    assert listed.returncode == 0 and listed.stdout == "called: list\n", listed
+    for args in ((), ("--live", "--live-port", "8765")):
+        role = run("orchestrator", *args)
+        assert role.returncode == 6, role  # TRANSPORT: no certificate within the deadline
+        assert "no certificate" in role.stderr and "called" not in role.stdout, role

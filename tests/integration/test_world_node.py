@@ -16,12 +16,13 @@ from agent.process import StopFlag
 from orchestrator.experiments.distributed import free_tcp_endpoint
 from protocol import (
     MAX_CMD_AHEAD_S,
-    MAX_SEQ_JUMP,
     CommandMsg,
     ControlMsg,
     PosesMsg,
     RunConfigMsg,
     RunKeys,
+    max_seq,
+    scoped_cn,
     session_settings,
 )
 from world.node import WorldNode, WorldOptions, parse_args, run_configs
@@ -139,9 +140,11 @@ def test_liveliness_join_loss_and_rejoin(rig: Rig) -> None:
     stray.undeclare()
 
 
-def test_a_robot_back_on_a_new_link_numbers_on_from_before_its_loss(rig: Rig) -> None:
-    """The lease closed a robot's link and it came back: the world takes its next seq (far
-    above the first-command bound) as the same process's, and refuses a jump from there."""
+def test_a_robot_back_after_a_loss_numbers_on_from_time_and_old_commands_stay_stale(
+        rig: Rig) -> None:
+    """The lease closed a robot's link and it came back: its seq follows time
+    (`protocol.next_seq`), so the world keeps its last seq as the bar: a command replayed
+    from before the loss is stale, one beyond what the time allows is refused."""
     node = rig.node
     pub0 = rig.client.declare_publisher(rig.keys.cmd(0))
     token = rig.client.liveliness().declare_token(rig.keys.alive_robot(0))
@@ -151,20 +154,21 @@ def test_a_robot_back_on_a_new_link_numbers_on_from_before_its_loss(rig: Rig) ->
     def cmd(seq: int, v: float) -> bytes:
         return CommandMsg(0, seq, 0.0, v, 0.0, 2.0, "ok").encode()
 
-    for seq in range(0, 10 * MAX_SEQ_JUMP, MAX_SEQ_JUMP // 2):  # up to seq 608
+    for seq in range(0, 640, 32):  # up to seq 608
         pub0.put(cmd(seq, 0.2))
     until(lambda: node.counts["commands"] == 20, node.apply_commands, "twenty commands")
     token.undeclare()
     until(lambda: 0 in node.lost, node.poll_liveliness, "robot 0 to be lost")
     token = rig.client.liveliness().declare_token(rig.keys.alive_robot(0))
     until(lambda: 0 in node.alive, node.poll_liveliness, "robot 0 to rejoin")
-    pub0.put(cmd(608 + 2 * MAX_SEQ_JUMP, 0.9))  # too far even for the same process
-    pub0.put(cmd(612, 0.5))  # the same process, four plans on
+    pub0.put(cmd(max_seq(node.sim.t_s) + 1, 0.9))  # beyond what the time allows
+    pub0.put(cmd(512, 0.1))  # replayed from before the loss
+    pub0.put(cmd(612, 0.5))
     pub0.put(cmd(613, 0.6))
-    until(lambda: node.counts["commands"] + node.counts["rejected"] == 23,
-          node.apply_commands, "three more commands")
+    until(lambda: node.counts["commands"] + node.counts["rejected"] + node.counts["stale"] == 24,
+          node.apply_commands, "four more commands")
     assert node.counts["seq_jumps"] == 1 and node.counts["commands"] == 22
-    assert node.last_seq[0] == 613 and not node.rejoined_seq
+    assert node.counts["stale"] == 1 and node.last_seq[0] == 613
     assert node.sim.command[node.sim.index_of(0)][0] == pytest.approx(0.6)
     token.undeclare()
 
@@ -206,16 +210,21 @@ def test_a_seq_jump_or_a_plan_from_the_future_is_refused_not_stored(rig: Rig) ->
     def cmd(seq: int, v: float, stamp: float = 0.0) -> bytes:
         return CommandMsg(0, seq, stamp, v, 0.0, 2.0, "ok").encode()
 
-    pub0.put(cmd(2**63 - 1, 0.9))  # before any: beyond the first-command bound
+    bound = max_seq(node.sim.t_s)
+    pub0.put(cmd(2**63 - 1, 0.9))  # far beyond what the time allows
     pub0.put(cmd(1, 0.5))
-    pub0.put(cmd(1 + MAX_SEQ_JUMP + 1, 0.9))  # jumps too far above 1
+    pub0.put(cmd(bound + 1, 0.9))  # one beyond
     pub0.put(cmd(2, 0.4, stamp=MAX_CMD_AHEAD_S + 5.0))  # planned on a pose of the future
-    pub0.put(cmd(1 + MAX_SEQ_JUMP, 0.3))  # the largest allowed step
+    pub0.put(cmd(bound, 0.3))  # the largest allowed now
     until(lambda: node.counts["commands"] + node.counts["rejected"] == 5, node.apply_commands,
           "five commands")
     assert node.counts["seq_jumps"] == 2 and node.counts["future_cmds"] == 1
-    assert node.counts["commands"] == 2 and node.last_seq[0] == 1 + MAX_SEQ_JUMP
+    assert node.counts["commands"] == 2 and node.last_seq[0] == bound
     assert node.sim.command[node.sim.index_of(0)][0] == pytest.approx(0.3)
+    node.sim.step(0.5)  # half a second later, half a second more of seq
+    pub0.put(cmd(bound + 500, 0.2))
+    until(lambda: node.counts["commands"] == 3, node.apply_commands, "a later command")
+    assert node.last_seq[0] == bound + 500
     reasons = node.rejected_by_reason
     assert reasons["cmd.seq"] == 2 and reasons["cmd.pose_stamp"] == 1
 
@@ -292,7 +301,8 @@ def test_relays_and_a_fixed_id_go_into_the_worlds_router_settings(tmp_path: Path
     assert opts.relays == (("b", (4,)),) and opts.zid == "e1f0a5"
     settings = world_settings(opts, scenario)
     acl = json.loads(settings["access_control"])
-    assert {"id": "s-router-b", "cert_common_names": ["router-b"]} in acl["subjects"]
+    assert {"id": "s-router-b",
+            "cert_common_names": [scoped_cn("router-b", "r1")]} in acl["subjects"]
     assert json.loads(settings["id"]) == "e1f0a5"
     bad = [
         (["--relay", "b=7"], "robots of the run"),          # not in the scenario

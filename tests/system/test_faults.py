@@ -39,6 +39,7 @@ from tests.system.test_distributed import (
     wait_matching,
     write_scenario,
 )
+from world.node import LOST_GRACE_S
 from world.sim.faults import build_plan
 
 pytestmark = [pytest.mark.system, pytest.mark.timeout(240)]
@@ -136,9 +137,14 @@ def test_killed_robot_is_avoided_by_the_launchers_schedule(tmp_path: Path) -> No
     events = read_events(out)
     end = by_kind(events, "end")[0]
     assert end["contacts"] == 0 and end["lost"] == [1] and end["arrived"] == [0]
-    assert end["reason"] == "time_limit"
+    # Robot 0 arrived, robot 1 was lost: the run ends once the lost robot's grace is over
+    # (`world.node.LOST_GRACE_S` of sim time after the loss), not at the 20 s limit.
     lost = by_kind(events, "robot_lost", 1)[0]
     assert 3.0 <= lost["t"] < 3.5
+    arrived_t = by_kind(events, "arrived", 0)[0]["t"]
+    assert end["reason"] == "arrived_or_lost"
+    assert end["t"] == pytest.approx(max(arrived_t, lost["t"] + LOST_GRACE_S), abs=0.1)
+    assert end["t"] < 20.0 - 1.0
 
 
 def test_ten_thousand_malformed_messages_are_counted_and_survived(tmp_path: Path) -> None:

@@ -45,6 +45,7 @@ from protocol import (
     RunConfigMsg,
     RunKeys,
     TlsFiles,
+    next_seq,
     robot_cn,
     session_settings,
     tls_endpoint,
@@ -78,7 +79,7 @@ def crossing(path: Path) -> Path:
 class Run:
     """A world and four robots started by hand, so the rogue can be in place in between."""
 
-    def __init__(self, tmp_path: Path, tag: str, tls: bool) -> None:
+    def __init__(self, tmp_path: Path, tag: str, tls: bool, ca_dir: Path | None = None) -> None:
         self.run_id = unique_run_id(tag)
         self.out_dir = tmp_path / "run"
         self.out_dir.mkdir()
@@ -87,7 +88,7 @@ class Run:
         endpoint = free_tcp_endpoint()
         self.endpoint = tls_endpoint(endpoint) if tls else endpoint
         if self.tls_dir is not None:
-            make_run_pki(self.tls_dir, self.run_id, ROBOTS)
+            make_run_pki(self.tls_dir, self.run_id, ROBOTS, ca_dir=ca_dir)
         self.world = spawn_logged(
             world_command(self.run_id, self.scenario, self.out_dir, self.endpoint,
                           time_scale=2.0, wait_robots_s=STARTUP_S, tls_dir=self.tls_dir),
@@ -121,8 +122,8 @@ class Run:
 def runs(tmp_path: Path):
     made: list[Run] = []
 
-    def make(tag: str, tls: bool) -> Run:
-        made.append(Run(tmp_path, tag, tls))
+    def make(tag: str, tls: bool, ca_dir: Path | None = None) -> Run:
+        made.append(Run(tmp_path, tag, tls, ca_dir))
         return made[-1]
 
     yield make
@@ -144,6 +145,21 @@ def wait_world_ready(run: Run) -> None:
     wait_for_event(run.out_dir, lambda e: e["kind"] == "world_ready", STARTUP_S, run.world)
 
 
+def first_pose(run: Run, session) -> tuple[PosesMsg, object]:
+    """The first pose `session` receives once the run started (and its sample)."""
+    import zenoh
+
+    keys = RunKeys(run.run_id)
+    sub = session.declare_subscriber(keys.poses_all, zenoh.handlers.RingChannel(1))
+    wait_for_event(run.out_dir, lambda e: e["kind"] == "start", STARTUP_S, run.world)
+    deadline = time.monotonic() + RUN_S
+    while (sample := sub.try_recv()) is None:
+        assert time.monotonic() < deadline, "no pose from the world"
+        time.sleep(0.005)
+    sub.undeclare()
+    return PosesMsg.decode(sample.payload.to_bytes()), sample
+
+
 def assert_clean_finish(end: dict, metrics: dict) -> None:
     assert end["reason"] == "all_arrived" and end["success"], end
     assert end["contacts"] == 0 and end["lost"] == []
@@ -156,7 +172,6 @@ def assert_clean_finish(end: dict, metrics: dict) -> None:
 
 def test_with_tls_a_rogue_without_a_certificate_cannot_connect_and_a_stolen_one_is_powerless(
         runs, tmp_path: Path) -> None:
-    import zenoh
 
     run = runs("tls", tls=True)
     wait_world_ready(run)
@@ -181,13 +196,7 @@ def test_with_tls_a_rogue_without_a_certificate_cannot_connect_and_a_stolen_one_
     stolen = rogue_session(run.endpoint, TlsFiles.in_dir(run.tls_dir, robot_cn(0)))
     observer = rogue_session(run.endpoint, TlsFiles.in_dir(run.tls_dir, "observer"))
     try:
-        seen = observer.declare_subscriber(keys.poses_all, zenoh.handlers.RingChannel(4))
-        wait_for_event(run.out_dir, lambda e: e["kind"] == "start", STARTUP_S, run.world)
-        deadline = time.monotonic() + RUN_S
-        while (sample := seen.try_recv()) is None:
-            assert time.monotonic() < deadline, "the observer never saw a pose"
-            time.sleep(0.01)
-        real = PosesMsg.decode(sample.payload.to_bytes())
+        real, sample = first_pose(run, observer)  # the observer may read everything
         for session in (stolen, observer):
             session.put(keys.cmd(3), CommandMsg(3, 2**63 - 1, real.t_s, 0.0, 0.0, 1.0,
                                                 "ok").encode())
@@ -245,14 +254,8 @@ def test_without_tls_every_forgery_fails_and_is_counted(runs) -> None:
         queryable = rogue.declare_queryable(keys.config_all, forge_reply)
         time.sleep(0.5)  # the declaration reaches the router before any robot asks
         run.start_robots()
-        poses = rogue.declare_subscriber(keys.poses_all, zenoh.handlers.RingChannel(1))
         cmds = rogue.declare_subscriber(keys.cmd_all, zenoh.handlers.RingChannel(64))
-        wait_for_event(run.out_dir, lambda e: e["kind"] == "start", STARTUP_S, run.world)
-        deadline = time.monotonic() + RUN_S
-        while (sample := poses.try_recv()) is None:
-            assert time.monotonic() < deadline, "no pose from the world"
-            time.sleep(0.005)
-        real = PosesMsg.decode(sample.payload.to_bytes())
+        real, sample = first_pose(run, rogue)
         world_source = sample.source_info
         time.sleep(0.5)  # the robots have commanded a few times
 
@@ -325,6 +328,85 @@ def test_without_tls_every_forgery_fails_and_is_counted(runs) -> None:
     print(f"world: {end['seq_jumps']} seq jumps, {end['stale']} stale; robots refused "
           f"{robots['refused_poses']} poses, {robots['refused_control']} control, "
           f"{robots['refused_config']} configs; {sent} flood rounds")
+
+
+def test_with_robot_1s_key_the_64_step_seq_walk_does_not_stop_robot_1(runs) -> None:
+    """Issue 40: 300 commands on robot 1's key, stepping seq by 64 in 1.5 s (each a stop),
+    froze robot 1 for the rest of the run (all accepted, exit 3). Now the world accepts a
+    seq only as far as its time allows; the walk is refused past that, and robot 1, whose
+    seq follows time, passes the forged ones and arrives."""
+    run = runs("walk", tls=True)
+    wait_world_ready(run)
+    run.start_robots()
+    keys = RunKeys(run.run_id)
+    stolen = rogue_session(run.endpoint, TlsFiles.in_dir(run.tls_dir, robot_cn(1)),
+                           attempts_s=STARTUP_S)
+    try:
+        real, _ = first_pose(run, stolen)
+        seq = next_seq(-1, real.t_s)
+        t0 = time.monotonic()
+        for k in range(300):  # paced as in the issue: 300 in 1.5 s
+            seq += 64
+            stolen.put(keys.cmd(1), CommandMsg(1, seq, real.t_s, 0.0, 0.0, 1.0,
+                                               "ok").encode())
+            time.sleep(max(0.0, t0 + 0.005 * (k + 1) - time.monotonic()))
+        end, robots, metrics = run.finish()
+    finally:
+        stolen.close()
+    assert_clean_finish(end, metrics)  # robot 1 arrived too
+    assert end["seq_jumps"] >= 200, end  # most of the walk refused
+    assert all(p["reason"] == "end (all_arrived)" for p in robots["processes"]), robots
+    print(f"walk: {300 - end['seq_jumps']} of 300 forged commands within the time bound; "
+          f"{end['seq_jumps']} refused")
+
+
+def test_a_certificate_of_another_run_from_the_same_ca_is_refused(runs, tmp_path: Path
+                                                                  ) -> None:
+    """Issue 40: with ``--tls-ca`` the access list checked the CN only, so robot 1's
+    certificate of an earlier run by the same CA put commands in a new run, and that run's
+    observer certificate read every command. Both now hold no right in this run: the CNs
+    carry the run (`protocol.scoped_cn`)."""
+    import zenoh
+
+    from agent.security import RunCA
+
+    ca = RunCA("site-ca")
+    ca_dir = tmp_path / "site-ca"
+    ca_dir.mkdir()
+    (ca_dir / "ca.pem").write_bytes(ca.cert_pem)
+    from cryptography.hazmat.primitives import serialization
+
+    (ca_dir / "ca.key").write_bytes(ca.key.private_bytes(
+        serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8,
+        serialization.NoEncryption()))
+    earlier = make_run_pki(tmp_path / "earlier", unique_run_id("earlier"), [1], ca_dir=ca_dir)
+    run = runs("same-ca", tls=True, ca_dir=ca_dir)
+    wait_world_ready(run)
+    keys = RunKeys(run.run_id)
+    # Same CA: the handshake succeeds, the access list gives these CNs nothing.
+    old_robot = rogue_session(run.endpoint, earlier[robot_cn(1)], attempts_s=STARTUP_S)
+    old_observer = rogue_session(run.endpoint, earlier["observer"], attempts_s=STARTUP_S)
+    observer = rogue_session(run.endpoint, TlsFiles.in_dir(run.tls_dir, "observer"),
+                             attempts_s=STARTUP_S)
+    try:
+        peeked_cmds = old_observer.declare_subscriber(keys.cmd_all,
+                                                      zenoh.handlers.RingChannel(64))
+        peeked_poses = old_observer.declare_subscriber(keys.poses_all,
+                                                       zenoh.handlers.RingChannel(4))
+        run.start_robots()
+        real, _ = first_pose(run, observer)
+        for k in range(300):  # stops on robot 1's key, each with a fresh, allowed seq
+            old_robot.put(keys.cmd(1), CommandMsg(1, next_seq(-1, real.t_s) + k, real.t_s,
+                                                  0.0, 0.0, 123.456, "ok").encode())
+        end, robots, metrics = run.finish()
+        assert peeked_cmds.try_recv() is None and peeked_poses.try_recv() is None
+    finally:
+        for session in (old_robot, old_observer, observer):
+            session.close()
+    assert_clean_finish(end, metrics)
+    assert end["rejected"] == 0 and end["seq_jumps"] == 0, end  # dropped by the router
+    applied = (run.out_dir / "commands.csv").read_text()
+    assert ",123.4560," not in applied  # no forged command was applied
 
 
 def test_the_world_refuses_to_listen_everywhere_without_tls(tmp_path: Path) -> None:

@@ -6,10 +6,11 @@ Layers, lowest first (a module may import its own layer and the layers below it)
 1. planning: threats, via-points, encounters, reference paths, MPC, ORCA, controller
    (`agent.planning`)
 2. simulation: dynamics, link faults, fault plans, schedule, the lockstep loop (`world.sim`)
-3. wire: keys, messages, codec (`protocol`), the scenario file format (`world.scenario_file`)
+3. wire: keys, messages, codec (`protocol`), the scenario file format (`world.scenario_file`),
+   run directories and files made safely (`agent.files`)
 4. runtime: the robot and world processes and their plumbing (`agent.node`, `agent.fleet`,
    `agent.process`, `agent.flags`, `world.node`, `world.router`, `world.recorder`,
-   `world.mcap_log`)
+   `world.mcap_log`), and the IR-SIM behaviour (`agent.irsim`)
 5. experiments and analysis (`orchestrator.experiments`, `orchestrator.analysis`)
 6. CLI (`orchestrator.cli`)
 """
@@ -27,16 +28,17 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("agent.core",),
     ("agent.planning",),
     ("world.sim",),
-    ("protocol", "world.scenario_file"),
+    ("protocol", "world.scenario_file", "agent.files"),
     ("agent.node", "agent.fleet", "agent.process", "agent.flags", "agent.security",
-     "agent.__main__",
+     "agent.__main__", "agent.irsim",
      "world.node", "world.router", "world.recorder", "world.mcap_log", "world.__main__"),
     ("orchestrator.experiments", "orchestrator.analysis"),
     ("orchestrator.cli", "orchestrator.__main__"),
 )
 LAYER_NAMES = ("core", "planning", "simulation", "wire", "runtime", "experiments", "cli")
-PURE_FORBIDDEN = ("zenoh", "yaml", "matplotlib", "psutil", "subprocess", "socket")
-"""Layers 0-2 do no I/O; the wire layer may read YAML but never touches zenoh."""
+PURE_FORBIDDEN = ("zenoh", "yaml", "matplotlib", "psutil", "subprocess", "socket", "irsim")
+"""Layers 0-2 do no I/O and know no simulator (IR-SIM is adapted at an edge, `agent.irsim`);
+the wire layer may read YAML but never touches zenoh."""
 
 
 def module_name(path: Path) -> str:

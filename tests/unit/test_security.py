@@ -10,19 +10,26 @@ from pathlib import Path
 import pytest
 from cryptography import x509
 from cryptography.x509.oid import NameOID
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from agent.security import make_run_pki
 from protocol import (
     ACL_MESSAGES,
+    MAX_CMD_AHEAD_S,
     MAX_POSE_AHEAD_S,
-    MAX_SEQ_JUMP,
+    SEQ_PER_S,
     TlsFiles,
     access_control,
     check_pose_time,
     check_seq,
+    max_seq,
+    next_seq,
     relay_access_control,
     robot_cn,
     router_cn,
+    run_tag,
+    scoped_cn,
     session_settings,
     tls_endpoint,
 )
@@ -30,32 +37,56 @@ from protocol import (
 # --- sequence numbers -----------------------------------------------------------------------
 
 
-def test_a_robots_first_command_may_start_anywhere_up_to_the_jump_bound() -> None:
-    assert check_seq(0, None) is None
-    assert check_seq(MAX_SEQ_JUMP, None) is None
-    assert check_seq(MAX_SEQ_JUMP + 1, None) == "seq_jump"
-    assert check_seq(2**63 - 1, None) == "seq_jump"
+def test_a_robots_seq_follows_the_time_of_its_poses() -> None:
+    assert next_seq(-1, 0.0) == 0
+    assert next_seq(-1, 1.5) == 1500  # a robot's first plan, or a restarted robot's
+    assert next_seq(1500, 1.5) == 1501  # a second plan on the same pose
+    assert next_seq(1530, 1.5) == 1531
+    assert next_seq(1501, 1.6) == 1600
 
 
-def test_after_a_rejoin_the_first_command_may_go_on_from_before_the_loss() -> None:
-    """The same process back (its link closed by the lease) numbers on; a restarted one
-    from 0; anything else is still a jump."""
-    assert check_seq(1017, None, before_loss=1000) is None
-    assert check_seq(1000 + MAX_SEQ_JUMP, None, before_loss=1000) is None
-    assert check_seq(3, None, before_loss=1000) is None  # a new process
-    assert check_seq(1001 + MAX_SEQ_JUMP, None, before_loss=1000) == "seq_jump"
-    assert check_seq(1000, None, before_loss=1000) == "seq_jump"  # not above it
-    assert check_seq(2**63 - 1, None, before_loss=1000) == "seq_jump"
-    assert check_seq(1017, 5, before_loss=1000) == "seq_jump"  # only for the first command
+def test_a_seq_is_bounded_by_the_worlds_time_not_by_its_step() -> None:
+    assert max_seq(0.0) == MAX_CMD_AHEAD_S * SEQ_PER_S
+    assert check_seq(max_seq(2.0), None, world_t_s=2.0) is None
+    assert check_seq(max_seq(2.0) + 1, None, world_t_s=2.0) == "seq_jump"
+    assert check_seq(max_seq(2.0) + 1, max_seq(2.0), world_t_s=2.0) == "seq_jump"
+    assert check_seq(2**63 - 1, None, world_t_s=1e6) == "seq_jump"
+    assert check_seq(11, 10, world_t_s=0.0) is None
+    assert check_seq(10, 10, world_t_s=0.0) == "stale"
+    assert check_seq(3, 10, world_t_s=0.0) == "stale"
 
 
-def test_a_seq_must_increase_by_at_most_the_bound() -> None:
-    assert check_seq(11, 10) is None
-    assert check_seq(10 + MAX_SEQ_JUMP, 10) is None
-    assert check_seq(11 + MAX_SEQ_JUMP, 10) == "seq_jump"
-    assert check_seq(2**63 - 1, 10) == "seq_jump"
-    assert check_seq(10, 10) == "stale"
-    assert check_seq(3, 10) == "stale"
+def test_the_64_step_walk_is_stopped_and_the_robot_passes_it_a_second_later() -> None:
+    """Issue 40: with robot 1's key, 300 commands stepping seq by 64 in 1.5 s took it from
+    145 to 19 281, every one accepted, and the robot never caught up. Now the world accepts
+    only what its time allows, and the genuine robot's next seq, taken from the time of its
+    poses, is above every forged one within MAX_CMD_AHEAD_S of the walk's end."""
+    t0_s, last, accepted = 14.5, 145, []
+    for k in range(300):
+        t_s = t0_s + 1.5 * k / 300
+        seq = 145 + 64 * (k + 1)
+        if check_seq(seq, last, world_t_s=t_s) is None:
+            accepted.append(seq)
+            last = seq
+    assert len(accepted) < 300 and last <= max_seq(t0_s + 1.5)
+    genuine = next_seq(145, t0_s + 1.5 + MAX_CMD_AHEAD_S + 0.02)  # its next pose
+    assert check_seq(genuine, last, world_t_s=t0_s + 1.5 + MAX_CMD_AHEAD_S + 0.02) is None
+
+
+@settings(max_examples=200, deadline=None)
+@given(steps=st.lists(st.tuples(st.floats(0.0, 0.5), st.integers(1, 2**40)), max_size=60),
+       t0_s=st.floats(0.0, 600.0))
+def test_no_forged_walk_outruns_the_genuine_robot_by_more_than_the_bound(
+        steps: list[tuple[float, int]], t0_s: float) -> None:
+    """Whatever a forger sends (any step at any time), what the world accepted is passed by
+    the genuine robot's seq on the first pose `MAX_CMD_AHEAD_S` after the forger stopped."""
+    t_s, last = t0_s, next_seq(-1, t0_s)
+    for dt_s, step in steps:
+        t_s += dt_s
+        if check_seq(last + step, last, world_t_s=t_s) is None:
+            last += step
+    later_s = t_s + MAX_CMD_AHEAD_S + 0.02
+    assert check_seq(next_seq(next_seq(-1, t0_s), later_s), last, world_t_s=later_s) is None
 
 
 # --- pose time --------------------------------------------------------------------------------
@@ -96,6 +127,8 @@ def test_a_pose_far_ahead_of_the_clock_is_refused() -> None:
 
 
 def rules_of(acl: dict, cn: str) -> list[dict]:
+    """The rules of a certificate with CN `cn` (a plain identity: of run ``r1``)."""
+    cn = cn if "@" in cn else scoped_cn(cn, "r1")
     subjects = {s["id"] for s in acl["subjects"] if cn in s["cert_common_names"]}
     names = {r for p in acl["policies"] if subjects & set(p["subjects"]) for r in p["rules"]}
     return [r for r in acl["rules"] if r["id"] in names]
@@ -206,6 +239,22 @@ def test_a_relay_may_speak_on_the_worlds_router_for_its_robots_only() -> None:
     assert access_control("r1", [0, 1]) == access_control("r1", [0, 1], relays={})
 
 
+def test_a_certificate_of_another_run_has_no_rights_even_from_the_same_ca() -> None:
+    """Issue 40: the ACL named bare CNs, so robot 1's certificate of an earlier run, signed by
+    the same ``--tls-ca``, put commands in a new run. Now every subject is scoped to its run."""
+    acl = access_control("r1", [1], relays={"b": [1]})
+    relay = relay_access_control("r1", [1])
+    earlier = {cn: scoped_cn(cn, "r0") for cn in ("robot-1", "observer", "orchestrator",
+                                                  "router-b", "world")}
+    for which in (acl, relay):
+        for cn in earlier.values():
+            assert rules_of(which, cn) == []
+    assert allowed(acl, "robot-1", "put", "ingress", "eifp/r1/cmd/1")
+    assert run_tag("r1") != run_tag("r0") and len(scoped_cn("router-" + "a" * 32, "x" * 64)) <= 64
+    every = [cn for s in acl["subjects"] + relay["subjects"] for cn in s["cert_common_names"]]
+    assert every and all(cn.endswith("@" + run_tag("r1")) for cn in every)
+
+
 def test_relays_must_carry_robots_of_the_run_each_behind_one_relay() -> None:
     with pytest.raises(ValueError, match="robots of the run"):
         access_control("r1", [0, 1], relays={"b": [2]})
@@ -239,7 +288,8 @@ def test_a_relay_enforces_its_robots_rights_and_trusts_only_the_worlds_router() 
 def test_relay_certificates_name_their_host(tmp_path) -> None:
     files = make_run_pki(tmp_path, "r1", [0], relays={"b": ["10.0.0.2", "host-b"]})
     cert = x509.load_pem_x509_certificate(Path(files["router-b"].cert).read_bytes())
-    assert cert.subject.get_attributes_for_oid(NameOID.COMMON_NAME)[0].value == "router-b"
+    assert (cert.subject.get_attributes_for_oid(NameOID.COMMON_NAME)[0].value
+            == scoped_cn("router-b", "r1"))
     sans = cert.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
     assert {str(n.value) for n in sans} == {"router-b", "localhost", "127.0.0.1", "10.0.0.2",
                                             "host-b"}
@@ -304,7 +354,8 @@ def test_run_pki_files_modes_names_and_no_ca_key(tmp_path) -> None:
     for cn, f in files.items():
         assert stat.S_IMODE((tmp_path / "tls" / f"{cn}.key").stat().st_mode) == 0o600
         cert = x509.load_pem_x509_certificate(Path(f.cert).read_bytes())
-        assert cert.subject.get_attributes_for_oid(NameOID.COMMON_NAME)[0].value == cn
+        assert cert.subject.get_attributes_for_oid(NameOID.COMMON_NAME)[0].value == (
+            f"{cn}@{run_tag('r1')}")
     world = x509.load_pem_x509_certificate(Path(files["world"].cert).read_bytes())
     sans = world.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
     names = {str(n.value) for n in sans}

@@ -31,6 +31,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
+import numpy as np
+
 from agent.core.scenario import RobotSpec, Scenario
 from agent.planning.controller import RobotController
 from agent.planning.routing import StaticMap
@@ -79,7 +81,8 @@ class LockstepResult:
     """How a lockstep run ended.
 
     Args:
-        reason: "all_arrived" or "time_limit".
+        reason: "all_arrived", "arrived_or_lost" (every robot arrived or was killed for
+            good: a lost robot does not hold the run to its time limit) or "time_limit".
         all_arrived: every robot arrived.
         contacts: contact episodes counted by the world.
         sim_time_s: sim time at the end.
@@ -200,6 +203,11 @@ def run_lockstep(scenario: Scenario, sink: RunSink, *, world_rate_hz: float = 50
     while True:
         if world.all_arrived():
             reason = "all_arrived"
+            break
+        # A killed robot that will not come back no longer holds the run open.
+        gone = np.array([r.state == "down" and r.back_s == math.inf for r in robots])
+        if gone.any() and bool(np.all(world.arrived | gone)):
+            reason = "arrived_or_lost"
             break
         if world.tick >= max_ticks:
             break

@@ -78,3 +78,19 @@ def test_a_wait_is_never_negative_and_the_stall_never_below_zero(clocks: Clocks,
     watch.waited(0.25, 0.25)  # a wait larger than the wall gap (rounding) gives 0, not < 0
     clocks.idle(0.1)
     assert watch.tick() == 0.0
+
+
+def test_the_worst_ending_of_a_batch_follows_the_documented_order() -> None:
+    from agent.process import ENDING_SEVERITY, ExitCode
+
+    assert ExitCode.worst([]) == ExitCode.OK
+    assert ExitCode.worst([0, 3, 0]) == ExitCode.INCOMPLETE
+    # The order within a run (`ExitCode.of_run`): contact > lost > interrupted > time-out.
+    assert ExitCode.worst([3, 130, 4]) == ExitCode.ROBOT_LOST
+    assert ExitCode.worst([4, 1, 130]) == ExitCode.CONTACT
+    # A run that could not be judged outranks any judged one; ERROR only from an ERROR.
+    assert ExitCode.worst([1, 5]) == ExitCode.WORLD_LOST
+    assert ExitCode.worst([1, 7]) == ExitCode.ERROR
+    # A child killed by a signal (negative status) was interrupted, not broken.
+    assert ExitCode.worst([3, -9]) == ExitCode.INTERRUPTED
+    assert set(ENDING_SEVERITY) == set(ExitCode)

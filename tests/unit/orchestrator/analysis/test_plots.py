@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from agent.core.config import PlannerConfig
 from agent.core.scenario import ObstacleSpec, RobotSpec, Scenario
@@ -69,3 +70,15 @@ def test_benchmark_png_with_a_failing_planner_and_missing_values(tmp_path):
 
     with Image.open(path) as im:
         assert im.format == "PNG" and im.size[0] >= 700
+
+
+def test_latency_axis_ends_past_the_p99_not_at_a_single_stall() -> None:
+    from orchestrator.analysis.plots import LATENCY_AXIS_MARGIN, latency_axis_ms
+
+    ms = np.r_[np.linspace(1.0, 3.0, 999), 1000.0]  # one 1 s stall among 1-3 ms
+    low, high, above = latency_axis_ms(ms)
+    p99 = float(np.percentile(ms, 99))
+    assert low == 1.0 and high == pytest.approx(p99 * LATENCY_AXIS_MARGIN)
+    assert high < 4.0 and above == 1  # the stall is counted, not drawn
+    low, high, above = latency_axis_ms(np.array([2.0, 2.0]))  # one value: a usable axis
+    assert high > low and above == 0

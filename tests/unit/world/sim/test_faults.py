@@ -87,3 +87,23 @@ def test_envelope_is_the_largest_level_with_all_smaller_ones_contact_free() -> N
     (env,) = envelope(table, ["latency_ms", "drop"])
     assert env["max_latency_ms"] == 100.0  # 200 had a contact (drop at its smallest, 0)
     assert env["max_drop"] == 0.0          # drop 0.2 at latency 0 had contacts
+
+
+def test_a_planner_that_never_arrives_is_not_contact_free() -> None:
+    from orchestrator.experiments.stress import aggregate, envelope
+
+    def row(lat: float, arrived: int, lost: int = 0) -> dict:
+        return {"setup": "s", "planner": "p", "seed": 0, "latency_ms": lat, "error": None,
+                "success": arrived == 4, "contacts": 0, "arrived": arrived, "robots": 4,
+                "lost": lost, "min_gap_m": 1.0, "time_ratio_mean": None}
+
+    # A deadlock (no contact, nobody arrives) is out of the envelope from the first level.
+    (env,) = envelope(aggregate([row(0.0, 0), row(100.0, 0)], ["latency_ms"]), ["latency_ms"])
+    assert env["max_latency_ms"] is None
+    # Every robot arrives up to 100 ms, at 200 ms one does not: 100 is the envelope.
+    rows = [row(0.0, 4), row(100.0, 4), row(200.0, 3)]
+    (env,) = envelope(aggregate(rows, ["latency_ms"]), ["latency_ms"])
+    assert env["max_latency_ms"] == 100.0
+    # A robot lost to a robot fault does not count against the planner.
+    (env,) = envelope(aggregate([row(0.0, 3, lost=1)], ["latency_ms"]), ["latency_ms"])
+    assert env["max_latency_ms"] == 0.0
