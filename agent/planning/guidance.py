@@ -73,12 +73,14 @@ class RouteGuide:
         self.liveness = Liveness(liveness) if liveness is not None else None
         self._follower: RouteFollower | None = None
         self._goal: tuple[float, float] | None = None
+        self._round_knot = False  # the route goes round a knot of slow robots
         self.replans = 0
 
     def reset(self) -> None:
         """Forget the route and the liveness state."""
         self._follower = None
         self._goal = None
+        self._round_knot = False
         if self.liveness is not None:
             self.liveness.reset()
 
@@ -105,6 +107,7 @@ class RouteGuide:
         if self._follower is None or self._goal != key:
             self._follower = self._plan(here, goal, observation.radius_m)
             self._goal = key
+            self._round_knot = False
         strategy = Strategy.GO
         if self.liveness is not None:
             left = self._follower.progress_left_m(here)
@@ -115,9 +118,15 @@ class RouteGuide:
                 self.liveness.rerouted(taken)
                 strategy = Strategy.GO if taken else self.liveness.fallback(
                     now_s, observation.robot_id, here, observation.others)
-        target = self._follower.intermediate_goal(here)
+        also = None
+        if self._round_knot and self.liveness is not None:
+            slow = knot(here, observation.others, math.inf, self.liveness.config.slow_mps)
+            also = StaticMap(observation.others.position_m[slow],
+                             observation.others.radius_m[slow])
+        target = self._follower.intermediate_goal(here, also)
         if target is None:  # pushed off the route: a new one from here
             self._follower = self._plan(here, goal, observation.radius_m)
+            self._round_knot = False
             self.replans += 1
             target = self._follower.intermediate_goal(here)
             if target is None:  # nothing in sight even so (squeezed into the margin)
@@ -144,6 +153,9 @@ class RouteGuide:
         if route is None or route.waypoints_m.shape[0] <= 2 or \
                 route.length_m > cfg.detour_ratio * max(straight, 1e-9):
             return False
-        # Follow it against the static map only: the knot's discs were a snapshot.
-        self._follower = RouteFollower(route, static)
+        # Followed against the map and the slow robots as they are each cycle (`guide`):
+        # the knot's discs were a snapshot, and a robot of the knot that has moved on
+        # must not hide the route's next waypoint.
+        self._follower = RouteFollower(route, self.static)
+        self._round_knot = True
         return True

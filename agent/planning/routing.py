@@ -384,19 +384,28 @@ class RouteFollower:
         """(k, 2) the route waypoints not yet passed (goal last)."""
         return self.route.waypoints_m[self._next:]
 
-    def intermediate_goal(self, position_m: np.ndarray) -> np.ndarray | None:
+    def intermediate_goal(self, position_m: np.ndarray,
+                          also: StaticMap | None = None) -> np.ndarray | None:
         """The farthest visible route waypoint from `position_m` (advances the follower),
         or None when none of the waypoints ahead is in sight (the robot was pushed off
-        its route: re-route from where it is)."""
+        its route: re-route from where it is).
+
+        Args:
+            position_m: (2,) the robot [m].
+            also: more discs that block the sight lines now (the slow robots a route
+                round a knot goes round, as they are this cycle); None: the map only.
+        """
         wps = self.route.waypoints_m
-        if self._next >= wps.shape[0] - 1 and len(self.static) == 0:
+        blocking = self.static if also is None else self.static.with_discs(
+            also.center_m, also.radius_m)
+        if self._next >= wps.shape[0] - 1 and len(blocking) == 0:
             return wps[-1]
-        keep = self.static.radius_m + self.route.clearance_m
+        keep = blocking.radius_m + self.route.clearance_m
         here = np.asarray(position_m, dtype=float)
         ahead = wps[self._next:]
-        need = _endpoint_keep(here, self.static.center_m, keep)
+        need = _endpoint_keep(here, blocking.center_m, keep)
         seen = segment_clears(np.broadcast_to(here, ahead.shape), ahead,
-                              self.static.center_m, need)
+                              blocking.center_m, need)
         if not seen.any():
             return None
         self._next += int(np.flatnonzero(seen)[-1])

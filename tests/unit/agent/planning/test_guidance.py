@@ -132,3 +132,21 @@ def test_a_robot_held_in_place_yields_to_a_moving_lower_id_and_never_to_a_higher
     assert PlanStatus.YIELD not in lower[:40]  # not stuck before 4 s
     assert PlanStatus.YIELD in lower[40:]
     assert PlanStatus.YIELD not in run(9)
+
+
+def test_a_route_round_a_knot_is_followed_against_the_map_not_the_knot() -> None:
+    """Rule 1 routes round the slow robots in the way; once they have moved on, the robot
+    heads for the goal again instead of for a waypoint round where they stood."""
+    guide = RouteGuide(StaticMap.empty(), 0.3, liveness=LivenessConfig())
+    knot = Others(ids=np.array([7, 8]), position_m=np.array([[2.0, 0.0], [2.0, 1.0]]),
+                  velocity_mps=np.zeros((2, 2)), radius_m=np.full(2, 0.5),
+                  linearity=np.zeros(2), track_start_m=np.array([[2.0, 0.0], [2.0, 1.0]]),
+                  is_robot=np.ones(2, dtype=bool))
+    here = (0.0, 0.0, 0.0, 0.0, (6.0, 0.0))
+    for k in range(41):  # held in place for 4 s: stuck, and rule 1 re-routes round the knot
+        g = guide.guide(observation(*here, knot), 0.1 * k)
+    assert guide.liveness is not None and guide.liveness.reroutes == 1
+    assert not np.allclose(g.goal_m, (6.0, 0.0))  # round the knot
+    # the knot has left: the goal is in sight on the (empty) map
+    g = guide.guide(observation(*here, Others.empty()), 4.2)
+    assert np.allclose(g.goal_m, (6.0, 0.0)) and g.tail_m.shape == (0, 2)
