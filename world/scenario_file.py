@@ -10,6 +10,8 @@ File format (YAML, SI units: metres, seconds, radians)::
     description: four robots ... # optional, default ""
     profile: default             # optional: default | paper (the paper's method as written;
                                  #   the keys under `defaults` still override it)
+    without: [routing, liveness] # optional: mechanisms of the default profile switched off
+                                 #   (ablations; agent.core.config.MECHANISM_NAMES)
     time_limit: 140              # required [s], > 0: the run fails if not all arrived by then
     goal_tolerance: 0.25         # optional [m], > 0, default 0.25
     defaults:                    # optional; every key optional
@@ -68,6 +70,7 @@ from typing import Any
 import numpy as np
 
 from agent.core.config import (
+    MECHANISM_NAMES,
     PLANNER_NAMES,
     POSITIVE_FIELDS,
     PROFILES,
@@ -107,9 +110,8 @@ MAX_ROBOT_ID = 2**31 - 1
 # Range rules of the config fields: agent.core.config (POSITIVE_FIELDS must be > 0, SIGNED_FIELDS
 # any sign, every other number >= 0); `v_min` may be negative (reversing) but not above v_max.
 
-_TOP_KEYS = ("name", "description", "profile", "time_limit", "goal_tolerance", "defaults",
-             "robots",
-             "obstacles")
+_TOP_KEYS = ("name", "description", "profile", "without", "time_limit", "goal_tolerance",
+             "defaults", "robots", "obstacles")
 _TOP_REQUIRED = ("name", "time_limit", "robots")
 _ROBOT_REQUIRED = ("id", "start", "goal")
 _OBSTACLE_KEYS = ("center", "radius", "velocity")
@@ -243,6 +245,20 @@ def _mapping(ctx: _Ctx, path: str, value: object, allowed: typing.Iterable[str],
     return value
 
 
+def _without(ctx: _Ctx, value: object) -> str:
+    """`without`: mechanisms switched off (`PlannerConfig.without`), as a list of names or a
+    comma-separated string; returned comma-separated."""
+    names = value.split(",") if isinstance(value, str) else value
+    if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+        raise ctx.error("without", f"expected a list of mechanism names, {_got(value)}")
+    names = [n.strip() for n in names if n.strip()]
+    for name in names:
+        if name not in MECHANISM_NAMES:
+            raise ctx.error("without", f"unknown mechanism {_got(name)}; expected one of "
+                            f"{', '.join(MECHANISM_NAMES)}")
+    return ",".join(names)
+
+
 def _field_value(ctx: _Ctx, path: str, field_name: str, typ: Any, value: object) -> Any:
     """One config field from the file, checked against its type and range."""
     args = typing.get_args(typ)
@@ -324,7 +340,8 @@ def scenario_from_dict(data: object, source: str = "<scenario>") -> Scenario:
     profile = top.get("profile", "default")
     if profile not in PROFILES:
         raise ctx.error("profile", f"expected one of {', '.join(PROFILES)}, got {_got(profile)}")
-    base = profile_config(profile)
+    base = dataclasses.replace(profile_config(profile),
+                               without=_without(ctx, top.get("without", [])))
     planner_kwargs: dict[str, Any] = {}
     for group in SUB_CONFIGS:
         if defaults.get(group) is None:
@@ -511,6 +528,8 @@ def _check_config(ctx: _Ctx, path: str, config: object) -> None:
         value = getattr(config, name)
         if dataclasses.is_dataclass(value):
             _check_config(ctx, _join(path, key), value)
+        elif name == "without":
+            _without(ctx, value)
         elif name == "profile":
             if value not in PROFILES:
                 raise ctx.error("profile", f"expected one of {', '.join(PROFILES)}, "
@@ -530,6 +549,7 @@ def scenario_to_dict(scenario: Scenario) -> dict[str, Any]:
     defaults.update(_config_to_dict(first.limits))
     planner = _config_to_dict(scenario.planner_config)
     profile = planner.pop("profile")
+    without = planner.pop("without")
     defaults.update(planner)
     robots = []
     for r in scenario.robots:
@@ -549,6 +569,7 @@ def scenario_to_dict(scenario: Scenario) -> dict[str, Any]:
         "name": scenario.name,
         "description": scenario.description,
         "profile": profile,
+        **({"without": without.split(",")} if without else {}),
         "time_limit": float(scenario.time_limit_s),
         "goal_tolerance": float(scenario.goal_tolerance_m),
         "defaults": defaults,

@@ -19,6 +19,13 @@ from dataclasses import dataclass, field
 
 PLANNER_NAMES: tuple[str, ...] = ("eifp-mpc", "eifp", "ifp", "orca")
 
+MECHANISM_NAMES: tuple[str, ...] = (
+    "direct_leg_check", "goal_tcpa_filter", "encounter_rules", "inflated_threats", "commitment",
+    "via_margin_m", "escape_band_m", "horizon_via_points", "lines_arcs", "clamp_heading",
+    "braking_guard", "keep_plan", "routing", "liveness")
+"""The additions to the paper's cycle that `PlannerConfig.without` can switch off: the fields
+of `agent.planning.mechanisms.Mechanisms` (a unit test keeps the two lists equal)."""
+
 PROFILES: tuple[str, ...] = ("default", "paper")
 """Planner profiles: ``default`` (this project's additions on) and ``paper`` (the paper's
 method as written, `paper_config`)."""
@@ -207,10 +214,13 @@ class PlannerConfig:
         safety, threats, cost, reference, mpc, orca: the sub-configs.
         profile: ``default`` (this project's additions on) or ``paper`` (the paper's method
             as written; `paper_config`). The planners derive their mechanisms from it
-            (`agent.planning.ifp.mechanisms`).
+            (`agent.planning.mechanisms.mechanisms`).
+        without: comma-separated `MECHANISM_NAMES` switched off (set to the paper's value)
+            in the default profile: ablations (``"routing,liveness"``); empty: none.
 
     Raises:
-        ValueError: an unknown profile (the sub-configs check their own ranges).
+        ValueError: an unknown profile or mechanism name (the sub-configs check their own
+            ranges).
     """
 
     safety: SafetyConfig = field(default_factory=SafetyConfig)
@@ -220,11 +230,21 @@ class PlannerConfig:
     mpc: MpcConfig = field(default_factory=MpcConfig)
     orca: OrcaConfig = field(default_factory=OrcaConfig)
     profile: str = "default"
+    without: str = ""
 
     def __post_init__(self) -> None:
         if self.profile not in PROFILES:
             raise ValueError(
                 f"profile: expected one of {', '.join(PROFILES)}, got {self.profile!r}")
+        unknown = [n for n in self.without_names if n not in MECHANISM_NAMES]
+        if unknown:
+            raise ValueError(f"without: unknown mechanism {unknown[0]!r}; expected names "
+                             f"from {', '.join(MECHANISM_NAMES)}")
+
+    @property
+    def without_names(self) -> tuple[str, ...]:
+        """The mechanisms `without` switches off, in the order given."""
+        return tuple(n.strip() for n in self.without.split(",") if n.strip())
 
     @property
     def is_paper(self) -> bool:
@@ -295,7 +315,7 @@ PAPER_OVERRIDES: dict[str, object] = {
     "threats.max_neighbors": 1000,
 }
 """What `paper_config` sets: the ``paper`` profile (every addition of this project off:
-`agent.planning.ifp.PAPER_MECHANISMS`, the paper's MPC weights and no braking guard,
+`agent.planning.mechanisms.PAPER_MECHANISMS`, the paper's MPC weights and no braking guard,
 `agent.planning.mpc.PAPER_TUNING`), plain argmin (Eq. 17), and neither a sensing range nor
 a neighbour cap, which the paper does not have."""
 

@@ -58,12 +58,14 @@ from agent.core.config import PlannerConfig
 from agent.core.types import Observation, Others, PlanStatus, Side
 from agent.planning.encounters import Role, encounter_roles, update_role_memory
 from agent.planning.ifp import (
-    PAPER_MECHANISMS,
+    Assessment,
     CandidateSelector,
-    Mechanisms,
+    Decisions,
     ViaPlan,
-    plan_via_points,
+    assess_threats,
+    plan_cycle,
 )
+from agent.planning.mechanisms import PAPER_MECHANISMS, Mechanisms
 from agent.planning.threats import as_complex
 from agent.planning.viapoints import SIDES, inflated_radius
 
@@ -346,6 +348,11 @@ def _plan_eifp(
 ) -> tuple[ViaPlan, dict[int, Role] | None]:
     """One eIFP cycle: IFP's iteration with cost-based candidate selection (Eqs. 14-16).
 
+    The cycle in its named steps: assess the threats (`ifp.assess_threats`), classify the
+    encounters against other robots (`assess_encounters`, with the encounter rules), build
+    the cost selector (`cost_selector`), then escape, resolve and iterate the legs
+    (`ifp.plan_cycle`) with every decision of earlier cycles passed in `ifp.Decisions`.
+
     Args:
         observation: what the robot knows now.
         config: planner parameters.
@@ -354,9 +361,10 @@ def _plan_eifp(
         timer: a wall clock for the stage timings only.
         role_memory: with the encounter rules, the encounter roles of earlier cycles
             (`agent.planning.encounters`); None: the rules are not applied.
-        primary_id: the threat the previous cycle resolved first (`ifp.plan_via_points`).
-        mech: the cycle's mechanisms (`ifp.Mechanisms`).
+        primary_id: the threat the previous cycle resolved first.
+        mech: the cycle's mechanisms (`agent.planning.mechanisms.Mechanisms`).
         escape_id: the other the previous cycle escaped from, if any.
+        previous: the previous cycle's plan, if it was OK.
 
     Returns:
         The plan, and (with `role_memory`) the role memory for the next cycle, else None.
@@ -365,31 +373,25 @@ def _plan_eifp(
         ValueError: on non-finite inputs or configuration.
     """
     memory = side_memory or {}
-    found: dict[str, Encounters] = {}
-    rule = None
-    if role_memory is not None:
-        def rule(others: Others, index: np.ndarray, tcpa: np.ndarray, dcpa: np.ndarray,
-                 inflated: np.ndarray) -> tuple[frozenset[int], frozenset[int]]:
-            enc = assess_encounters(observation, config, others, index, tcpa, dcpa, inflated,
-                                    role_memory)
-            found["encounters"] = enc
-            # A give-way manoeuvre is kept until the other is passed, or it would be undone
-            # as soon as it works (the swerve pushes DCPA past D_thresh).
-            return enc.stand_on_ids, enc.give_way_ids & frozenset(memory)
-
-    def make_selector(others: Others) -> CandidateSelector:
-        enc = found.get("encounters")
-        give_way = enc.give_way_ids if enc is not None else frozenset()
-        return cost_selector(observation, config, others, memory, give_way,
-                             RIGHT_HAND_MARGIN if mech.encounter_rules else 0.0)
-
-    plan = plan_via_points(observation, config, make_selector, frozenset(), timer,
-                           primary_id=primary_id, encounter_rule=rule, mech=mech,
-                           escape_id=escape_id, previous=previous)
+    t_start = timer() if timer is not None else 0.0
+    assessment = assess_threats(observation, config, mech)
+    encounters = None
+    decisions = Decisions(primary_id=primary_id, escape_id=escape_id, previous=previous)
+    if role_memory is not None and len(assessment.others):
+        encounters = assess_encounters(observation, assessment, role_memory)
+        # A give-way manoeuvre is kept until the other is passed, or it would be undone as
+        # soon as it works (the swerve pushes DCPA past D_thresh).
+        decisions = Decisions(ignored_ids=encounters.stand_on_ids,
+                              committed_ids=encounters.give_way_ids & frozenset(memory),
+                              primary_id=primary_id, escape_id=escape_id, previous=previous)
+    select = cost_selector(observation, config, assessment.others, memory,
+                           encounters.give_way_ids if encounters is not None else frozenset(),
+                           RIGHT_HAND_MARGIN if mech.encounter_rules else 0.0)
+    threats_s = timer() - t_start if timer is not None else 0.0
+    plan = plan_cycle(observation, config, assessment, select, decisions, mech, threats_s)
     if role_memory is None:
         return plan, None
-    enc = found.get("encounters")
-    return plan, (enc.memory if enc is not None else {})
+    return plan, (encounters.memory if encounters is not None else {})
 
 
 @dataclass(frozen=True)
@@ -409,36 +411,28 @@ class Encounters:
 
 def assess_encounters(
     observation: Observation,
-    config: PlannerConfig,
-    others: Others,
-    index: np.ndarray,
-    tcpa: np.ndarray,
-    dcpa: np.ndarray,
-    inflated: np.ndarray,
+    assessment: Assessment,
     memory: Mapping[int, Role],
 ) -> Encounters:
     """Classify the encounters of this cycle (see `agent.planning.encounters`).
 
     Args:
         observation: what the robot knows now (its pose and speed).
-        config: planner settings (unused; the roles depend on geometry alone).
-        others: the cycle's neighbours (after the sensing radius and cap).
-        index: their Eq. (5) threats, ranked; tcpa, dcpa: (K,) Eqs. (4)-(5);
-        inflated: (K,) inflated radii L (Eq. 7) -- all as `ifp.plan_via_points` computed
-            them for the cycle.
+        assessment: the cycle's neighbours and their Eqs. (4)-(6) assessment
+            (`ifp.assess_threats`).
         memory: the role memory of earlier cycles.
     """
     ego = observation.ego
-    p = np.array([ego.x_m, ego.y_m])
-    roles = encounter_roles(ego.heading_rad, ego.v_mps, p, others, tcpa, dcpa, inflated,
-                            memory)
+    others = assessment.others
+    roles = encounter_roles(ego.heading_rad, ego.v_mps, assessment.position_m, others,
+                            assessment.tcpa_s, assessment.dcpa_m, assessment.radius_m, memory)
     threat = np.zeros(len(others), dtype=bool)
-    threat[index] = True
+    threat[assessment.index] = True
     ids = others.ids
     return Encounters(
         give_way_ids=frozenset(ids[roles == int(Role.GIVE_WAY)].tolist()),
         stand_on_ids=frozenset(ids[roles == int(Role.STAND_ON)].tolist()),
-        memory=update_role_memory(others, roles, tcpa, threat, memory),
+        memory=update_role_memory(others, roles, assessment.tcpa_s, threat, memory),
     )
 
 
@@ -465,7 +459,8 @@ class EifpSelector:
 
     Args:
         config: planner settings.
-        mech: the cycle's mechanisms (`ifp.mechanisms`: eifp's or eifp-mpc's by profile).
+        mech: the cycle's mechanisms (`agent.planning.mechanisms.mechanisms`: eifp's or
+            eifp-mpc's by profile).
     """
 
     def __init__(self, config: PlannerConfig, mech: Mechanisms = PAPER_MECHANISMS) -> None:

@@ -65,7 +65,7 @@ import numpy as np
 
 from agent.core.config import PlannerConfig
 from agent.core.types import Observation, Others, PlanStatus, Side, Threat
-from agent.planning.liveness import LivenessConfig
+from agent.planning.mechanisms import PAPER_MECHANISMS, Mechanisms, mechanisms
 from agent.planning.threats import (
     as_complex,
     legs_threats,
@@ -95,9 +95,6 @@ LEG_GRAZE_TOL_M = 1.0e-6
 # are not resolved [s].
 GOAL_TCPA_MARGIN_S = 0.5
 
-# How far outside its inflated disc a via-point is placed [m].
-VIA_MARGIN_M = 0.05
-
 # A leg start within L * (1 + this) of a disc centre is on the disc: no tangent from it.
 ON_DISC_REL_TOL = 1.0e-6
 
@@ -110,17 +107,6 @@ HEAD_ON_MIN_SPEED_MPS = 0.2
 
 _HEAD_ON_COS = math.cos(math.radians(HEAD_ON_MAX_DEG))
 
-ARC_VIA_MARGIN_M = 0.3
-"""How far outside its inflated disc a via-point lies when the reference joins the legs with
-arcs (`Mechanisms.lines_arcs`): an arc of radius R turning by angle a at a via-point passes
-R (1 / cos(a / 2) - 1) inside the corner, towards the disc it turns round; 0.3 m covers a
-1 m arc up to about 75 degrees of turn."""
-
-ESCAPE_BAND_M = 0.1
-"""An escape goes on until the robot is this far outside the disc (`Mechanisms.escape_band`):
-two robots on each other's boundary otherwise alternate between escaping and planning
-round each other every cycle."""
-
 KEEP_PLAN_RATIO = 0.1
 """With `Mechanisms.keep_plan`, last cycle's via-points are kept while every leg through
 them is still clear and the path through them is at most this fraction longer than the
@@ -129,111 +115,6 @@ new plan's."""
 PASSED_VIA_M = 0.3
 """A kept via-point closer to the robot than this, or behind it along the next leg, has
 been passed [m]."""
-
-PRIMARY_HOLD_S = 3.0
-"""A head-on threat resolved first last cycle stays first while its TCPA is within this of
-the most imminent one's (`Mechanisms.commitment`): the order of two nearly simultaneous
-threats otherwise flips with small changes of TCPA, and the first via-point with it."""
-
-
-@dataclass(frozen=True)
-class Mechanisms:
-    """This project's additions to the paper's cycle; every one off is the paper's
-    (`PAPER_MECHANISMS`). `mechanisms` gives each planner its set.
-
-    Args:
-        direct_leg_check: when Eq. (6) finds no threat, the direct leg to the goal still
-            goes through the leg check (step 4): a robot standing still (v_r = 0) sees no
-            threat by Eq. (6), even a disc on its way.
-        goal_tcpa_filter: threats whose TCPA is more than `GOAL_TCPA_MARGIN_S` past the
-            robot's time to its goal are not resolved (near the goal an overshoot's
-            measured velocity points at whoever stands beyond it).
-        encounter_rules: the reciprocal convention of `agent.planning.encounters` against
-            other robots (eIFP's selector): mirrored robots choose sides that fit together.
-        inflated_threats: a threat of Eq. (6) needs DCPA <= L (a predicted incursion of the
-            inflated disc, Eq. 8) instead of D_thresh, a detection radius 2.2 times L for
-            two 0.5 m robots: neighbours that would pass clear are left alone.
-        commitment: a head-on threat that the last plan resolved first stays first while
-            its TCPA is within `PRIMARY_HOLD_S` of the most imminent one's, so the first
-            via-point (where the robot heads now) does not flip between two nearly
-            simultaneous threats. (Keeping every resolved threat while its DCPA stays within
-            L + 0.5 m, against the robot's own swerve pushing it past L, did not earn its
-            place: more reversals on the tuning seeds of `orchestrator benchmark`.)
-        via_margin_m: how far outside its inflated disc a via-point is placed [m].
-        escape_band_m: an escape goes on from the same disc until the robot is this far
-            outside it, towards a point that far out (0: only while inside) [m].
-        horizon_via_points: a candidate reached after more than T_max (lambda*, Eq. 13) is
-            infeasible: past the threat horizon the constant-velocity forecast that placed
-            it is not to be trusted (for an other as fast as the robot, a tangent point
-            receding nearly as fast is met kilometres down its track); and when the first
-            threat has no feasible candidate, the next one in rank order that has one gets
-            the first via-point, instead of a plan straight through the first.
-        lines_arcs: the reference follows the waypoint legs joined by arcs
-            (`agent.planning.spline.LineArcPath`) instead of the cubic spline (Eq. 19).
-        clamp_heading: the spline leaves along the robot's heading when the first
-            via-point lies within 30 degrees of it, instead of natural end conditions.
-        braking_guard: eIFP-MPC's command speed is capped so the robot can still stop its
-            own approach to every disc it faces (`agent.planning.safety`): the MPC's
-            half-planes are soft and can trade a stopped neighbour's gap away.
-        keep_plan: last cycle's via-points are kept, minus those passed, while every leg
-            through them is still clear and the path is at most `KEEP_PLAN_RATIO` longer
-            than the one the cycle just built (`_keep_previous`). Rebuilt from scratch each
-            cycle, a plan in a crowd jumps between unrelated via-point sequences as the
-            ranking of nearly simultaneous threats reorders; a plan that still holds is
-            the same decision made again, so only a failing or clearly worse plan is
-            replaced.
-        routing: the robot routes round the scenario's static obstacles, known in
-            advance (`agent.planning.routing`), and eIFP plans towards the farthest route
-            waypoint it can see (`agent.planning.guidance`). eIFP still resolves the
-            static discs it meets on its legs like any other disc.
-        liveness: with thresholds (not None), the robot monitors its progress and, when
-            stuck, re-routes round the knot or yields to lower ids
-            (`agent.planning.liveness`).
-    """
-
-    direct_leg_check: bool = False
-    goal_tcpa_filter: bool = False
-    encounter_rules: bool = False
-    inflated_threats: bool = False
-    commitment: bool = False
-    via_margin_m: float = VIA_MARGIN_M
-    escape_band_m: float = 0.0
-    horizon_via_points: bool = False
-    lines_arcs: bool = False
-    clamp_heading: bool = False
-    braking_guard: bool = False
-    keep_plan: bool = False
-    routing: bool = False
-    liveness: LivenessConfig | None = None
-
-
-PAPER_MECHANISMS = Mechanisms()
-"""The paper's cycle (the ``paper`` profile, every planner)."""
-
-IFP_MECHANISMS = Mechanisms(direct_leg_check=True, goal_tcpa_filter=True, clamp_heading=True)
-"""ifp in the default profile."""
-
-EIFP_MECHANISMS = dataclasses.replace(IFP_MECHANISMS, encounter_rules=True)
-"""eifp in the default profile: ifp's and the encounter rules. Its pure-pursuit law cuts
-the corners of a lines-and-arcs reference, so it keeps the spline and the paper's cycle."""
-
-EIFP_MPC_MECHANISMS = dataclasses.replace(
-    EIFP_MECHANISMS, inflated_threats=True, commitment=True, via_margin_m=ARC_VIA_MARGIN_M,
-    escape_band_m=ESCAPE_BAND_M, horizon_via_points=True, lines_arcs=True,
-    clamp_heading=False, braking_guard=True, keep_plan=True, routing=True,
-    liveness=LivenessConfig())
-"""eifp-mpc in the default profile: every mechanism."""
-
-
-def mechanisms(planner: str, config: PlannerConfig) -> Mechanisms:
-    """The mechanisms `planner` runs with under `config.profile`."""
-    if config.is_paper:
-        return PAPER_MECHANISMS
-    if planner == "eifp-mpc":
-        return EIFP_MPC_MECHANISMS
-    if planner == "eifp":
-        return EIFP_MECHANISMS
-    return IFP_MECHANISMS
 
 
 def is_head_on(heading_rad: float, speed_mps: float, other_velocity_mps: np.ndarray) -> bool:
@@ -245,14 +126,6 @@ def is_head_on(heading_rad: float, speed_mps: float, other_velocity_mps: np.ndar
         return False
     towards = -(vx * math.cos(heading_rad) + vy * math.sin(heading_rad)) / other_speed
     return towards >= _HEAD_ON_COS
-
-# rule(others, index, tcpa, dcpa, inflated) -> (ignored ids, committed ids): eIFP's encounter
-# rules, given the cycle's neighbours and their Eq. (5) assessment (threat indices ranked,
-# TCPA, DCPA, inflated radii L), so the assessment is made once per cycle.
-EncounterRule = Callable[
-    [Others, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
-    "tuple[frozenset[int], frozenset[int]]",
-]
 
 # select(k, points, times, leg_start, leg_end) -> index into SIDES of the chosen candidate
 # of other k, or None if none is acceptable. points: the (RIGHT, LEFT) via-points as
@@ -356,18 +229,85 @@ def plan_ifp(
                            mech=mechanisms("ifp", config))
 
 
+@dataclass(frozen=True)
+class Decisions:
+    """What earlier cycles and eIFP's encounter rules decided, passed explicitly into a cycle.
+
+    Args:
+        ignored_ids: others the robot leaves to themselves (eIFP's stand-on encounters,
+            `agent.planning.encounters`): never resolved, on no leg; still escaped from if
+            the robot is inside their inflated disc, and still listed in `ViaPlan.threats`.
+        committed_ids: others the robot is already giving way to (eIFP's encounter rules):
+            they stay threats while still approaching (0 < TCPA < 2 T_max), even when the
+            robot's own swerve has pushed their DCPA past the threshold.
+        primary_id: the other the previous cycle's first via-point resolved: with
+            `Mechanisms.commitment`, a head-on one is resolved first again unless another
+            one's TCPA is more than `Mechanisms.primary_hold_s` smaller.
+        escape_id: the other the previous cycle escaped from, if it did
+            (`Mechanisms.escape_band_m`).
+        previous: the previous cycle's plan, if it was OK (`Mechanisms.keep_plan`).
+    """
+
+    ignored_ids: frozenset[int] = frozenset()
+    committed_ids: frozenset[int] = frozenset()
+    primary_id: int | None = None
+    escape_id: int | None = None
+    previous: ViaPlan | None = None
+
+
+@dataclass(frozen=True)
+class Assessment:
+    """Step 1 and Eqs. (3)-(6) of one cycle: the neighbours and their threat ranking.
+
+    Args:
+        position_m: (2,) the robot's position P [m].
+        others: the neighbours (sensing radius and cap applied), K of them.
+        radius_m: (K,) their inflated radii L (Eq. 7) [m].
+        index: indices of Eq. (6)'s threats, ranked by TCPA (Eq. 6).
+        tcpa_s, dcpa_m: (K,) Eqs. (4)-(5) at the measured velocity.
+        speed_mps: the robot's top speed, the speed of the velocity cone [m/s].
+    """
+
+    position_m: np.ndarray
+    others: Others
+    radius_m: np.ndarray
+    index: np.ndarray
+    tcpa_s: np.ndarray
+    dcpa_m: np.ndarray
+    speed_mps: float
+
+
+def assess_threats(observation: Observation, config: PlannerConfig,
+                   mech: Mechanisms = PAPER_MECHANISMS) -> Assessment:
+    """Steps 1 and 3: the neighbours, and Eq. (6)'s threats at the measured velocity.
+
+    Raises:
+        ValueError: on non-finite inputs or configuration.
+    """
+    validate_inputs(observation, config)
+    ego = observation.ego
+    p = np.array([ego.x_m, ego.y_m])
+    threats_cfg = config.threats
+    others = nearby_others(p, observation.others, threats_cfg.sensing_radius_m,
+                           threats_cfg.max_neighbors)
+    radius = inflated_radius(observation.radius_m, others.radius_m, config.safety.d_safety_m)
+    v_r = ego.v_mps * np.array([math.cos(ego.heading_rad), math.sin(ego.heading_rad)])
+    d_thresh: float | np.ndarray = config.dcpa_threshold_m(observation.radius_m)
+    if mech.inflated_threats:
+        d_thresh = radius
+    index, tcpa, dcpa = rank_threats(p, v_r, others, d_thresh, threats_cfg.t_max_s)
+    return Assessment(position_m=p, others=others, radius_m=radius,
+                      index=index, tcpa_s=tcpa, dcpa_m=dcpa,
+                      speed_mps=float(observation.limits.v_max_mps))
+
+
 def plan_via_points(
     observation: Observation,
     config: PlannerConfig,
     make_selector: Callable[[Others], CandidateSelector],
-    committed_ids: frozenset[int] = frozenset(),
+    decisions: Decisions = Decisions(),
     timer: Callable[[], float] | None = None,
-    ignored_ids: frozenset[int] = frozenset(),
-    primary_id: int | None = None,
-    encounter_rule: EncounterRule | None = None,
     mech: Mechanisms = PAPER_MECHANISMS,
-    escape_id: int | None = None,
-    previous: ViaPlan | None = None,
 ) -> ViaPlan:
     """The IFP cycle (module docstring) with a pluggable candidate selector.
 
@@ -377,197 +317,270 @@ def plan_via_points(
         make_selector: given the neighbours the cycle plans against (after the sensing
             radius and neighbour cap), returns the rule that picks one candidate of a
             threat; IFP's is `select_earliest`, eIFP's cost rule is in `agent.planning.eifp`.
-            Called after `encounter_rule`.
-        committed_ids: others the robot is already giving way to (eIFP's encounter rules):
-            they stay threats while still approaching (0 < TCPA < 2 T_max), even when the
-            robot's own swerve has pushed their DCPA past the threshold.
+        decisions: what earlier cycles decided (`Decisions`).
         timer: a wall clock, only to time the threat assessment (`ViaPlan.threats_s`);
             it never influences the plan.
-        ignored_ids: others the robot leaves to themselves (eIFP's stand-on encounters,
-            `agent.planning.encounters`): never resolved, on no leg; still escaped from if the robot
-            is inside their inflated disc, and still listed in `ViaPlan.threats`.
-        primary_id: the other the previous cycle's first via-point resolved: with
-            `Mechanisms.commitment`, a head-on one is resolved first again unless another
-            one's TCPA is more than `PRIMARY_HOLD_S` smaller.
-        encounter_rule: eIFP's encounter rules (`EncounterRule`): their ignored ids join
-            `ignored_ids`, their committed ids `committed_ids`.
         mech: the mechanisms of the cycle (`Mechanisms`); the paper's by default.
-        escape_id: the other the previous cycle escaped from, if it did
-            (`Mechanisms.escape_band_m`).
 
     Raises:
         ValueError: on non-finite inputs or configuration.
     """
-    validate_inputs(observation, config)
-    ego = observation.ego
-    p = np.array([ego.x_m, ego.y_m])
-    goal = observation.goal_m
-    threats_cfg = config.threats
-    t_max_s = threats_cfg.t_max_s
-    others = nearby_others(p, observation.others, threats_cfg.sensing_radius_m,
-                           threats_cfg.max_neighbors)
-    speed = float(observation.limits.v_max_mps)
-    radius = inflated_radius(observation.radius_m, others.radius_m, config.safety.d_safety_m)
-
-    # Eqs. (3)-(6) at the measured velocity.
     t_start = timer() if timer is not None else 0.0
-    v_r = ego.v_mps * np.array([math.cos(ego.heading_rad), math.sin(ego.heading_rad)])
-    d_thresh: float | np.ndarray = config.dcpa_threshold_m(observation.radius_m)
-    if mech.inflated_threats:
-        d_thresh = radius
-    index, tcpa, dcpa = rank_threats(p, v_r, others, d_thresh, t_max_s)
-    if encounter_rule is not None and len(others):
-        more_ignored, more_committed = encounter_rule(others, index, tcpa, dcpa, radius)
-        ignored_ids = ignored_ids | more_ignored
-        committed_ids = committed_ids | more_committed
-    select = make_selector(others)
-    if committed_ids and len(others):
-        index = _with_committed(index, tcpa, others, committed_ids, t_max_s)
-    threats = threat_records(index, tcpa, dcpa, others)
+    assessment = assess_threats(observation, config, mech)
+    select = make_selector(assessment.others)
+    threats_s = timer() - t_start if timer is not None else 0.0
+    return plan_cycle(observation, config, assessment, select, decisions, mech, threats_s)
+
+
+def plan_cycle(
+    observation: Observation,
+    config: PlannerConfig,
+    assessment: Assessment,
+    select: CandidateSelector,
+    decisions: Decisions,
+    mech: Mechanisms,
+    threats_s: float = 0.0,
+) -> ViaPlan:
+    """Steps 2-4 after the assessment: escape, resolve the first threat, iterate the legs.
+
+    Args:
+        observation: what the robot knows now.
+        config: planner parameters.
+        assessment: the cycle's `assess_threats`.
+        select: the candidate selector for the cycle's neighbours.
+        decisions: what earlier cycles and the encounter rules decided (`Decisions`).
+        mech: the mechanisms of the cycle.
+        threats_s: wall time the assessment took (reported in `ViaPlan.threats_s`).
+    """
+    others, p, goal = assessment.others, assessment.position_m, observation.goal_m
+    t_max_s = config.threats.t_max_s
+    index = resolution_order(observation, assessment, decisions, mech, t_max_s)
+    threats = threat_records(index.recorded, assessment.tcpa_s, assessment.dcpa_m, others)
+    direct = ViaPlan(status=PlanStatus.OK, waypoints_m=np.stack((p, goal)), threats=threats,
+                     threats_s=threats_s)
+    if len(others) == 0:
+        return direct
+    escaping = escape(observation, assessment, decisions.escape_id, mech)
+    if escaping is not None:
+        return dataclasses.replace(escaping, threats=threats, threats_s=threats_s)
+
+    clearance = np.where(index.ignored, -math.inf, assessment.radius_m - LEG_GRAZE_TOL_M)
+    world = _World(others, assessment.radius_m, assessment.speed_mps, select, mech.via_margin_m,
+                   t_max_s if mech.horizon_via_points else math.inf)
+    legs = _Legs(p, goal)
+    if index.resolve.size:
+        if not resolve_first(world, legs, index.resolve, mech):
+            new_wps = legs.points
+            plan = None
+            if mech.keep_plan:
+                plan = keep_previous(decisions.previous, new_wps, assessment, clearance,
+                                     t_max_s, threats, threats_s)
+            return plan or dataclasses.replace(direct, status=PlanStatus.NO_FEASIBLE)
+    elif not mech.direct_leg_check:
+        # The paper declares threats by Eq. (6) alone: none, so the plan is [P, goal].
+        return direct
+    iterate_legs(world, legs, assessment, clearance, t_max_s, config.reference.max_depth)
+    if mech.keep_plan:
+        kept = keep_previous(decisions.previous, legs.points, assessment, clearance, t_max_s,
+                             threats, threats_s)
+        if kept is not None:
+            return kept
+    return legs.plan(others.ids, threats, threats_s)
+
+
+@dataclass(frozen=True)
+class ResolutionOrder:
+    """The threats a cycle resolves, in order, after the encounter and commitment decisions.
+
+    Args:
+        recorded: Eq. (6)'s threats plus the committed ones, ranked (`ViaPlan.threats`).
+        resolve: the ones resolved from the robot's position, in order.
+        ignored: (K,) bool, the others left to themselves (on no leg).
+    """
+
+    recorded: np.ndarray
+    resolve: np.ndarray
+    ignored: np.ndarray
+
+
+def resolution_order(observation: Observation, assessment: Assessment, decisions: Decisions,
+                     mech: Mechanisms, t_max_s: float) -> ResolutionOrder:
+    """Which threats step 3 resolves and in what order: Eq. (6)'s ranking, plus the others
+    given way to, minus those after the goal (`Mechanisms.goal_tcpa_filter`) and those left
+    to themselves, with last cycle's head-on first threat kept first
+    (`Mechanisms.commitment`)."""
+    others, tcpa = assessment.others, assessment.tcpa_s
+    index = assessment.index
+    if decisions.committed_ids and len(others):
+        index = _with_committed(index, tcpa, others, decisions.committed_ids, t_max_s)
+    recorded = index
     # Closest approaches after the robot can be at its goal are not its business: near the
     # goal, an overshoot would otherwise point the measured velocity at someone beyond it
-    # and send the robot round the goal. The leg to the goal is still checked below.
+    # and send the robot round the goal. The leg to the goal is still checked.
     if mech.goal_tcpa_filter:
         to_goal_m = observation.goal_distance_m
         if to_goal_m is None:
+            p, goal = assessment.position_m, observation.goal_m
             to_goal_m = math.hypot(goal[0] - p[0], goal[1] - p[1])
         to_goal_s = to_goal_m / float(observation.limits.v_max_mps)
         index = index[tcpa[index] <= to_goal_s + GOAL_TCPA_MARGIN_S]
     ignored = np.zeros(len(others), dtype=bool)
-    if ignored_ids and len(others):
-        ignored = np.fromiter((i in ignored_ids for i in others.ids.tolist()), dtype=bool,
-                              count=len(others))
+    if decisions.ignored_ids and len(others):
+        ignored = np.fromiter((i in decisions.ignored_ids for i in others.ids.tolist()),
+                              dtype=bool, count=len(others))
         index = index[~ignored[index]]
-    if mech.commitment and primary_id is not None and index.size > 1:
-        hit = (others.ids[index] == primary_id).nonzero()[0]
-        if hit.size:
-            j = int(index[hit[0]])
-            if (is_head_on(ego.heading_rad, ego.v_mps, others.velocity_mps[j])
-                    and tcpa[j] <= tcpa[index[0]] + PRIMARY_HOLD_S):
-                index = np.concatenate((index[hit[:1]], np.delete(index, hit[0])))
-    threats_s = timer() - t_start if timer is not None else 0.0
-    if len(others) == 0:
-        return ViaPlan(status=PlanStatus.OK, waypoints_m=np.stack((p, goal)), threats=threats,
-                       threats_s=threats_s)
+    if mech.commitment and decisions.primary_id is not None and index.size > 1:
+        index = _primary_first(observation, index, tcpa, others, decisions.primary_id,
+                               mech.primary_hold_s)
+    return ResolutionOrder(recorded=recorded, resolve=index, ignored=ignored)
 
-    # Inside an inflated disc: no tangent exists, steer straight out of the deepest one.
-    position = as_complex(others.position_m)
-    gap = np.abs(position - complex(ego.x_m, ego.y_m)) - radius
+
+def _primary_first(observation: Observation, index: np.ndarray, tcpa: np.ndarray,
+                   others: Others, primary_id: int, hold_s: float) -> np.ndarray:
+    """`index` with last cycle's first threat moved first, if it is head-on and its TCPA is
+    within `hold_s` of the most imminent one's."""
+    hit = (others.ids[index] == primary_id).nonzero()[0]
+    if not hit.size:
+        return index
+    j = int(index[hit[0]])
+    ego = observation.ego
+    if (is_head_on(ego.heading_rad, ego.v_mps, others.velocity_mps[j])
+            and tcpa[j] <= tcpa[index[0]] + hold_s):
+        return np.concatenate((index[hit[:1]], np.delete(index, hit[0])))
+    return index
+
+
+def escape(observation: Observation, assessment: Assessment, escape_id: int | None,
+           mech: Mechanisms) -> ViaPlan | None:
+    """Step 2: inside an inflated disc no tangent exists; the plan steers straight out of the
+    deepest one (ties by id), or None when the robot is inside none.
+
+    With `Mechanisms.escape_band_m`, the escape from last cycle's disc (`escape_id`) goes on
+    until the robot is that far outside it: a robot that left by a centimetre would plan
+    round the disc, graze it and escape again."""
+    others, radius, p = assessment.others, assessment.radius_m, assessment.position_m
+    ego = observation.ego
+    gap = np.abs(as_complex(others.position_m) - complex(ego.x_m, ego.y_m)) - radius
     band = mech.escape_band_m
     if escape_id is not None and band > 0.0:
-        # Still escaping from the same disc until a band clear of it: a robot that left
-        # by a centimetre would plan round the disc, graze it and escape again.
         held = (others.ids == escape_id) & (gap <= band)
         gap = np.where(held, np.minimum(gap, 0.0), gap)
     inside = (gap <= 0.0).nonzero()[0]
-    if inside.size:
-        j = int(inside[np.lexsort((others.ids[inside], gap[inside]))[0]])
-        out = escape_point(p, others.position_m[j], float(radius[j]) + band, ego.heading_rad)
+    if not inside.size:
+        return None
+    j = int(inside[np.lexsort((others.ids[inside], gap[inside]))[0]])
+    out = escape_point(p, others.position_m[j], float(radius[j]) + band, ego.heading_rad)
+    goal = observation.goal_m
+    return ViaPlan(
+        status=PlanStatus.ESCAPE,
+        waypoints_m=np.stack((p, out) if ego.v_mps < ESCAPE_STANDING_MPS else (p, out, goal)),
+        via_point_m=out,
+        side=Side.NONE,
+        resolved_id=int(others.ids[j]),
+    )
+
+
+class _Legs:
+    """The waypoint list of a cycle while it grows: complex points x + iy, per leg the other
+    it is tangent to (-1: none), per waypoint the (other index, side) it resolves."""
+
+    def __init__(self, p: np.ndarray, goal: np.ndarray) -> None:
+        self.points = [complex(p[0], p[1]), complex(goal[0], goal[1])]
+        self.excluded = [-1]
+        self.chosen: list[tuple[int, Side] | None] = [None, None]
+
+    def insert(self, leg: int, via: tuple[complex, Side], k: int) -> None:
+        """Split leg `leg` at a via-point that resolves other k."""
+        self.points.insert(leg + 1, via[0])
+        self.excluded[leg : leg + 1] = [k, -1]
+        self.chosen.insert(leg + 1, (k, via[1]))
+
+    def arrival_s(self, speed_mps: float) -> list[float]:
+        """When the robot reaches each waypoint at top speed [s]."""
+        pts = self.points
+        return [0.0, *itertools.accumulate(abs(b - a) / speed_mps for a, b in zip(pts, pts[1:]))]
+
+    def plan(self, ids: np.ndarray, threats: tuple[Threat, ...], threats_s: float) -> ViaPlan:
+        """The finished plan (status OK)."""
+        waypoints = np.array([(z.real, z.imag) for z in self.points])
+        head = self.chosen[1]
         return ViaPlan(
-            status=PlanStatus.ESCAPE,
-            waypoints_m=np.stack((p, out) if ego.v_mps < ESCAPE_STANDING_MPS else (p, out, goal)),
-            via_point_m=out,
-            side=Side.NONE,
-            resolved_id=int(others.ids[j]),
+            status=PlanStatus.OK,
+            waypoints_m=waypoints,
+            via_point_m=None if head is None else waypoints[1].copy(),
+            side=Side.NONE if head is None else head[1],
+            resolved_id=None if head is None else int(ids[head[0]]),
             threats=threats,
+            resolved_sides=tuple((int(ids[c[0]]), c[1]) for c in self.chosen if c is not None),
             threats_s=threats_s,
         )
 
+
+def resolve_first(world: _World, legs: _Legs, order: np.ndarray, mech: Mechanisms) -> bool:
+    """Step 3: the first via-point, for the first threat in `order` (with
+    `Mechanisms.horizon_via_points`, the first one that has a feasible candidate).
+
+    Returns:
+        False when none is resolvable (the cycle is NO_FEASIBLE).
+    """
+    candidates = order.tolist() if mech.horizon_via_points else order.tolist()[:1]
+    for k in candidates:
+        split = world.resolve(legs.points[0], 0.0, legs.points[1], k)
+        if split is not None:
+            legs.insert(0, split, k)
+            return True
+    return False
+
+
+def iterate_legs(world: _World, legs: _Legs, assessment: Assessment, clearance: np.ndarray,
+                 t_max_s: float, max_depth: int) -> None:
+    """Step 4: re-check every leg from the last split on and split the first resolvable one,
+    until no leg needs a via-point or `max_depth` via-points are placed."""
+    others = assessment.others
+    position = as_complex(others.position_m)
     velocity = as_complex(others.velocity_mps)
-    clearance = np.where(ignored, -math.inf, radius - LEG_GRAZE_TOL_M)
-
-    def keep(new_wps: list[complex]) -> ViaPlan | None:
-        """Last cycle's plan instead of the new one (`new_wps`, or [P, goal] when the cycle
-        found no feasible via-point), if it still holds (`keep_plan`)."""
-        if not (mech.keep_plan and previous is not None and previous.resolved_sides):
-            return None
-        kept = _keep_previous(previous, new_wps, speed, position, velocity, clearance,
-                              t_max_s, others.ids)
-        if kept is None:
-            return None
-        kept_wps, kept_sides = kept
-        return ViaPlan(status=PlanStatus.OK, waypoints_m=kept_wps,
-                       via_point_m=kept_wps[1].copy(), side=kept_sides[0][1],
-                       resolved_id=kept_sides[0][0], threats=threats,
-                       resolved_sides=kept_sides, threats_s=threats_s)
-
-    # Waypoints as complex numbers x + iy while the list changes.
-    world = _World(others, radius, speed, select, mech.via_margin_m,
-                   t_max_s if mech.horizon_via_points else math.inf)
-    wps = [complex(ego.x_m, ego.y_m), complex(goal[0], goal[1])]
-    excluded = [-1]  # per leg: index of the other the leg is tangent to, or -1
-    chosen: list[tuple[int, Side] | None] = [None, None]  # per waypoint: (index, side)
-
-    if index.size:
-        k = int(index[0])
-        split = world.resolve(wps[0], 0.0, wps[1], k)
-        if split is None and mech.horizon_via_points:
-            for other_k in index[1:].tolist():
-                split = world.resolve(wps[0], 0.0, wps[1], other_k)
-                if split is not None:
-                    k = other_k
-                    break
-        if split is None:
-            return keep(wps) or ViaPlan(
-                status=PlanStatus.NO_FEASIBLE, waypoints_m=np.stack((p, goal)), threats=threats,
-                threats_s=threats_s,
-            )
-        wps.insert(1, split[0])
-        excluded[0:1] = [k, -1]
-        chosen.insert(1, (k, split[1]))
-    elif not mech.direct_leg_check:
-        # The paper declares threats by Eq. (5) alone: none, so the plan is [P, goal].
-        return ViaPlan(status=PlanStatus.OK, waypoints_m=np.stack((p, goal)), threats=threats,
-                       threats_s=threats_s)
-
-    # Iteration: re-check every leg from `first` on; split the first resolvable one.
     first = 0
-    while len(wps) - 2 < config.reference.max_depth:
-        arrival = [0.0, *itertools.accumulate(abs(b - a) / speed for a, b in zip(wps, wps[1:]))]
-        hit, leg_tcpa = legs_threats(
-            wps[first:-1],
-            wps[first + 1 :],
-            arrival[first:-1],
-            speed,
-            position,
-            velocity,
-            clearance,
-            t_max_s,
-            excluded[first:],
-        )
-        split = None
+    while len(legs.points) - 2 < max_depth:
+        wps = legs.points
+        arrival = legs.arrival_s(assessment.speed_mps)
+        hit, leg_tcpa = legs_threats(wps[first:-1], wps[first + 1:], arrival[first:-1],
+                                     assessment.speed_mps, position, velocity, clearance,
+                                     t_max_s, legs.excluded[first:])
+        found = None
         for row in hit.any(axis=1).nonzero()[0].tolist():
             leg = first + row
-            for hit_k in ranked(hit[row].nonzero()[0], leg_tcpa[row], others.ids).tolist():
-                split = world.resolve(wps[leg], arrival[leg], wps[leg + 1], hit_k)
+            for k in ranked(hit[row].nonzero()[0], leg_tcpa[row], others.ids).tolist():
+                split = world.resolve(wps[leg], arrival[leg], wps[leg + 1], k)
                 if split is not None:
-                    k = hit_k
+                    found = (leg, split, k)
                     break
-            if split is not None:
+            if found is not None:
                 break
-        if split is None:
-            break
-        wps.insert(leg + 1, split[0])
-        excluded[leg : leg + 1] = [k, -1]
-        chosen.insert(leg + 1, (k, split[1]))
+        if found is None:
+            return
+        leg, split, k = found
+        legs.insert(leg, split, k)
         first = leg
 
-    waypoints = np.array([(z.real, z.imag) for z in wps])
-    resolved = tuple((int(others.ids[c[0]]), c[1]) for c in chosen if c is not None)
-    head = chosen[1]
-    kept_plan = keep(wps)
-    if kept_plan is not None:
-        return kept_plan
-    return ViaPlan(
-        status=PlanStatus.OK,
-        waypoints_m=waypoints,
-        via_point_m=None if head is None else waypoints[1].copy(),
-        side=Side.NONE if head is None else head[1],
-        resolved_id=None if head is None else int(others.ids[head[0]]),
-        threats=threats,
-        resolved_sides=resolved,
-        threats_s=threats_s,
-    )
+
+def keep_previous(previous: ViaPlan | None, new_wps: list[complex], assessment: Assessment,
+                  clearance: np.ndarray, t_max_s: float, threats: tuple[Threat, ...],
+                  threats_s: float) -> ViaPlan | None:
+    """`Mechanisms.keep_plan`: last cycle's plan instead of the new one (`new_wps`, or
+    [P, goal] when the cycle found no feasible via-point), if it still holds
+    (`_keep_previous`)."""
+    if previous is None or not previous.resolved_sides:
+        return None
+    others = assessment.others
+    kept = _keep_previous(previous, new_wps, assessment.speed_mps,
+                          as_complex(others.position_m), as_complex(others.velocity_mps),
+                          clearance, t_max_s, others.ids)
+    if kept is None:
+        return None
+    kept_wps, kept_sides = kept
+    return ViaPlan(status=PlanStatus.OK, waypoints_m=kept_wps, via_point_m=kept_wps[1].copy(),
+                   side=kept_sides[0][1], resolved_id=kept_sides[0][0], threats=threats,
+                   resolved_sides=kept_sides, threats_s=threats_s)
 
 
 def _keep_previous(previous: ViaPlan, new_wps: list[complex], speed: float,
@@ -648,7 +661,7 @@ class _World:
 
     def __init__(
         self, others: Others, radius: np.ndarray, speed: float, select: CandidateSelector,
-        via_margin_m: float = VIA_MARGIN_M, via_time_max_s: float = math.inf,
+        via_margin_m: float, via_time_max_s: float = math.inf,
     ) -> None:
         self.position = others.position_m.tolist()
         self.velocity = others.velocity_mps.tolist()

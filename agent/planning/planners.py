@@ -21,7 +21,7 @@ the goal: half, so that the world, which judges arrival on ground truth at the f
 tolerance, agrees even when the robot's own pose estimate is slightly off.
 
 Which of this project's additions a planner runs follows from its name and the
-configuration's profile (`agent.planning.ifp.mechanisms`). Planners keep only the memory
+configuration's profile (`agent.planning.mechanisms.mechanisms`). Planners keep only the memory
 the method needs (side per threat and the threats resolved last cycle for eIFP, the MPC's
 warm start); for the same sequence of inputs they return the same decisions. Stage timings are
 wall time from an injected `timer` (default `time.perf_counter`); they are the only
@@ -43,6 +43,8 @@ from agent.core.types import Observation, PlanDebug, PlanResult, PlanStatus, Sid
 from agent.planning.estimation import ESTIMATION_WINDOW_S
 from agent.planning.guidance import RouteGuide
 from agent.planning.liveness import Strategy
+from agent.planning.mechanisms import Mechanisms
+from agent.planning.mechanisms import mechanisms as mechanisms_of
 from agent.planning.routing import StaticMap
 from agent.planning.safety import (
     braking_speed_limit,
@@ -146,14 +148,17 @@ class ViaPointPlanner:
         config: planner parameters.
         control_period_s: the command period (rate limits of the tracking law).
         timer: wall clock for stage timings only.
+        static_map: the scenario's static obstacles (`make_planner`).
+        mechanisms: the mechanisms to run instead of `name`'s under `config`.
     """
 
     def __init__(self, name: str, config: PlannerConfig, *,
                  control_period_s: float = CONTROL_PERIOD_S,
                  timer: Timer = time.perf_counter,
-                 static_map: StaticMap | None = None) -> None:
+                 static_map: StaticMap | None = None,
+                 mechanisms: Mechanisms | None = None) -> None:
         from agent.planning.eifp import EifpSelector
-        from agent.planning.ifp import mechanisms, plan_ifp
+        from agent.planning.ifp import plan_ifp
 
         if name not in ("ifp", "eifp", "eifp-mpc"):
             raise ValueError(f"not a via-point planner: {name!r}")
@@ -161,7 +166,7 @@ class ViaPointPlanner:
         self.config = config
         self.control_period_s = control_period_s
         self._timer = timer
-        self.mech = mechanisms(name, config)
+        self.mech = mechanisms if mechanisms is not None else mechanisms_of(name, config)
         self._selector = EifpSelector(config, self.mech) if name != "ifp" else None
         self._plan_ifp = plan_ifp
         self._trackers: dict[object, object] = {}
@@ -418,16 +423,19 @@ class OrcaPlanner:
 def make_planner(name: str, config: PlannerConfig, *,
                  control_period_s: float = CONTROL_PERIOD_S,
                  timer: Timer = time.perf_counter,
-                 static_map: StaticMap | None = None) -> Planner:
+                 static_map: StaticMap | None = None,
+                 mechanisms: Mechanisms | None = None) -> Planner:
     """The planner called `name` (one of `PLANNER_NAMES`).
 
     Args:
         static_map: the scenario's static obstacles, known in advance; eIFP-MPC routes
             round them (`agent.planning.routing`). ORCA, IFP and eIFP ignore it.
+        mechanisms: the via-point planners' mechanisms, instead of those `name` and
+            `config` give (`agent.planning.mechanisms.mechanisms`); ORCA ignores it.
     """
     if name == "orca":
         return OrcaPlanner(config, control_period_s=control_period_s, timer=timer)
     if name in PLANNER_NAMES:
         return ViaPointPlanner(name, config, control_period_s=control_period_s, timer=timer,
-                               static_map=static_map)
+                               static_map=static_map, mechanisms=mechanisms)
     raise ValueError(f"unknown planner {name!r}; expected one of {', '.join(PLANNER_NAMES)}")

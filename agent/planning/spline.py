@@ -1,7 +1,7 @@
 """The time-parametrised reference through the waypoints (trajectory smoothing).
 
 Two paths (`build_reference`): `LineArcPath`, the waypoint legs joined by arcs (our
-change, eIFP-MPC's default, `agent.planning.ifp.Mechanisms.lines_arcs`), and the paper's
+change, eIFP-MPC's default, `agent.planning.mechanisms.Mechanisms.lines_arcs`), and the paper's
 cubic spline (Eq. 19), described here.
 
 The paper fits cubic splines S_x(t), S_y(t) through the waypoints with t in [0, 1]. We
@@ -274,7 +274,7 @@ def distance_profile(
 class LineArcPath:
     """The waypoint polyline with its corners rounded by circular arcs (lines and arcs).
 
-    Our alternative to the paper's cubic spline (`agent.planning.ifp.Mechanisms.lines_arcs`,
+    Our alternative to the paper's cubic spline (`agent.planning.mechanisms.Mechanisms.lines_arcs`,
     eIFP-MPC's default). A via-point is built for a robot that drives the straight leg to it (the
     tangent to the other's inflated disc, reached at the cone time; `agent.planning.viapoints`);
     a cubic spline through robot, via-point and goal bows off that leg and turns along

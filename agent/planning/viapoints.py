@@ -18,7 +18,7 @@ static obstacle gives lambda* = M / r; an obstacle exactly as fast as the cone (
 makes the quadratic linear, handled by the cancellation-free root formula (`cone_time`).
 Planners may push the via-point a margin further out of the moving disc (`margin_m`, see
 `agent.planning.ifp`), and may cap lambda* (`max_time_s`): a candidate reached later is infeasible.
-The cap is ours, for eIFP-MPC (T_max, `agent.planning.ifp.Mechanisms.horizon_via_points`).
+The cap is ours, for eIFP-MPC (T_max, `agent.planning.mechanisms.Mechanisms.horizon_via_points`).
 With the others as fast as the robot the quadratic is nearly linear, and a tangent point
 that recedes almost as fast as the robot closes on it is met only after tens or thousands
 of seconds: the via-point then lies far down the other's track, and the robot heads along

@@ -57,6 +57,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="runs at a time (a process pool; default 1)")
     p.add_argument("--quick", action="store_true",
                    help="a handful of small cases (CI; about a minute for two planners)")
+    p.add_argument("--without", default=None, metavar="LIST",
+                   help="mechanisms of the default profile to switch off in every run, "
+                        "comma-separated (an ablation; docs/method.md)")
     p.add_argument("--out", help="output directory (default runs/benchmark-<time>)")
     p.add_argument("--readme", type=Path, default=None, metavar="FILE",
                    help="also write the table into FILE between <!-- results:begin --> and "
@@ -95,9 +98,12 @@ def run(args: argparse.Namespace) -> int:
     stamp = dt.datetime.now().strftime("%Y%m%d-%H%M%S")
     out = Path(args.out) if args.out else DEFAULT_RUNS_DIR / f"benchmark-{stamp}"
     jobs = bm.plan_jobs(cases, planners, seeds, mode=args.mode, out=out,
-                        time_scale=args.time_scale)
+                        time_scale=args.time_scale, without=args.without)
     for job in jobs:  # fail before starting: every scenario resolves, no run is overwritten
-        job.scenario()
+        try:
+            job.scenario()
+        except ValueError as exc:
+            raise BadInput(str(exc)) from None
         if (job.out_dir / "metrics.json").exists() or (job.out_dir / "trajectory.csv").exists():
             raise BadInput(f"--out: {job.out_dir} already holds a run; choose another "
                            "directory")
@@ -122,7 +128,7 @@ def run(args: argparse.Namespace) -> int:
     wall_s = time.monotonic() - wall0
     rows = bm.summarize(records, case_order=[c.label for c in cases], planner_order=planners)
     suite = {"cases": [c.label for c in cases], "planners": planners, "seeds": list(seeds),
-             "seed_set": seed_set, "mode": args.mode, "quick": args.quick,
+             "seed_set": seed_set, "mode": args.mode, "without": args.without or "", "quick": args.quick,
              "jobs": args.jobs, "start_jitter_m": bm.START_JITTER_M,
              "wall_s": round(wall_s, 1), "argv": list(getattr(args, "argv", []))}
     paths = bm.write_outputs(out, rows, records, suite)

@@ -61,6 +61,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--profile", choices=PROFILES, default=None,
                    help="planner configuration: default or paper (the paper\'s method as "
                         "written); default: the scenario\'s own")
+    p.add_argument("--without", default=None, metavar="LIST",
+                   help="mechanisms of the default profile to switch off, comma-separated "
+                        "(ablations; docs/method.md): e.g. routing,liveness")
     p.add_argument("setup", help="setup_a..setup_g (or a..g), a family (circle, crossing, "
                                  "crossing4, random, ...: orchestrator list), or a scenario "
                                  ".yaml file")
@@ -130,7 +133,7 @@ def run(args: argparse.Namespace) -> int:
               file=sys.stderr)
     scenario = resolve(args.setup, agents=args.agents, seed=args.seed,
                        start_jitter_m=jitter_m, planner=args.planner,
-                       profile=args.profile)
+                       profile=args.profile, without=args.without)
     if args.mp4:
         from orchestrator.analysis.plots import mp4_available
 
@@ -145,7 +148,7 @@ def run(args: argparse.Namespace) -> int:
     claim_run_dir(out_dir, {
         "setup": args.setup, "scenario": scenario.name, "planner": planner,
         "seed": args.seed, "mode": args.mode, "profile": args.profile,
-        "agents": len(scenario.robots),
+        "without": scenario.planner_config.without_names, "agents": len(scenario.robots),
         "start_jitter_m": jitter_m, "time_scale": args.time_scale,
         "launcher": launcher if args.mode == "distributed" else None,
         "faults": faults.to_json() if faults is not None else None,

@@ -193,6 +193,7 @@ class Job:
     mode: str
     out_dir: Path
     time_scale: float = 1.0
+    without: str | None = None
 
     @property
     def name(self) -> str:
@@ -200,14 +201,17 @@ class Job:
 
     def scenario(self) -> Scenario:
         return resolve(self.case.scenario, agents=self.case.agents, seed=self.seed,
-                       start_jitter_m=START_JITTER_M, planner=self.planner)
+                       start_jitter_m=START_JITTER_M, planner=self.planner,
+                       without=self.without)
 
 
 def plan_jobs(cases: Sequence[Case], planners: Sequence[str], seeds: Sequence[int], *,
-              mode: str, out: Path, time_scale: float = 1.0) -> list[Job]:
-    """Every (case, planner, seed), run directories `out/runs/<case>-<planner>-s<seed>`."""
+              mode: str, out: Path, time_scale: float = 1.0,
+              without: str | None = None) -> list[Job]:
+    """Every (case, planner, seed), run directories `out/runs/<case>-<planner>-s<seed>`;
+    `without`: mechanisms switched off in every run (`PlannerConfig.without`)."""
     return [Job(case, planner, seed, mode, Path(out) / "runs" /
-                f"{safe_name(case.label)}-{planner}-s{seed}", time_scale)
+                f"{safe_name(case.label)}-{planner}-s{seed}", time_scale, without)
             for case in cases for planner in planners for seed in seeds]
 
 

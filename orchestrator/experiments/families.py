@@ -526,7 +526,7 @@ def known_names() -> tuple[str, ...]:
 
 def resolve(name_or_path: str, agents: int | None = None, seed: int = 0,
             start_jitter_m: float = 0.0, planner: str | None = None,
-            profile: str | None = None) -> Scenario:
+            profile: str | None = None, without: str | None = None) -> Scenario:
     """The scenario the CLI runs.
 
     Args:
@@ -542,6 +542,8 @@ def resolve(name_or_path: str, agents: int | None = None, seed: int = 0,
         profile: if given, the planner configuration of that profile
             (`agent.core.config.PROFILES`; ``paper``: the paper's method as written, built
             on the scenario's own weights and sizes).
+        without: if given, mechanisms of the default profile to switch off, comma-separated
+            (`agent.core.config.PlannerConfig.without`): ablations.
 
     Raises:
         ScenarioError: unknown name, bad size, invalid file or parameters.
@@ -578,5 +580,11 @@ def resolve(name_or_path: str, agents: int | None = None, seed: int = 0,
             config = profile_config(profile, scenario.planner_config)
         except ValueError as exc:
             raise ScenarioError(f"--profile: {exc}") from None
+        scenario = dataclasses.replace(scenario, planner_config=config)
+    if without is not None:
+        try:
+            config = scenario.planner_config.with_settings(without=without)
+        except ValueError as exc:
+            raise ScenarioError(f"--{exc}") from None
         scenario = dataclasses.replace(scenario, planner_config=config)
     return jitter_starts(scenario, start_jitter_m, jitter_rng)

@@ -74,20 +74,19 @@ def test_control_rate_must_divide_the_world_rate(tmp_path):
 
 
 @pytest.mark.parametrize("planner", ["eifp", "eifp-mpc"])
-def test_encounter_rules_break_the_mirror_symmetry_of_setup_a(tmp_path, planner, monkeypatch):
+def test_encounter_rules_break_the_mirror_symmetry_of_setup_a(tmp_path, planner):
     # Setup A is mirrored across the x axis: with the paper's cost alone the two robots see
     # mirrored costs, pick mirrored (incompatible) sides and run side by side; with the
     # shared give-way convention one gives way and both go nearly straight.
     from dataclasses import replace
 
-    import agent.planning.ifp as ifp
     from orchestrator.experiments.families import resolve
 
     base = resolve("setup_a", planner=planner)
     on = run_lockstep(base, tmp_path / "on").metrics
-    for name in ("EIFP_MECHANISMS", "EIFP_MPC_MECHANISMS"):
-        monkeypatch.setattr(ifp, name, replace(getattr(ifp, name), encounter_rules=False))
-    off = run_lockstep(base, tmp_path / "off").metrics
+    ablated = replace(base, planner_config=base.planner_config.with_settings(
+        without="encounter_rules"))
+    off = run_lockstep(ablated, tmp_path / "off").metrics
     assert on.success and on.contacts == 0
     assert on.path_ratio_mean < 1.03 and on.oscillations_per_robot <= 2
     # Without the rules: the dance, a clearly longer path or no arrival at all.

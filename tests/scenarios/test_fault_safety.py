@@ -7,21 +7,20 @@ from __future__ import annotations
 from orchestrator.experiments.lockstep import run_lockstep
 from world.sim.faults import build_plan
 
+CYCLE_MECHANISMS = ("inflated_threats,commitment,via_margin_m,escape_band_m,"
+                    "horizon_via_points,keep_plan")
 
-def without_cycle_mechanisms(monkeypatch, **more):
-    """eIFP-MPC with the paper's threat test, via-point margin and escape, no commitment, no
-    kept plan and no horizon on via-points (`more`: further `Mechanisms` fields). The
-    ablations below isolate one safety feature; with those mechanisms on, setup D keeps
-    clear at these latencies without the feature under test too, so they would not show
-    what it does."""
+
+def without_cycle_mechanisms(scenario, *more):
+    """`scenario` with eIFP-MPC's paper threat test, via-point margin and escape, no
+    commitment, no kept plan and no horizon on via-points (`more`: further mechanisms off,
+    `PlannerConfig.without`). The ablations below isolate one safety feature; with those
+    mechanisms on, setup D keeps clear at these latencies without the feature under test
+    too, so they would not show what it does."""
     from dataclasses import replace
 
-    import agent.planning.ifp as ifp
-
-    monkeypatch.setattr(ifp, "EIFP_MPC_MECHANISMS", replace(
-        ifp.EIFP_MPC_MECHANISMS, inflated_threats=False, commitment=False,
-        via_margin_m=ifp.VIA_MARGIN_M, escape_band_m=0.0, horizon_via_points=False,
-        keep_plan=False, **more))
+    off = ",".join((CYCLE_MECHANISMS, *more))
+    return replace(scenario, planner_config=scenario.planner_config.with_settings(without=off))
 
 
 def test_latency_aware_half_planes_keep_setup_d_clear_at_150_ms(tmp_path, monkeypatch):
@@ -32,8 +31,9 @@ def test_latency_aware_half_planes_keep_setup_d_clear_at_150_ms(tmp_path, monkey
     import agent.planning.planners
     from orchestrator.experiments.families import resolve
 
-    scenario = resolve("setup_d", agents=None, seed=2, start_jitter_m=0.0, planner=None)
-    without_cycle_mechanisms(monkeypatch, braking_guard=False)
+    scenario = without_cycle_mechanisms(
+        resolve("setup_d", agents=None, seed=2, start_jitter_m=0.0, planner=None),
+        "braking_guard")
     faults = build_plan(latency_ms=150, jitter_ms=45, seed=2)
     gaps = {}
     for factor in (0.0, agent.planning.planners.LATENCY_CLEARANCE_FACTOR):
@@ -51,7 +51,7 @@ def test_braking_guard_keeps_setup_g_clear_at_100_ms_with_loss(tmp_path):
     # stopped one. A run at this level is chaotic, so the bar is "clear", not the guard's
     # 5 cm margin, which latency may eat into. The cap itself is tested step by step in
     # tests/unit/agent/planning/test_safety.py.
-    from agent.planning.ifp import EIFP_MPC_MECHANISMS
+    from agent.planning.mechanisms import EIFP_MPC_MECHANISMS
     from orchestrator.experiments.families import resolve
 
     scenario = resolve("setup_g", agents=None, seed=3, start_jitter_m=0.0, planner=None)
@@ -75,8 +75,8 @@ def test_braking_guard_makes_the_difference_in_setup_d_at_200_and_250_ms(tmp_pat
         scenario = resolve("setup_d", agents=None, seed=seed, start_jitter_m=0.0, planner=None)
         faults = build_plan(latency_ms=latency_ms, jitter_ms=0.3 * latency_ms, seed=seed)
         for guard in (False, True):
-            without_cycle_mechanisms(monkeypatch, braking_guard=guard)
-            out = run_lockstep(scenario, tmp_path / f"{latency_ms}-{seed}-{guard}",
+            ablated = without_cycle_mechanisms(scenario, *(() if guard else ("braking_guard",)))
+            out = run_lockstep(ablated, tmp_path / f"{latency_ms}-{seed}-{guard}",
                                faults=faults)
             results[latency_ms, seed, guard] = (out.metrics.contacts, out.metrics.min_gap_m)
     off = [v for (_, _, guard), v in results.items() if not guard]

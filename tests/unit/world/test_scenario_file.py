@@ -393,6 +393,24 @@ def test_unknown_profile_names_file_and_field(tmp_path):
         _load_profile_doc(tmp_path, "profile: fancy")
 
 
+def test_without_switches_mechanisms_off_and_round_trips(tmp_path):
+    from world.scenario_file import ScenarioError, scenario_from_dict, scenario_to_dict
+
+    config = _load_profile_doc(tmp_path, "without: [routing, liveness]").planner_config
+    assert config.without_names == ("routing", "liveness")
+    same = _load_profile_doc(tmp_path, "without: routing,liveness").planner_config
+    assert same == config
+    scenario = _load_profile_doc(tmp_path, "without: [routing]")
+    data = scenario_to_dict(scenario)
+    assert data["without"] == ["routing"]
+    assert scenario_from_dict(data, "again.yaml").planner_config == scenario.planner_config
+    assert "without" not in scenario_to_dict(_load_profile_doc(tmp_path, ""))
+    with pytest.raises(ScenarioError, match=r"profiled.yaml: without: unknown mechanism"):
+        _load_profile_doc(tmp_path, "without: [routes]")
+    with pytest.raises(ScenarioError, match=r"profiled.yaml: without: expected a list"):
+        _load_profile_doc(tmp_path, "without: 3")
+
+
 # --- the wire's bounds --------------------------------------------------------------------
 
 

@@ -19,7 +19,8 @@ from agent.planning.eifp import (
     segment_distance,
     update_side_memory,
 )
-from agent.planning.ifp import EIFP_MECHANISMS, ESCAPE_STANDING_MPS, ViaPlan
+from agent.planning.ifp import ESCAPE_STANDING_MPS, ViaPlan
+from agent.planning.mechanisms import EIFP_MECHANISMS
 from agent.planning.threats import as_complex
 
 R = 0.2
@@ -334,7 +335,7 @@ def test_property_finite_inputs_give_finite_plans(rows, v, heading):
 
 def test_selector_carries_an_escape_into_the_next_cycle_under_the_band():
     from agent.planning.eifp import EifpSelector
-    from agent.planning.ifp import PAPER_MECHANISMS, Mechanisms
+    from agent.planning.mechanisms import PAPER_MECHANISMS, Mechanisms
 
     inflated = 2 * R + CFG.safety.d_safety_m
     inside = observe(others([[0.0, inflated - 0.02]]))
@@ -355,7 +356,7 @@ def test_selector_carries_an_escape_into_the_next_cycle_under_the_band():
 
 def test_each_planner_runs_its_mechanisms():
     from agent.core.config import paper_config
-    from agent.planning.ifp import EIFP_MPC_MECHANISMS, PAPER_MECHANISMS
+    from agent.planning.mechanisms import EIFP_MPC_MECHANISMS, PAPER_MECHANISMS
     from agent.planning.planners import make_planner
 
     assert make_planner("eifp-mpc", CFG)._selector.mech == EIFP_MPC_MECHANISMS

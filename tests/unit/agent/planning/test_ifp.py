@@ -9,7 +9,8 @@ from hypothesis import strategies as st
 
 from agent.core.config import PlannerConfig, ReferenceConfig, RobotLimits
 from agent.core.types import EgoState, Observation, Others, PlanStatus, Side
-from agent.planning.ifp import ESCAPE_STANDING_MPS, VIA_MARGIN_M, ViaPlan, plan_ifp, select_earliest
+from agent.planning.ifp import ESCAPE_STANDING_MPS, ViaPlan, plan_ifp, select_earliest
+from agent.planning.mechanisms import VIA_MARGIN_M
 from agent.planning.viapoints import ESCAPE_MARGIN_M, via_point_candidates
 
 R = 0.2  # robot and obstacle radius
@@ -261,23 +262,24 @@ def test_property_finite_inputs_give_a_finite_well_formed_plan(rows, v, heading,
 
 
 def test_ignored_others_are_neither_resolved_nor_on_any_leg_but_still_escaped():
-    from agent.planning.ifp import IFP_MECHANISMS, plan_via_points
+    from agent.planning.ifp import Decisions, plan_via_points
+    from agent.planning.mechanisms import IFP_MECHANISMS
 
     # Two discs on the way: ignoring 1 (a stand-on encounter) resolves only 2.
     o = others([[4, 0], [8, -0.6]])
     obs = observe(o, v=1.0, goal=(14.0, 0.0))
-    plan = plan_via_points(obs, CFG, lambda _o: select_earliest, ignored_ids=frozenset({1}),
-                           mech=IFP_MECHANISMS)
+    plan = plan_via_points(obs, CFG, lambda _o: select_earliest,
+                           Decisions(ignored_ids=frozenset({1})), mech=IFP_MECHANISMS)
     assert {i for i, _ in plan.resolved_sides} == {2}
     assert 1 in [t.other_id for t in plan.threats]  # still reported
     # Ignoring both: the direct line.
-    both = plan_via_points(obs, CFG, lambda _o: select_earliest, ignored_ids=frozenset({1, 2}),
-                           mech=IFP_MECHANISMS)
+    both = plan_via_points(obs, CFG, lambda _o: select_earliest,
+                           Decisions(ignored_ids=frozenset({1, 2})), mech=IFP_MECHANISMS)
     assert both.waypoints_m.shape == (2, 2) and both.resolved_sides == ()
     # Inside an ignored disc: still the escape.
     inside = plan_via_points(observe(others([[0.5, 0]]), v=1.0), CFG,
-                             lambda _o: select_earliest, ignored_ids=frozenset({1}),
-                           mech=IFP_MECHANISMS)
+                             lambda _o: select_earliest,
+                           Decisions(ignored_ids=frozenset({1})), mech=IFP_MECHANISMS)
     assert inside.status is PlanStatus.ESCAPE
 
 
@@ -285,19 +287,19 @@ def test_ignored_others_are_neither_resolved_nor_on_any_leg_but_still_escaped():
 
 
 def _rules(**kw):
-    from agent.planning.ifp import Mechanisms
+    from agent.planning.mechanisms import Mechanisms
 
     return Mechanisms(**kw)
 
 
 def _plan(obs, mech, config=CFG, **kw):
-    from agent.planning.ifp import plan_via_points
+    from agent.planning.ifp import Decisions, plan_via_points
 
-    return plan_via_points(obs, config, lambda _o: select_earliest, mech=mech, **kw)
+    return plan_via_points(obs, config, lambda _o: select_earliest, Decisions(**kw), mech=mech)
 
 
 def test_inflated_threats_drop_a_pass_outside_l_but_inside_d_thresh():
-    from agent.planning.ifp import PAPER_MECHANISMS
+    from agent.planning.mechanisms import PAPER_MECHANISMS
 
     # Head-on, DCPA 1.0 m: outside L = 0.7, inside the paper's D_thresh = 5 r + d = 1.3.
     wide = observe(others([[5.0, 1.0]], [[-1.0, 0.0]]), v=1.0)
@@ -349,14 +351,14 @@ def test_escape_band_keeps_escaping_until_a_band_clear():
     assert _plan(obs, _rules(), escape_id=1).status is PlanStatus.OK
 
 
-def test_commitment_keeps_a_head_on_primary_first_and_no_other(monkeypatch):
-    import agent.planning.ifp as ifp
+def test_commitment_keeps_a_head_on_primary_first_and_no_other():
+    from agent.planning.mechanisms import PRIMARY_HOLD_S
 
     def wps(plan):
         return plan.waypoints_m.tolist()
 
     # Head-on, TCPA 2.0 s (id 1) and 4.5 s (id 2): 2.5 s apart, within PRIMARY_HOLD_S.
-    assert ifp.PRIMARY_HOLD_S > 2.5
+    assert PRIMARY_HOLD_S > 2.5
     head_on = others([[4, 0.3], [9, -0.3]], [[-1, 0], [-1, 0]])
     obs = observe(head_on, v=1.0, goal=(30.0, 0.0))
     rules = _rules(commitment=True)
@@ -367,9 +369,7 @@ def test_commitment_keeps_a_head_on_primary_first_and_no_other(monkeypatch):
     # Without commitment (the paper's cycle), or a hold shorter than the 2.5 s between
     # them: the ranking stands.
     assert wps(_plan(obs, _rules(), primary_id=2)) == wps(plain)
-    monkeypatch.setattr(ifp, "PRIMARY_HOLD_S", 2.0)
-    assert wps(_plan(obs, rules, primary_id=2)) == wps(plain)
-    monkeypatch.undo()
+    assert wps(_plan(obs, _rules(commitment=True, primary_hold_s=2.0), primary_id=2)) == wps(plain)
     # Id 2 crossing from the right (course 90 degrees off reciprocal), TCPA 4.5 s: not held.
     crossing = others([[4, 0.3], [4.5, -4.5]], [[-1, 0], [0, 1]])
     obs = observe(crossing, v=1.0, goal=(30.0, 0.0))
@@ -431,7 +431,7 @@ def test_horizon_via_points_drop_far_candidates_and_resolve_the_next_threat():
 
 def test_mechanisms_follow_the_planner_and_the_profile():
     from agent.core.config import paper_config
-    from agent.planning.ifp import PAPER_MECHANISMS, Mechanisms, mechanisms
+    from agent.planning.mechanisms import PAPER_MECHANISMS, Mechanisms, mechanisms
 
     paper = paper_config()
     for name in ("ifp", "eifp", "eifp-mpc"):

@@ -12,6 +12,7 @@ from agent.core.config import PLANNER_NAMES, PlannerConfig, RobotLimits
 from agent.core.scenario import RobotSpec, Scenario
 from agent.core.types import EgoState, Observation, Others, PlanStatus
 from agent.planning.controller import RobotController
+from agent.planning.mechanisms import EIFP_MPC_MECHANISMS, Mechanisms
 from agent.planning.planners import make_planner
 from world.sim.dynamics import WorldSim
 
@@ -26,10 +27,12 @@ def head_on(planner: str, offset_m: float = 0.0) -> Scenario:
     return Scenario("head_on", "", 60.0, 0.25, PlannerConfig(), robots)
 
 
-def run_loop(scenario: Scenario, seconds: float) -> tuple[WorldSim, list]:
+def run_loop(scenario: Scenario, seconds: float,
+             mechanisms: Mechanisms | None = None) -> tuple[WorldSim, list]:
     """Lockstep: 50 Hz world, 10 Hz planning on the newest snapshot."""
     sim = WorldSim(scenario)
-    ctrls = [RobotController(r, scenario.planner_config, scenario.goal_tolerance_m)
+    ctrls = [RobotController(r, scenario.planner_config, scenario.goal_tolerance_m,
+                             mechanisms=mechanisms)
              for r in scenario.robots]
     decisions = []
     for tick in range(int(seconds * 50)):
@@ -160,13 +163,12 @@ def test_the_paper_profile_runs_the_papers_tracker_without_the_guard():
 
 
 @pytest.mark.parametrize("planner", ["eifp-mpc", "eifp", "ifp"])
-def test_spline_reference_head_on_pair_passes(planner, monkeypatch):
-    import agent.planning.ifp as ifp
-
+def test_spline_reference_head_on_pair_passes(planner):
     # eifp and ifp follow the spline; eifp-mpc here too, with the spline's clamped start.
-    monkeypatch.setattr(ifp, "EIFP_MPC_MECHANISMS", replace(
-        ifp.EIFP_MPC_MECHANISMS, lines_arcs=False, clamp_heading=True))
-    sim, _ = run_loop(head_on(planner, offset_m=0.3), 60.0)
+    mech = None
+    if planner == "eifp-mpc":
+        mech = replace(EIFP_MPC_MECHANISMS, lines_arcs=False, clamp_heading=True)
+    sim, _ = run_loop(head_on(planner, offset_m=0.3), 60.0, mech)
     assert sim.contact_count == 0 and sim.all_arrived()
 
 
