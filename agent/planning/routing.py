@@ -65,6 +65,15 @@ many times longer (`route_or_tight`)."""
 MAX_ROUTED_OBSTACLES = 128
 """Maps with more static discs than this are not routed (cost grows as M^3)."""
 
+WAYPOINT_REACHED_M = 0.3
+"""A route waypoint (not the goal) closer to the robot than this is reached
+(`RouteFollower.intermediate_goal`): the waypoints after it are looked at with this much
+less clearance, the most a line from anywhere that close can lose against the route's own
+leg. Without it a robot pushed a little off a corner of its route heads back to the corner,
+which may lie behind it; a unicycle standing there may not find its way to a point 0.2 m
+behind it at all (the MPC, linearised about standing, sees no gain in turning). eIFP's
+legs still keep every inflated disc, so the route's guidance is all that is relaxed."""
+
 LOOKAHEAD_TOLERANCE_M = 1.0e-6
 """A sight line clears a disc when it keeps the clearance less this (rounding) [m]."""
 
@@ -365,7 +374,8 @@ class RouteFollower:
 
     The intermediate goal handed to eIFP is the farthest route waypoint (goal included)
     whose sight line from the robot keeps the route's clearance from every static disc
-    (less what the robot already lacks of it, `_endpoint_keep`); waypoints before it are
+    (less what the robot already lacks of it, `_endpoint_keep`; past a waypoint within
+    `WAYPOINT_REACHED_M`, less that too); waypoints before it are
     passed and never looked at again, so the goal moves only forward along the route.
     Cost per cycle: one sight-line check of the next few waypoints against the map.
 
@@ -404,8 +414,15 @@ class RouteFollower:
         here = np.asarray(position_m, dtype=float)
         ahead = wps[self._next:]
         need = _endpoint_keep(here, blocking.center_m, keep)
-        seen = segment_clears(np.broadcast_to(here, ahead.shape), ahead,
-                              blocking.center_m, need)
+        starts = np.broadcast_to(here, ahead.shape)
+        seen = segment_clears(starts, ahead, blocking.center_m, need)
+        reached = np.flatnonzero(np.hypot(*(ahead[:-1] - here).T) < WAYPOINT_REACHED_M)
+        if reached.size:
+            last = int(reached[-1])
+            seen[last] = True
+            beyond = segment_clears(starts[last + 1:], ahead[last + 1:], blocking.center_m,
+                                    np.maximum(need - WAYPOINT_REACHED_M, 0.0))
+            seen[last + 1:] |= beyond
         if not seen.any():
             return None
         self._next += int(np.flatnonzero(seen)[-1])

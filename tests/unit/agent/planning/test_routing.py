@@ -188,3 +188,28 @@ def test_static_map_refuses_bad_discs() -> None:
         StaticMap(np.zeros((2, 2)), np.array([1.0, -1.0]))
     with pytest.raises(ValueError, match="centres"):
         StaticMap(np.zeros((2, 2)), np.array([1.0]))
+
+
+def test_a_waypoint_within_reach_is_reached_so_the_robot_is_not_sent_back_to_it() -> None:
+    from agent.planning.routing import WAYPOINT_REACHED_M
+
+    # One pillar; the route from the east to the north-west bends at a ring node south of
+    # it. A robot pushed 0.25 m past that corner, slightly inside the route's clearance,
+    # has the corner behind it: the corner counts as reached and the goal, in sight with
+    # the clearance less WAYPOINT_REACHED_M, is the next goal (the pillar_circle robot
+    # that stood for 100 s 0.26 m from such a corner).
+    static = StaticMap(np.array([[0.48, -0.01]]), np.array([1.59]))
+    start, goal = np.array([17.34, -4.77]), np.array([-17.39, 4.66])
+    route = plan_route(start, goal, static, CLEARANCE_M)
+    assert route is not None and route.waypoints_m.shape[0] == 3
+    corner = route.waypoints_m[1]
+    here = np.array([0.32, -2.51])
+    assert 0.2 < math.dist(here, corner) < WAYPOINT_REACHED_M
+    follower = RouteFollower(route, static)
+    target = follower.intermediate_goal(here)
+    assert target is not None and np.allclose(target, goal)
+    # on the way there, farther from the corner than the reach: the corner stays the goal
+    far = RouteFollower(route, static)
+    before = corner + (start - corner) * (2.0 * WAYPOINT_REACHED_M / math.dist(start, corner))
+    target = far.intermediate_goal(before)
+    assert target is not None and np.allclose(target, corner)
