@@ -75,7 +75,13 @@ from agent.planning.threats import (
     require_finite,
     threat_records,
 )
-from agent.planning.viapoints import SIDES, candidate_pair, escape_point, inflated_radius
+from agent.planning.viapoints import (
+    SIDES,
+    candidate_pair,
+    escape_point,
+    escape_point_many,
+    inflated_radius,
+)
 
 ESCAPE_STANDING_MPS = 0.05
 """Below this speed an escaping robot's plan ends at the escape point, without the goal.
@@ -453,7 +459,8 @@ def _primary_first(observation: Observation, index: np.ndarray, tcpa: np.ndarray
 def escape(observation: Observation, assessment: Assessment, escape_id: int | None,
            mech: Mechanisms) -> ViaPlan | None:
     """Step 2: inside an inflated disc no tangent exists; the plan steers straight out of the
-    deepest one (ties by id), or None when the robot is inside none.
+    deepest one (ties by id), or None when the robot is inside none. With
+    `Mechanisms.escape_all`, out of every disc it is inside (`viapoints.escape_point_many`).
 
     With `Mechanisms.escape_band_m`, the escape from last cycle's disc (`escape_id`) goes on
     until the robot is that far outside it: a robot that left by a centimetre would plan
@@ -469,7 +476,11 @@ def escape(observation: Observation, assessment: Assessment, escape_id: int | No
     if not inside.size:
         return None
     j = int(inside[np.lexsort((others.ids[inside], gap[inside]))[0]])
-    out = escape_point(p, others.position_m[j], float(radius[j]) + band, ego.heading_rad)
+    if mech.escape_all and inside.size > 1:
+        out = escape_point_many(p, others.position_m[inside], radius[inside] + band,
+                                ego.heading_rad)
+    else:
+        out = escape_point(p, others.position_m[j], float(radius[j]) + band, ego.heading_rad)
     goal = observation.goal_m
     return ViaPlan(
         status=PlanStatus.ESCAPE,

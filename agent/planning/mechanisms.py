@@ -62,6 +62,8 @@ class Mechanisms:
         via_margin_m: how far outside its inflated disc a via-point is placed [m].
         escape_band_m: an escape goes on from the same disc until the robot is this far
             outside it, towards a point that far out (0: only while inside) [m].
+        escape_all: inside several inflated discs, the escape leads out of all of them
+            (`viapoints.escape_point_many`), not straight out of the deepest into the next.
         horizon_via_points: a candidate reached after more than T_max (lambda*, Eq. 13) is
             infeasible: past the threat horizon the constant-velocity forecast that placed
             it is not to be trusted (for an other as fast as the robot, a tangent point
@@ -100,6 +102,7 @@ class Mechanisms:
     commitment: bool = False
     via_margin_m: float = VIA_MARGIN_M
     escape_band_m: float = 0.0
+    escape_all: bool = False
     horizon_via_points: bool = False
     lines_arcs: bool = False
     clamp_heading: bool = False
@@ -122,8 +125,8 @@ the corners of a lines-and-arcs reference, so it keeps the spline and the paper'
 
 EIFP_MPC_MECHANISMS = dataclasses.replace(
     EIFP_MECHANISMS, inflated_threats=True, commitment=True, via_margin_m=ARC_VIA_MARGIN_M,
-    escape_band_m=ESCAPE_BAND_M, horizon_via_points=True, lines_arcs=True,
-    clamp_heading=False, braking_guard=True, keep_plan=True, routing=True,
+    escape_band_m=ESCAPE_BAND_M, escape_all=True, horizon_via_points=True,
+    lines_arcs=True, clamp_heading=False, braking_guard=True, keep_plan=True, routing=True,
     liveness=LivenessConfig())
 """eifp-mpc in the default profile: every mechanism."""
 

@@ -107,14 +107,28 @@ def at_goal(x_m: float, y_m: float, goal_m: np.ndarray, goal_tolerance_m: float)
     return gap <= ARRIVAL_FRACTION * goal_tolerance_m
 
 
-def arrived_result(observation: Observation) -> PlanResult | None:
+def braking_speed_mps(observation: Observation, period_s: float) -> float:
+    """The speed a stopping robot commands: its own, less the most it may brake in one
+    command period (`RobotLimits.accel_max_mps2`), down to 0.
+
+    A stop commanded at once (v = 0 from 0.9 m/s) is one no robot can make, and the others
+    plan on that: the braking guard (`agent.planning.safety`) assumes every robot changes
+    speed at most at accel_max, so a robot close behind one that arrives at its goal, or
+    starts to yield, could not stop its own approach in time."""
+    ego, limits = observation.ego, observation.limits
+    return max(ego.v_mps - limits.accel_max_mps2 * period_s, 0.0)
+
+
+def arrived_result(observation: Observation, period_s: float) -> PlanResult | None:
     """The stop result when the robot is at its goal, else None (ego state and goal only:
-    every planner returns it before looking at the others)."""
+    every planner returns it before looking at the others); the robot brakes at its limit
+    (`braking_speed_mps`)."""
     ego = observation.ego
     if not at_goal(ego.x_m, ego.y_m, observation.goal_m, observation.goal_tolerance_m):
         return None
     here = np.array([[ego.x_m, ego.y_m], observation.goal_m])
-    return PlanResult(v_mps=0.0, omega_radps=0.0, status=PlanStatus.ARRIVED, waypoints_m=here,
+    return PlanResult(v_mps=braking_speed_mps(observation, period_s), omega_radps=0.0,
+                      status=PlanStatus.ARRIVED, waypoints_m=here,
                       debug=PlanDebug(ego=np.array([ego.x_m, ego.y_m, ego.heading_rad]),
                                       reference_m=here))
 
@@ -130,11 +144,13 @@ def _inside_any(observation: Observation, config: PlannerConfig) -> bool:
                  + config.safety.d_safety_m).any())
 
 
-def _yield_result(observation: Observation, elapsed_s: float) -> PlanResult:
-    """A stop while yielding (`agent.planning.liveness`, rule 2)."""
+def _yield_result(observation: Observation, elapsed_s: float, period_s: float) -> PlanResult:
+    """A stop while yielding (`agent.planning.liveness`, rule 2), braking at the robot's
+    limit (`braking_speed_mps`)."""
     ego = observation.ego
     here = np.array([[ego.x_m, ego.y_m], observation.goal_m])
-    return PlanResult(v_mps=0.0, omega_radps=0.0, status=PlanStatus.YIELD, waypoints_m=here,
+    return PlanResult(v_mps=braking_speed_mps(observation, period_s), omega_radps=0.0,
+                      status=PlanStatus.YIELD, waypoints_m=here,
                       times=StageTimes(total_ms=elapsed_s * 1e3),
                       debug=PlanDebug(ego=np.array([ego.x_m, ego.y_m, ego.heading_rad]),
                                       reference_m=here))
@@ -204,7 +220,7 @@ class ViaPointPlanner:
 
         clock = self._timer
         t0 = clock()
-        done = arrived_result(observation)
+        done = arrived_result(observation, self.control_period_s)
         if done is not None:
             return replace(done, times=StageTimes(total_ms=(clock() - t0) * 1e3))
         from agent.planning.threats import nearby_others
@@ -222,7 +238,7 @@ class ViaPointPlanner:
         if self.guide is not None:
             guided = self.guide.guide(observation, now_s)
             if guided.strategy is Strategy.YIELD and not _inside_any(observation, cfg):
-                return _yield_result(observation, clock() - t0)
+                return _yield_result(observation, clock() - t0, self.control_period_s)
             if guided.tail_m.shape[0]:
                 observation = observation.with_goal(guided.goal_m, guided.left_m)
                 tail = guided.tail_m
@@ -395,7 +411,7 @@ class OrcaPlanner:
         from agent.planning.orca import OrcaController
 
         t0 = self._timer()
-        done = arrived_result(observation)
+        done = arrived_result(observation, self.control_period_s)
         if done is not None:
             return replace(done, times=StageTimes(total_ms=(self._timer() - t0) * 1e3))
         controller = self._controllers.get(observation.limits)

@@ -330,3 +330,59 @@ def escape_point(
     else:
         direction = away / q
     return c + (inflated_radius_m + margin_m) * direction
+
+
+def escape_point_many(
+    position_m: np.ndarray,
+    centres_m: np.ndarray,
+    inflated_radii_m: np.ndarray,
+    heading_rad: float,
+    margin_m: float = ESCAPE_MARGIN_M,
+) -> np.ndarray:
+    """Where a robot inside several inflated discs heads to get out of all of them.
+
+    Not in the paper (`Mechanisms.escape_all`). Straight out of the deepest disc alone
+    (`escape_point`) can lead straight into the next: a robot squeezed between two others
+    escapes from one towards the other, whose braking guard then stops it, and both
+    stand. Here the direction is the sum of the unit vectors out of each disc, each
+    weighted by how deep the robot is inside it (plus 1 cm, so a disc it only touches still
+    counts); the point is where that ray leaves the last of the discs, `margin_m` beyond.
+    When the weighted vectors cancel (a symmetric squeeze), the direction is across the
+    line of the squeeze, to the robot's right (the planners' right-hand convention).
+
+    Args:
+        position_m: (2,) robot position P [m].
+        centres_m: (n, 2) centres of the discs the robot is inside [m].
+        inflated_radii_m: (n,) their radii L [m].
+        heading_rad: robot heading (`escape_point`'s tie rule) [rad].
+        margin_m: how far beyond each L the point lies [m].
+
+    Raises:
+        ValueError: on a non-finite input or no disc.
+    """
+    p = np.asarray(position_m, dtype=float)
+    c = np.asarray(centres_m, dtype=float).reshape(-1, 2)
+    r = np.asarray(inflated_radii_m, dtype=float).reshape(-1) + margin_m
+    require_finite("escape_point_many", p, c, r, heading_rad)
+    if c.shape[0] == 0:
+        raise ValueError("escape_point_many: no disc")
+    away = p - c
+    q = np.hypot(away[:, 0], away[:, 1])
+    deepest = int(np.argmax(r - q))
+    if c.shape[0] == 1 or np.any(q < _COINCIDENT_M):
+        return escape_point(p, c[deepest], float(r[deepest]) - margin_m, heading_rad, margin_m)
+    weight = np.maximum(r - q, 0.0) + 0.01
+    pull = (weight[:, None] * away / q[:, None]).sum(axis=0)
+    norm = math.hypot(pull[0], pull[1])
+    if norm < 1e-6 * float(weight.sum()):
+        # the pulls cancel: across the line of the squeeze, to the robot's right
+        radial = away[deepest] / q[deepest]
+        d = np.array([radial[1], -radial[0]])
+        if d @ (math.sin(heading_rad), -math.cos(heading_rad)) < 0.0:
+            d = -d
+    else:
+        d = pull / norm
+    # |away_k + t d| = r_k: t_k = -(away_k . d) + sqrt((away_k . d)^2 - q_k^2 + r_k^2)
+    along = away @ d
+    t = -along + np.sqrt(np.maximum(along * along - q * q + r * r, 0.0))
+    return p + float(t.max()) * d

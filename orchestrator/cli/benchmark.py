@@ -128,7 +128,8 @@ def run(args: argparse.Namespace) -> int:
     wall_s = time.monotonic() - wall0
     rows = bm.summarize(records, case_order=[c.label for c in cases], planner_order=planners)
     suite = {"cases": [c.label for c in cases], "planners": planners, "seeds": list(seeds),
-             "seed_set": seed_set, "mode": args.mode, "without": args.without or "", "quick": args.quick,
+             "seed_set": seed_set, "mode": args.mode, "without": args.without or "",
+             "quick": args.quick,
              "jobs": args.jobs, "start_jitter_m": bm.START_JITTER_M,
              "wall_s": round(wall_s, 1), "argv": list(getattr(args, "argv", []))}
     paths = bm.write_outputs(out, rows, records, suite)

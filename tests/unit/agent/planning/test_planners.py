@@ -107,9 +107,18 @@ def test_finite_input_gives_finite_command_within_bounds(planner, ego, crowd):
 
 
 @pytest.mark.parametrize("planner", PLANNER_NAMES)
-def test_at_goal_the_planner_stops(planner):
+def test_at_goal_the_planner_stops_braking_at_its_limit(planner):
+    from agent.planning.planners import CONTROL_PERIOD_S
+
+    # Arriving at 0.5 m/s: a stop at once would be a deceleration no robot makes (and the
+    # others' braking guard assumes none does); the command brakes by accel_max per period.
     obs = observation(10.0, 0.05, 0.0, 0.5, [], [], goal=(10.0, 0.0))
     res = make_planner(planner, PlannerConfig()).plan(obs, 0.0)
+    assert res.status == PlanStatus.ARRIVED and res.omega_radps == 0.0
+    assert res.v_mps == pytest.approx(max(0.5 - LIMITS.accel_max_mps2 * CONTROL_PERIOD_S, 0.0))
+    assert res.v_mps < 0.5
+    standing = observation(10.0, 0.05, 0.0, 0.0, [], [], goal=(10.0, 0.0))
+    res = make_planner(planner, PlannerConfig()).plan(standing, 0.0)
     assert res.status == PlanStatus.ARRIVED and res.v_mps == 0.0 and res.omega_radps == 0.0
 
 

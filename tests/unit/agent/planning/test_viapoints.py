@@ -247,3 +247,32 @@ def test_escape_when_coincident_goes_to_the_right_of_the_heading():
     out = escape_point([0.0, 0.0], [0.0, 0.0], 1.0, heading_rad=math.pi / 2)
     np.testing.assert_allclose(out, [1.0 + ESCAPE_MARGIN_M, 0.0], atol=1e-12)
     assert np.all(np.isfinite(out))
+
+
+def test_escape_from_several_discs_leaves_all_of_them_not_into_the_next():
+    from agent.planning.viapoints import escape_point_many
+
+    # Squeezed between two discs of L = 1.3 whose centres are 1.05 m apart (the robot 0.05 m
+    # from the east one, 1.0 m from the west one): straight out of the deepest leads into
+    # the other; the combined escape leaves both, sideways.
+    p = np.array([0.0, 0.0])
+    centres = np.array([[-1.0, 0.0], [0.05, 0.9]])
+    radii = np.array([1.3, 1.3])
+    single = escape_point(p, centres[1], 1.3, 0.0)
+    assert math.dist(single, centres[0]) < 1.3  # straight out of one, still in the other
+    out = escape_point_many(p, centres, radii, heading_rad=0.0)
+    for c, r in zip(centres, radii):
+        assert math.dist(out, c) >= r + ESCAPE_MARGIN_M - 1e-9
+    # the direction moves away from both centres
+    d = out - p
+    assert all(d @ (p - c) > 0.0 for c in centres)
+    # one disc: escape_point itself
+    np.testing.assert_allclose(escape_point_many(p, centres[:1], radii[:1], 0.0),
+                               escape_point(p, centres[0], 1.3, 0.0))
+    # a symmetric squeeze (the pulls cancel): across it, to the right of the heading (+x)
+    sym = np.array([[-0.5, 0.0], [0.5, 0.0]])
+    out = escape_point_many(p, sym, radii, heading_rad=0.0)
+    assert out[0] == pytest.approx(0.0, abs=1e-12) and out[1] < 0.0
+    assert min(math.dist(out, c) for c in sym) == pytest.approx(1.3 + ESCAPE_MARGIN_M)
+    with pytest.raises(ValueError, match="no disc"):
+        escape_point_many(p, np.zeros((0, 2)), np.zeros(0), 0.0)
