@@ -56,7 +56,8 @@ def test_settings_list_every_sub_config_field_once_and_at_most_15() -> None:
               for f in dataclasses.fields(getattr(config, group))}
     assert set(SETTINGS) == fields
     assert len(SETTINGS) <= 15
-    assert {f.name for f in dataclasses.fields(PlannerConfig)} == {*SUB_CONFIGS, "profile"}
+    assert {f.name for f in dataclasses.fields(PlannerConfig)} == {*SUB_CONFIGS, "profile",
+                                                                   "without"}
     for name, planners in SETTINGS.items():
         assert planners and set(planners) <= {"ifp", "eifp", "eifp-mpc", "orca"}, name
         setting(config, name)  # resolvable
