@@ -5,15 +5,17 @@ Layers, lowest first (a module may import its own layer and the layers below it)
 0. core: types, configs, scenario dataclasses (`agent.core`)
 1. planning: threats, via-points, encounters, reference paths, MPC, ORCA, controller
    (`agent.planning`)
-2. simulation: dynamics, link faults, fault plans, schedule, the lockstep loop (`world.sim`)
+2. simulation: dynamics, link faults, fault plans, schedule, lifecycle, the lockstep loop
+   (`world.sim`)
 3. wire: keys, messages, codec (`protocol`), the scenario file format (`world.scenario_file`),
    run directories and files made safely (`agent.files`)
-4. runtime: the robot and world processes and their plumbing (`agent.node`, `agent.fleet`,
-   `agent.process`, `agent.flags`, `world.node`, `world.router`, `world.recorder`,
-   `world.mcap_log`), and the IR-SIM behaviour (`agent.irsim`)
-5. experiments and analysis (`orchestrator.experiments`, `orchestrator.analysis`)
-6. CLI (`orchestrator.cli`)
-"""
+4. decisions: what the robot and world processes decide each cycle, pure
+   (`agent.robot_cycle`, `world.world_cycle`)
+5. runtime: the robot and world processes and their plumbing (`agent.node`, `agent.startup`,
+   `agent.fleet`, `agent.process`, `agent.flags`, `world.node`, `world.router`,
+   `world.recorder`, `world.mcap_log`), and the IR-SIM behaviour (`agent.irsim`)
+6. experiments and analysis (`orchestrator.experiments`, `orchestrator.analysis`)
+7. CLI (`orchestrator.cli`)"""
 
 from __future__ import annotations
 
@@ -29,16 +31,27 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("agent.planning",),
     ("world.sim",),
     ("protocol", "world.scenario_file", "agent.files"),
-    ("agent.node", "agent.fleet", "agent.process", "agent.flags", "agent.security",
+    ("agent.robot_cycle", "world.world_cycle"),
+    ("agent.node", "agent.startup", "agent.fleet", "agent.process", "agent.flags", "agent.security",
      "agent.__main__", "agent.irsim",
      "world.node", "world.router", "world.recorder", "world.mcap_log", "world.__main__"),
     ("orchestrator.experiments", "orchestrator.analysis"),
     ("orchestrator.cli", "orchestrator.__main__"),
 )
-LAYER_NAMES = ("core", "planning", "simulation", "wire", "runtime", "experiments", "cli")
+LAYER_NAMES = ("core", "planning", "simulation", "wire", "decisions", "runtime", "experiments",
+               "cli")
+WIRE, DECISIONS = 3, 4
 PURE_FORBIDDEN = ("zenoh", "yaml", "matplotlib", "psutil", "subprocess", "socket", "irsim")
 """Layers 0-2 do no I/O and know no simulator (IR-SIM is adapted at an edge, `agent.irsim`);
 the wire layer may read YAML but never touches zenoh."""
+CLOCKS = ("time", "datetime")
+"""Nor do layers 0-2 and the decisions read a clock: time comes in as an argument."""
+CLOCK_ALLOWED = {"agent.planning.planners": "its stages are timed by an injectable timer "
+                                            "whose default is time.perf_counter"}
+DECISIONS_FORBIDDEN = (*PURE_FORBIDDEN, *CLOCKS, "logging", "os", "sys", "threading", "queue",
+                       "select", "signal", "multiprocessing")
+"""The decisions take messages and times and return what to do: no I/O, no clock, no logs
+(the node logs what they return)."""
 
 
 def module_name(path: Path) -> str:
@@ -115,10 +128,22 @@ def test_no_upward_import(module: str) -> None:
     assert not upward, f"{module} ({LAYER_NAMES[mine]}) imports upward: {upward}"
 
 
-@pytest.mark.parametrize("module", sorted(m for m in MODULES if (layer_of(m) or 0) <= 3))
+def forbidden_imports(module: str) -> tuple[str, ...]:
+    """The top-level packages `module` may not import."""
+    mine = layer_of(module) or 0
+    if mine > DECISIONS:
+        return ()
+    if mine == WIRE:
+        return ("zenoh",)
+    if mine == DECISIONS:
+        return DECISIONS_FORBIDDEN
+    return PURE_FORBIDDEN + (() if module in CLOCK_ALLOWED else CLOCKS)
+
+
+@pytest.mark.parametrize("module", sorted(m for m in MODULES if (layer_of(m) or 0) <= DECISIONS))
 def test_lower_layers_do_no_io(module: str) -> None:
     mine = layer_of(module)
-    forbidden = ("zenoh",) if mine == 3 else PURE_FORBIDDEN
+    forbidden = forbidden_imports(module)
     external = {name.split(".")[0] for name in imports_of(MODULES[module], module)}
     bad = sorted(external & set(forbidden))
     assert not bad, f"{module} ({LAYER_NAMES[mine or 0]}) imports {bad}"
@@ -167,3 +192,9 @@ def test_the_checker_sees_an_upward_import(tmp_path: Path) -> None:
     src.write_text("def f():\n    from orchestrator.cli import main\n    return main\n")
     assert "orchestrator.cli.main" in imports_of(src, "agent.core.probe") or \
         "orchestrator.cli" in imports_of(src, "agent.core.probe")
+
+
+def test_the_decisions_and_the_pure_layers_may_not_read_a_clock() -> None:
+    assert {"time", "logging", "zenoh"} <= set(forbidden_imports("agent.robot_cycle"))
+    assert "time" in forbidden_imports("world.sim.lockstep")
+    assert "time" not in forbidden_imports("agent.node")
