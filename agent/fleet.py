@@ -26,7 +26,7 @@ the same moment, and on a loaded 2-core machine that starved the router's Zenoh 
 past the 1 s transport lease: the world dropped most of them and they left (docs/scale.md).
 
 CPU tokens (``--cpu-tokens N``, off by default): the children share a semaphore of N; a
-robot holds one while it senses and plans (`agent.node.RobotNode.sense_and_plan`), so at
+robot holds one while it senses and plans (`agent.node.cpu_token`), so at
 most N compute at once, each to the end of its cycle, instead of 100 runnable robots
 time-sliced against each other (and against the world) when they want more CPU than the
 host has. Measured with N = 2 on 2 cores it kept every robot's lease but raised the
@@ -119,7 +119,7 @@ def warm_up_planners() -> None:
     """Import every planner and plan once with each (a throwaway robot), before forking."""
     from agent.core.config import PLANNER_NAMES, PlannerConfig
     from agent.core.scenario import RobotSpec
-    from agent.node import warm_up
+    from agent.startup import warm_up
     from protocol import RunConfigMsg
 
     for k, name in enumerate(PLANNER_NAMES):
@@ -193,7 +193,7 @@ def run_fleet(args: argparse.Namespace) -> int:
         log.error("--cpu-tokens must be >= 0, got %d", n_tokens)
         return 2
     # A POSIX semaphore in shared memory, inherited by every child (see
-    # agent.node.RobotNode.sense_and_plan).
+    # agent.node.cpu_token).
     cpu_tokens = multiprocessing.get_context("fork").Semaphore(n_tokens) if n_tokens else None
     overrides = dict(args.connect_id)
     unknown = sorted(set(overrides) - set(args.ids))

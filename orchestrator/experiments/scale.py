@@ -33,7 +33,7 @@ processes that map them; RSS where the kernel gives no PSS). Per N it reports:
   each of ``--hosts``);
 - cpu_ms_per_plan_sense / _plan / _send / _loop / _threads: where a robot process's CPU
   went, per plan it sent: the robots' own thread and process CPU clocks over their loops
-  (`agent.node.RobotNode.cpu_summary`, from their exit lines in robots.json), summed over
+  (`agent.node.CpuMeter.summary`, from their exit lines in robots.json), summed over
   the robots and divided by all their plans. sense: decoding and observing poses; plan:
   estimates and the planner; send: encoding and publishing the command; loop: the rest of
   the main thread; threads: the other threads (Zenoh's runtime, the pose callback's).
@@ -79,7 +79,7 @@ ROBOT_NICE = 0
 starve too, and a missed 1 s lease loses the robot)."""
 
 CPU_PARTS = ("sense", "plan", "send", "loop", "threads")
-"""Parts of a robot process's CPU time (`agent.node.RobotNode.cpu_summary`)."""
+"""Parts of a robot process's CPU time (`agent.node.CpuMeter.summary`)."""
 
 COLUMNS = (
     "agents", "family", "planner", "success", "arrived", "contacts", "min_gap_m",

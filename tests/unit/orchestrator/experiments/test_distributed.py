@@ -110,7 +110,7 @@ def test_bad_inputs_fail_before_anything_is_spawned(tmp_path: Path) -> None:
 
 def test_robot_args_reach_every_robot_through_the_fleet(tmp_path: Path) -> None:
     from agent.fleet import build_parser, robot_argv
-    from agent.node import parse_args
+    from agent.startup import parse_args
 
     cmd = fleet_command("r1", [0, 1], "tcp/127.0.0.1:9", tmp_path, robot_args=["--no-plan"])
     fleet_args = build_parser().parse_args(cmd[3:])
