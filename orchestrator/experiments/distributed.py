@@ -230,7 +230,7 @@ def world_lost_grace_args(plan: FaultPlan | None, *, time_scale: float,
     """``--lost-grace-s`` of ``python -m world`` for a plan whose robots come back: a
     stopped robot is lost from the lease until it resumes (its stop's duration), a restarted
     one until its new process is up (at most the start-up deadline, in sim time). Without
-    such faults the world's default (`world.node.LOST_GRACE_S`) stands."""
+    such faults the world's default (`world.world_cycle.LOST_GRACE_S`) stands."""
     if plan is None:
         return []
     back_s = [f.duration_s + 1.0 for f in plan.process if f.kind == "stop"]
