@@ -19,7 +19,8 @@ from matplotlib.patches import Circle
 
 from agent.core.scenario import Scenario
 from agent.files import replace_file
-from orchestrator.analysis.metrics import WALL_STAGES, RunSpec, contact_episodes
+from orchestrator.analysis.latency import WALL_STAGES
+from orchestrator.analysis.metrics import RunSpec, contact_episodes
 from orchestrator.analysis.rundir import RunData, read_run_dir, read_timing
 from protocol import TIMING_COLUMNS
 
@@ -337,7 +338,7 @@ def latency_axis_ms(ms: np.ndarray) -> tuple[float, float, int]:
 
 
 def plot_wall_latency(stamps: np.ndarray, path: Path) -> Path | None:
-    """latency.png: a histogram per wall-clock stage (`metrics.WALL_STAGES`), p50 and p99
+    """latency.png: a histogram per wall-clock stage (`latency.WALL_STAGES`), p50 and p99
     marked, each x axis clipped just past the p99 (`latency_axis_ms`; the panel says how
     many samples lie beyond, and the largest); None (nothing written) if no stage could be
     measured.

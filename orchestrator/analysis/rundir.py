@@ -20,16 +20,8 @@ import numpy as np
 
 from agent.core.scenario import Scenario
 from agent.files import replace_file
-from orchestrator.analysis.metrics import (
-    Commands,
-    RunMetrics,
-    RunSpec,
-    Trajectory,
-    compute_metrics,
-    router_groups,
-    wall_latency_ms,
-    wall_latency_ms_by_group,
-)
+from orchestrator.analysis.latency import router_groups, wall_latency_ms, wall_latency_ms_by_group
+from orchestrator.analysis.metrics import Commands, RunMetrics, RunSpec, Trajectory, compute_metrics
 from protocol import TIMING_COLUMNS
 from world.scenario_file import load_scenario
 

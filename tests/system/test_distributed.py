@@ -213,7 +213,7 @@ def test_head_on_run_completes_without_contact(tmp_path: Path) -> None:
         assert (out_dir / name).stat().st_size > 0
     assert progress and progress[-1].arrived == {0, 1} and progress[-1].started
     # Every applied command carries its wall stamps; on one host every stage is measured.
-    from orchestrator.analysis.metrics import TRANSPORT_STAGE, WALL_STAGES
+    from orchestrator.analysis.latency import TRANSPORT_STAGE, WALL_STAGES
     from orchestrator.analysis.rundir import metrics_from_run_dir, read_timing
 
     assert read_timing(out_dir).shape[0] == end[0]["commands"]
