@@ -226,7 +226,7 @@ def watch_run(options: SetupOptions, scenario: Scenario, connect: str, startup_t
         ``"signal"``.
     """
     from orchestrator.analysis.console import ProgressLine
-    from orchestrator.experiments.distributed import _EventTail, _progress
+    from orchestrator.experiments.progress import EventTail, distributed_progress
     from protocol import RunKeys
 
     keys = RunKeys(options.run_id)
@@ -236,7 +236,7 @@ def watch_run(options: SetupOptions, scenario: Scenario, connect: str, startup_t
         return "signal" if stop else "no_world"
     watch = RunWatch(frozenset(r.id for r in scenario.robots), set())
     progress = ProgressLine(f"{scenario.name} docker")
-    tail = _EventTail(options.run_dir / "events.jsonl")
+    tail = EventTail(options.run_dir / "events.jsonl")
     try:
         robot_sub = session.liveliness().declare_subscriber(keys.alive_robot_all, history=True)
         world_sub = session.liveliness().declare_subscriber(keys.alive_world, history=True)
@@ -258,7 +258,8 @@ def watch_run(options: SetupOptions, scenario: Scenario, connect: str, startup_t
                 return "world_stuck"
             if watch.all_alive_once:
                 tail.poll()
-                progress(_progress(tail.events, options.run_dir, t0, len(watch.robot_ids), ()))
+                progress(distributed_progress(tail.events, options.run_dir, t0,
+                                              len(watch.robot_ids), ()))
             time.sleep(POLL_S)
         return "done"
     finally:
