@@ -25,6 +25,7 @@ from protocol import (
     scoped_cn,
     session_settings,
 )
+from tests.unit.world.test_world_cycle import TWO_ROBOTS
 from world.node import WorldNode, WorldOptions, parse_args, run_configs
 from world.recorder import RunRecorder
 from world.scenario_file import scenario_from_dict
@@ -32,16 +33,7 @@ from world.scenario_file import scenario_from_dict
 pytestmark = pytest.mark.timeout(60)
 
 DEADLINE_S = 10.0
-SCENARIO = {
-    "name": "node_test",
-    "time_limit": 20,
-    "defaults": {"radius": 0.3},
-    "robots": [
-        {"id": 0, "start": [-3.0, 0.0, 0.0], "goal": [3.0, 0.0]},
-        {"id": 4, "start": [3.0, 1.0, 3.14], "goal": [-3.0, 1.0]},
-    ],
-    "obstacles": [{"center": [0.0, 5.0], "radius": 0.5}],
-}
+SCENARIO = TWO_ROBOTS
 
 
 def open_session(mode: str, endpoint: str) -> zenoh.Session:

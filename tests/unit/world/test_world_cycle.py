@@ -24,16 +24,18 @@ from world.world_cycle import (
     tally,
 )
 
-SCENARIO = scenario_from_dict({
-    "name": "cycle_test",
-    "time_limit": 2,
+TWO_ROBOTS = {
+    "name": "node_test",
+    "time_limit": 20,
     "defaults": {"radius": 0.3},
     "robots": [
         {"id": 0, "start": [-3.0, 0.0, 0.0], "goal": [3.0, 0.0]},
         {"id": 4, "start": [3.0, 1.0, 3.14], "goal": [-3.0, 1.0]},
     ],
     "obstacles": [{"center": [0.0, 5.0], "radius": 0.5}],
-}, "test")
+}
+"""Two robots crossing and a disc (the world's process tests use it too)."""
+SCENARIO = scenario_from_dict({**TWO_ROBOTS, "time_limit": 2}, "test")
 KEYS = RunKeys("r-1")
 DT_S = 0.02
 
