@@ -120,7 +120,7 @@ def warm_up_planners() -> None:
     from agent.core.config import PLANNER_NAMES, PlannerConfig
     from agent.core.scenario import RobotSpec
     from agent.node import warm_up
-    from protocol import RunConfigMsg
+    from eifp_wire import RunConfigMsg
 
     for k, name in enumerate(PLANNER_NAMES):
         spec = RobotSpec(k, (0.0, 0.0, 0.0), (10.0, 0.0), planner=name)

@@ -47,8 +47,8 @@ from agent.core.scenario import Scenario
 from agent.files import append_line, open_new, replace_file
 from agent.flags import endpoint_host, every_interface, unspecified_literal
 from agent.process import PARENT_PID_ENV, raise_interrupt
+from eifp_wire import OBSERVER_CN, TlsFiles, tls_endpoint, validate_run_id
 from orchestrator.analysis.metrics import RunMetrics
-from protocol import OBSERVER_CN, TlsFiles, tls_endpoint, validate_run_id
 from world.scenario_file import load_scenario
 from world.sim.faults import FaultPlan, ProcessFault
 
