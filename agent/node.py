@@ -138,16 +138,15 @@ STAMP_EPS_S = 1e-6
 SUSPEND_GAP_S = 0.5
 """A loop stall this long (wall time between two iterations that the loop's CPU time and its
 waits do not explain, `agent.process.StallWatch`) means the process was suspended (stopped,
-or not scheduled for that long: the fork launcher's start-up of 64 robots on 2 cores gives
-some robots 0.5-0.6 s of such a wait)."""
+or not scheduled for that long, as some robots are while a fork launcher starts many robots
+on a small host)."""
 REJOIN_GRACE_S = 5.0
 """After a suspension, how long the robot waits for the world's token to come back."""
 WORLD_BLIP_GRACE_S = 0.5
 """Otherwise, how long it waits (sending nothing) before it takes a vanished world token
-for a lost world. At 128 robots on 2 cores a start-up stall let the transport lease close
-every robot's link at once; 119 of 123 robots rejoined within 0.35 s (they had seen their
-own loop stall and waited), the other 4 exited at once and stood in the way for the rest
-of the run (`orchestrator scale --agents 128`, 23 contacts)."""
+for a lost world. A stall of the whole host can let the transport lease close every robot's
+link at once, also for a robot that did not see its own loop stall; taking that for a lost
+world, it would exit and stand, an obstacle, in the others' way for the rest of the run."""
 COMPUTE_DECAY = 0.9
 """Per plan, how much of the longest recent plan time the robot still expects (see
 `RobotNode.compute_s`, at most `STALE_PLAN_S`): a spike is forgotten by half in about 7

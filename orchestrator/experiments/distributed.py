@@ -68,7 +68,7 @@ STARTUP_S_MIN = 30.0
 STARTUP_S_PER_ROBOT = 0.5
 """The default start-up deadline is the larger of `STARTUP_S_MIN` and this per robot: every
 spawned robot imports numpy, scipy, osqp and zenoh and opens a TLS session, so with more
-robots than cores start-up grows with N (128 robots on 2 cores are not all alive after 30 s)."""
+robots than cores start-up grows with N."""
 FAULT_POLL_S = 0.02
 """Wall period of the launcher's loop while process faults are pending."""
 TLS_DIR = "tls"
