@@ -1,7 +1,7 @@
 """The robot process: senses poses, plans with `RobotController`, publishes commands.
 
 One OS process per robot, a Zenoh client of the run's router (multicast scouting off,
-explicit endpoint). It knows nothing but what arrives on the wire (see `protocol`):
+explicit endpoint). It knows nothing but what arrives on the wire (see `eifp_wire`):
 
 1. Connect (retrying until ``--startup-timeout-s``), fetch this robot's `RunConfigMsg` from
    the world's queryable (retrying with the same deadline), build the controller.
@@ -11,10 +11,10 @@ explicit endpoint). It knows nothing but what arrives on the wire (see `protocol
    command publisher (DROP, express), the debug publisher (its plans' internals for
    viewers, `PlanDebugMsg`, DROP, express) and, last, its own liveliness token.
 3. Loop: drain control and liveliness (their callbacks fill an `Inbox` each), decode the
-   ring (a `protocol.PoseDecoder`; the newest valid snapshot goes to
+   ring (an `eifp_wire.poses.PoseDecoder`; the newest valid snapshot goes to
    `RobotController.observe`, which drops stale or out-of-order ones), and plan at the
    control rate in SIM time: when the newest pose's stamp reaches the next scheduled plan
-   time, plan and publish one `CommandMsg` (`protocol.encode_command`); the schedule
+   time, plan and publish one `CommandMsg` (`eifp_wire.messages.encode_command`); the schedule
    advances by one period (slots already passed are skipped and counted as overruns, never
    planned as a backlog).
 
@@ -59,11 +59,12 @@ world is gone).
 
 Planning slots are staggered over the world's ticks (`plan_phase_s`: robot k plans on the
 ticks k mod 5 of each 0.1 s period), so only a fifth of the robots plan on any one pose.
-The world publishes tick t on the pose slot ``poses/<t mod 5>`` (`protocol.pose_slot_count`)
-and a robot subscribes to the one slot its plans fall on (`protocol.plan_pose_slot`): it
-receives and decodes 10 poses per second instead of 50, and the router sends a fifth of the
-bytes. A robot whose plan slots are not on one pose slot (``--control-phase-s`` between
-ticks, ``--control-rate-hz`` 20 ...) subscribes to every slot (``poses/*``).
+The world publishes tick t on the pose slot ``poses/<t mod 5>``
+(`world.sim.schedule.pose_slot_count`) and a robot subscribes to the one slot its plans fall
+on (`world.sim.schedule.plan_pose_slot`): it receives and decodes 10 poses per second
+instead of 50, and the router sends a fifth of the bytes. A robot whose plan slots are not
+on one pose slot (``--control-phase-s`` between ticks, ``--control-rate-hz`` 20 ...)
+subscribes to every slot (``poses/*``).
 Between poses the loop blocks on the pose queue (woken by the pose itself: no polling while
 the world runs late), at most `MAX_NAP_S`. Zenoh runs on one thread of the process
 (`agent.process.use_one_zenoh_thread`). A robot's cost per cycle is in docs/scale.md
@@ -104,7 +105,7 @@ from agent.process import (
     stop_on_signals,
     use_one_zenoh_thread,
 )
-from protocol import (
+from eifp_wire import (
     MAX_ROBOT_ID,
     ControlMsg,
     PlanDebugMsg,
@@ -137,16 +138,15 @@ STAMP_EPS_S = 1e-6
 SUSPEND_GAP_S = 0.5
 """A loop stall this long (wall time between two iterations that the loop's CPU time and its
 waits do not explain, `agent.process.StallWatch`) means the process was suspended (stopped,
-or not scheduled for that long: the fork launcher's start-up of 64 robots on 2 cores gives
-some robots 0.5-0.6 s of such a wait)."""
+or not scheduled for that long, as some robots are while a fork launcher starts many robots
+on a small host)."""
 REJOIN_GRACE_S = 5.0
 """After a suspension, how long the robot waits for the world's token to come back."""
 WORLD_BLIP_GRACE_S = 0.5
 """Otherwise, how long it waits (sending nothing) before it takes a vanished world token
-for a lost world. At 128 robots on 2 cores a start-up stall let the transport lease close
-every robot's link at once; 119 of 123 robots rejoined within 0.35 s (they had seen their
-own loop stall and waited), the other 4 exited at once and stood in the way for the rest
-of the run (`orchestrator scale --agents 128`, 23 contacts)."""
+for a lost world. A stall of the whole host can let the transport lease close every robot's
+link at once, also for a robot that did not see its own loop stall; taking that for a lost
+world, it would exit and stand, an obstacle, in the others' way for the rest of the run."""
 COMPUTE_DECAY = 0.9
 """Per plan, how much of the longest recent plan time the robot still expects (see
 `RobotNode.compute_s`, at most `STALE_PLAN_S`): a spike is forgotten by half in about 7
@@ -508,7 +508,7 @@ class RobotNode:
                        "token_timeouts": 0, "refused_poses": 0, "refused_control": 0,
                        "refused_config": refused_config}
         self.world_zid = world_zid
-        self.seq = -1  # the last command's seq (`protocol.next_seq`); none yet
+        self.seq = -1  # the last command's seq (`eifp_wire.clock.next_seq`); none yet
         # How long [sim s] the robot expects its next plan to take, from sensing to sending:
         # the longest recent plan time, decaying by COMPUTE_DECAY per plan. The robot plans
         # for the time its command will leave (`plan_and_send`).
@@ -747,7 +747,7 @@ class RobotNode:
         # plan seconds ahead for the rest of the run (the controller caps the age there too).
         self.compute_s = min(max(took_s, COMPUTE_DECAY * self.compute_s), STALE_PLAN_S)
         # The fields of a `CommandMsg`, its `WallStamps` in their wire order.
-        # On the clock of the poses (`protocol.next_seq`): a robot whose seq a forger pushed
+        # On the clock of the poses (`eifp_wire.clock.next_seq`): a robot whose seq a forger pushed
         # up catches up as time passes.
         self.seq = next_seq(self.seq, msg.t_s)
         self.cmd_pub.put(encode_command(

@@ -65,7 +65,7 @@ from typing import Any
 import numpy as np
 
 from agent.core.scenario import Scenario
-from protocol import TIMING_COLUMNS
+from eifp_wire import TIMING_COLUMNS
 
 CONTACT_OVERLAP_M = 1.0e-3
 TURN_RATE_MIN_RADPS = 0.05

@@ -22,7 +22,7 @@ from agent.node import (
     plan_phase_s,
 )
 from agent.process import ExitCode, StallWatch, StopFlag
-from protocol import CommandMsg, RunConfigMsg
+from eifp_wire import CommandMsg, RunConfigMsg
 
 
 def test_schedule_plans_on_first_pose_then_every_period() -> None:
@@ -206,7 +206,7 @@ def test_a_robot_process_imports_only_what_it_needs() -> None:
     code = """
 import json, sys
 from agent.node import make_controller, warm_up
-from protocol import RunConfigMsg
+from eifp_wire import RunConfigMsg
 from agent.core.config import PlannerConfig
 from agent.core.scenario import RobotSpec
 spec = RobotSpec(0, (0.0, 0.0, 0.0), (10.0, 0.0), planner="eifp-mpc")
@@ -385,7 +385,7 @@ def _pose_node(world_zid: str | None):
     from types import SimpleNamespace
 
     from agent.planning.controller import RobotController
-    from protocol import PoseDecoder
+    from eifp_wire import PoseDecoder
     from world.sim.link import FaultyLink, LinkFaults
 
     node = object.__new__(RobotNode)
@@ -409,7 +409,7 @@ def _pose_node(world_zid: str | None):
 
 
 def _pose(tick: int, t_s: float):
-    from protocol import PosesMsg
+    from eifp_wire import PosesMsg
 
     return PosesMsg(t_s=t_s, tick=tick, robot_ids=[0, 1],
                     robot_pose=[[0, 0, 0], [5, 0, 3.1]], robot_radius_m=[0.5, 0.5],
@@ -457,7 +457,7 @@ def test_the_clock_moves_only_on_a_pose_that_passed_every_check() -> None:
 
 
 def test_control_is_obeyed_only_from_the_worlds_session() -> None:
-    from protocol import ControlMsg
+    from eifp_wire import ControlMsg
 
     node = _pose_node("aa")
     end = ControlMsg("end", 1.0, "all_arrived").encode()
@@ -477,7 +477,7 @@ def test_a_configuration_reply_not_from_the_world_is_refused() -> None:
     from types import SimpleNamespace
 
     from agent.process import StopFlag
-    from protocol import RunKeys
+    from eifp_wire import RunKeys
 
     good = RunConfigMsg(run_id="r1", robot=RobotSpec(id=3, start=(0.0, 0.0, 0.0),
                                                       goal=(5.0, 0.0)),
@@ -590,7 +590,7 @@ def test_a_configuration_out_of_range_is_refused_and_named_at_start_up() -> None
     import msgpack
 
     from agent import node
-    from protocol import RunKeys
+    from eifp_wire import RunKeys
 
     good = RunConfigMsg(run_id="r1", robot=RobotSpec(id=3, start=(0.0, 0.0, 0.0),
                                                       goal=(5.0, 0.0)),

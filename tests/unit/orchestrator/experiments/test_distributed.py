@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 
+from eifp_wire import ProtocolError
 from orchestrator.experiments.distributed import (
     _EventTail,
     _last_trajectory_time,
@@ -19,7 +20,6 @@ from orchestrator.experiments.distributed import (
     run_distributed,
     world_command,
 )
-from protocol import ProtocolError
 from world.scenario_file import ScenarioError
 
 
