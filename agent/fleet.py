@@ -21,16 +21,16 @@ the robots run N steps nicer than the parent (a world sharing their machine stay
 
 Start-up is throttled: at most ``--max-starting`` (`MAX_STARTING`) children are between
 their fork and their liveliness token at once; each reports ready through a pipe and the
-parent forks the next. 128 robots forked in one burst all connect, query and warm up at
-the same moment, and on a loaded 2-core machine that starved the router's Zenoh threads
-past the 1 s transport lease: the world dropped most of them and they left (docs/scale.md).
+parent forks the next. Robots forked in one burst all connect, query and warm up at the
+same moment, which on a loaded host can starve the router's Zenoh threads past the 1 s
+transport lease: the world then drops most of them and they leave (docs/scale.md).
 
 CPU tokens (``--cpu-tokens N``, off by default): the children share a semaphore of N; a
 robot holds one while it senses and plans (`agent.node.cpu_token`), so at
 most N compute at once, each to the end of its cycle, instead of 100 runnable robots
 time-sliced against each other (and against the world) when they want more CPU than the
-host has. Measured with N = 2 on 2 cores it kept every robot's lease but raised the
-deadline misses (the queue's wait adds to every late cycle), so it is off (docs/scale.md).
+host has. It is off by default: it keeps every robot's lease, but the wait for a token adds
+to every late cycle, so more cycles miss their deadline (docs/scale.md).
 """
 
 from __future__ import annotations
@@ -120,7 +120,7 @@ def warm_up_planners() -> None:
     from agent.core.config import PLANNER_NAMES, PlannerConfig
     from agent.core.scenario import RobotSpec
     from agent.startup import warm_up
-    from protocol import RunConfigMsg
+    from eifp_wire import RunConfigMsg
 
     for k, name in enumerate(PLANNER_NAMES):
         spec = RobotSpec(k, (0.0, 0.0, 0.0), (10.0, 0.0), planner=name)

@@ -1,7 +1,7 @@
 """The robot process: the Zenoh edge around one `agent.robot_cycle.RobotCycle`.
 
 One OS process per robot, a Zenoh client of the run's router (multicast scouting off,
-explicit endpoint). It knows nothing but what arrives on the wire (see `protocol`). Every
+explicit endpoint). It knows nothing but what arrives on the wire (see `eifp_wire`). Every
 decision (what a pose does, when to plan, what to send, what to count, when the world is
 lost) is the cycle's; this module reads the clocks and the wire, feeds them in, publishes
 what comes out and logs.
@@ -34,14 +34,14 @@ world is gone).
 Planning slots are staggered over the world's ticks (`world.sim.schedule.plan_phase_s`:
 robot k plans on the ticks k mod 5 of each 0.1 s period), so only a fifth of the robots
 plan on any one pose. The world publishes tick t on the pose slot ``poses/<t mod 5>``
-(`protocol.pose_slot_count`) and a robot subscribes to the one slot its plans fall on
-(`protocol.plan_pose_slot`): it receives and decodes 10 poses per second instead of 50, and
-the router sends a fifth of the bytes. A robot whose plan slots are not on one pose slot
-(``--control-phase-s`` between ticks, ``--control-rate-hz`` 20 ...) subscribes to every
-slot (``poses/*``). Between poses the loop blocks on the pose queue (woken by the pose
-itself: no polling while the world runs late), at most `MAX_NAP_S`. Zenoh runs on one
-thread of the process (`agent.process.use_one_zenoh_thread`). A robot's cost per cycle is
-in docs/scale.md (`orchestrator bench --process`).
+(`world.sim.schedule.pose_slot_count`) and a robot subscribes to the one slot its plans fall
+on (`world.sim.schedule.plan_pose_slot`): it receives and decodes 10 poses per second
+instead of 50, and the router sends a fifth of the bytes. A robot whose plan slots are not
+on one pose slot (``--control-phase-s`` between ticks, ``--control-rate-hz`` 20 ...)
+subscribes to every slot (``poses/*``). Between poses the loop blocks on the pose queue
+(woken by the pose itself: no polling while the world runs late), at most `MAX_NAP_S`.
+Zenoh runs on one thread of the process (`agent.process.use_one_zenoh_thread`). A robot's
+cost per cycle is in docs/scale.md (`orchestrator bench --process`).
 """
 
 from __future__ import annotations
@@ -80,7 +80,7 @@ from agent.startup import (
     warm_up,
     world_zid_of,
 )
-from protocol import RunConfigMsg, RunKeys, plan_pose_slot, pose_slot_count
+from eifp_wire import RunConfigMsg, RunKeys, plan_pose_slot, pose_slot_count
 from world.sim.link import LINK_POSES, FaultyLink, link_rng
 from world.sim.schedule import PlanSchedule, plan_phase_s
 

@@ -9,7 +9,7 @@ clock, touches Zenoh or logs, so every decision is tested by calling it
 - **Sensing** (`RobotCycle.sense`): every payload of the pose ring is decoded (a malformed one
   is rejected and counted), newest first; only the newest valid one goes on, the older ones
   are ``skipped``. A pose whose tick and time do not fit the robot's clock
-  (`protocol.check_pose_time`) is refused (``refused_poses``). The one left sets the sim
+  (`eifp_wire.clock.check_pose_time`) is refused (``refused_poses``). The one left sets the sim
   clock (`SimClock`), passes through the injected pose link (`world.sim.link.FaultyLink`),
   and what the link releases is observed by the controller, which drops stale or
   out-of-order snapshots (``stale``).
@@ -36,7 +36,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Protocol
 
 from agent.core.types import PlanResult, PlanStatus, PoseSnapshot
-from protocol import (
+from eifp_wire import (
     ControlMsg,
     PlanDebugMsg,
     PoseDecoder,
@@ -53,16 +53,15 @@ from world.sim.schedule import PlanSchedule
 SUSPEND_GAP_S = 0.5
 """A loop stall this long (wall time between two iterations that the loop's CPU time and its
 waits do not explain, `agent.process.StallWatch`) means the process was suspended (stopped,
-or not scheduled for that long: the fork launcher's start-up of 64 robots on 2 cores gives
-some robots 0.5-0.6 s of such a wait)."""
+or not scheduled for that long, as some robots are while a fork launcher starts many robots
+on a small host)."""
 REJOIN_GRACE_S = 5.0
 """After a suspension, how long the robot waits for the world's token to come back."""
 WORLD_BLIP_GRACE_S = 0.5
 """Otherwise, how long it waits (sending nothing) before it takes a vanished world token
-for a lost world. At 128 robots on 2 cores a start-up stall let the transport lease close
-every robot's link at once; 119 of 123 robots rejoined within 0.35 s (they had seen their
-own loop stall and waited), the other 4 exited at once and stood in the way for the rest
-of the run (`orchestrator scale --agents 128`, 23 contacts)."""
+for a lost world. A stall of the whole host can let the transport lease close every robot's
+link at once, also for a robot that did not see its own loop stall; taking that for a lost
+world, it would exit and stand, an obstacle, in the others' way for the rest of the run."""
 COMPUTE_DECAY = 0.9
 """Per plan, how much of the longest recent plan time the robot still expects (see
 `RobotCycle.compute_s`, at most `STALE_PLAN_S`): a spike is forgotten by half in about 7
@@ -235,7 +234,7 @@ class RobotCommand:
 
     Args:
         robot_id: the robot.
-        seq: the command's sequence number (`protocol.next_seq`).
+        seq: the command's sequence number (`eifp_wire.clock.next_seq`).
         pose: the poses it was planned on.
         rx_ns: when the robot took those poses off its queue (monotonic ns).
         result: what to command.
@@ -294,7 +293,7 @@ class RobotCycle:
         self.counts = RobotCounters(refused_config=refused_config)
         self.clock = SimClock(config.time_scale)
         self.world = WorldWatch()
-        self.seq = -1  # the last command's seq (`protocol.next_seq`); none yet
+        self.seq = -1  # the last command's seq (`eifp_wire.clock.next_seq`); none yet
         self.compute_s = 0.0
         """How long [sim s] the robot expects its next plan to take, from sensing to
         sending: the longest recent plan time, decaying by `COMPUTE_DECAY` per plan, at most
@@ -477,7 +476,7 @@ class RobotCycle:
         # Capped at STALE_PLAN_S: a plan a stop (SIGSTOP) stretched must not make the robot
         # plan seconds ahead for the rest of the run (the controller caps the age there too).
         self.compute_s = min(max(took_s, COMPUTE_DECAY * self.compute_s), STALE_PLAN_S)
-        # On the clock of the poses (`protocol.next_seq`): a robot whose seq a forger pushed
+        # On the clock of the poses (`eifp_wire.clock.next_seq`): a robot whose seq a forger pushed
         # up catches up as time passes.
         self.seq = next_seq(self.seq, msg.t_s)
         self.counts.plans += 1

@@ -23,7 +23,7 @@ import zenoh
 from agent import flags as argtypes
 from agent.process import ExitCode, SessionError, StopFlag, check_tls_files, open_session
 from agent.robot_cycle import is_world
-from protocol import (
+from eifp_wire import (
     MAX_ROBOT_ID,
     ProtocolError,
     RunConfigMsg,

@@ -1,7 +1,7 @@
 """The world process: ground truth of a distributed run (the I/O edge around `WorldCycle`).
 
 One process simulates every robot's unicycle and publishes poses; robots are separate
-processes that only sense poses and send velocity commands (see `protocol` for the keys).
+processes that only sense poses and send velocity commands (see `eifp_wire.keys`).
 What to do with each message, tick and liveliness change is decided by a
 `world.world_cycle.WorldCycle`; this module owns the Zenoh session, the pacing, the run
 directory and the logs.
@@ -20,7 +20,7 @@ Lifecycle:
    queries and commands (all read from handler channels, never in callbacks), applies the
    newest command per robot (zero-order hold, `WorldSim.set_command`), steps the world,
    publishes one `PosesMsg` (DROP, express) on the tick's pose slot
-   (``poses/<tick mod K>``, `protocol.pose_slot_count`) and records the tick. The robots'
+   (``poses/<tick mod K>``, `world.sim.schedule.pose_slot_count`) and records the tick. The robots'
    plan internals (``debug/<id>``, `PlanDebugMsg`, through a ring) are validated and
    recorded into ``run.mcap`` (`RunRecorder.record_plan`).
 4. The run ends when every robot has arrived (``all_arrived``), when every robot has
@@ -79,7 +79,7 @@ from agent.process import (
     open_session,
     stop_on_signals,
 )
-from protocol import (
+from eifp_wire import (
     WORLD_CN,
     ControlMsg,
     PosesMsg,
@@ -111,7 +111,7 @@ class WorldOptions:
     """Command-line options of the world process.
 
     Args:
-        run_id: run id (safe characters, see `protocol.validate_run_id`).
+        run_id: run id (safe characters, see `eifp_wire.keys.validate_run_id`).
         scenario_path: scenario YAML file.
         listen: endpoint to listen on as a router (None when `connect` is given).
         connect: endpoint of an existing router to join as a client.
@@ -125,12 +125,12 @@ class WorldOptions:
         link: faults injected on every robot's command link (sim-time delays).
         fault_seed: seeds the command links (with the link kind and the robot id).
         tls_dir: directory with ``ca.pem``, ``world.pem``, ``world.key``: mutual TLS, and
-            as a router the run's access control (`protocol.access_control`); endpoints
+            as a router the run's access control (`eifp_wire.access.access_control`); endpoints
             are then ``tls/...``. None: plain TCP, no authentication. Not with `connect`:
             the world's own router is what enforces the access control.
         relays: relay routers on other hosts (``python -m world.router``), as
             ``(name, robot ids behind it)``: router ``router-<name>`` may speak for those
-            robots only (`protocol.access_control`).
+            robots only (`eifp_wire.access.access_control`).
         zid: the session's Zenoh id (None: random). Robots behind a relay check the source
             of poses against it (``python -m agent --world-zid``).
         lost_grace_s: sim time a lost robot may still come back (a stopped process that

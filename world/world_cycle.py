@@ -28,7 +28,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from agent.core.scenario import Scenario
-from protocol import (
+from eifp_wire import (
     MAX_CMD_AHEAD_S,
     CommandMsg,
     PlanDebugMsg,
@@ -202,7 +202,7 @@ class WorldCycle:
             return
         del self.lost_at_s[rid]
         # The same process, or a new one: either numbers on from the time of its poses
-        # (`protocol.next_seq`), so its last seq stays the bar (an old command replayed now
+        # (`eifp_wire.clock.next_seq`), so its last seq stays the bar (an old command replayed now
         # is still stale).
         self.cmd_links[rid].clear()
         self.sim.set_offline(rid, False)

@@ -17,7 +17,8 @@ One planning cycle, as `plan_ifp` runs it:
    others advanced to that time; the shortened leg is then checked again. A leg whose
    threats all lack candidates is left as it is.
 
-Choices the paper leaves open (documented here, tested in tests/agent/test_ifp.py):
+Choices the paper leaves open (documented here, tested in
+tests/unit/agent/planning/test_ifp.py):
 
 - Step 3 uses the measured velocity v_r as in Eq. (3). A robot that stands still (v_r = 0)
   sees no static obstacle as a threat under Eq. (5), so when Eq. (5) finds nothing the
@@ -156,9 +157,7 @@ class Mechanisms:
         commitment: a head-on threat that the last plan resolved first stays first while
             its TCPA is within `PRIMARY_HOLD_S` of the most imminent one's, so the first
             via-point (where the robot heads now) does not flip between two nearly
-            simultaneous threats. (Keeping every resolved threat while its DCPA stays within
-            L + 0.5 m, against the robot's own swerve pushing it past L, did not earn its
-            place: more reversals on the tuning seeds of `orchestrator benchmark`.)
+            simultaneous threats.
         via_margin_m: how far outside its inflated disc a via-point is placed [m].
         escape_band_m: an escape goes on from the same disc until the robot is this far
             outside it, towards a point that far out (0: only while inside) [m].

@@ -1,6 +1,6 @@
 """Wall-clock latency of a distributed run by stage, from the commands' `WallStamps` (pure).
 
-Every applied command carries the monotonic stamps of its way (`protocol.TIMING_COLUMNS`:
+Every applied command carries the monotonic stamps of its way (`eifp_wire.TIMING_COLUMNS`:
 the pose's publish, the robot's receive, plan start and end, the command's publish, the
 world's receive and apply) and the ids of the clocks they were taken on. `wall_latency_ms`
 turns a run's stamps (``timing.csv``) into percentiles per stage (`WALL_STAGES`,
@@ -14,7 +14,7 @@ from collections.abc import Iterable, Mapping
 
 import numpy as np
 
-from protocol import TIMING_COLUMNS
+from eifp_wire import TIMING_COLUMNS
 
 WALL_STAGES: tuple[tuple[str, str, str, bool], ...] = (
     ("pose_to_robot", "pose_pub_ns", "pose_rx_ns", True),

@@ -46,6 +46,7 @@ from agent.core.scenario import Scenario
 from agent.files import append_line, open_new, replace_file
 from agent.flags import endpoint_host, every_interface, unspecified_literal
 from agent.process import PARENT_PID_ENV, raise_interrupt
+from eifp_wire import OBSERVER_CN, TlsFiles, tls_endpoint, validate_run_id
 from orchestrator.analysis.metrics import RunMetrics
 from orchestrator.experiments.progress import (
     DistributedProgress,
@@ -53,7 +54,6 @@ from orchestrator.experiments.progress import (
     distributed_progress,
     last_trajectory_time,
 )
-from protocol import OBSERVER_CN, TlsFiles, tls_endpoint, validate_run_id
 from world.scenario_file import load_scenario
 from world.sim.faults import FaultPlan, ProcessFault
 
@@ -73,7 +73,7 @@ STARTUP_S_MIN = 30.0
 STARTUP_S_PER_ROBOT = 0.5
 """The default start-up deadline is the larger of `STARTUP_S_MIN` and this per robot: every
 spawned robot imports numpy, scipy, osqp and zenoh and opens a TLS session, so with more
-robots than cores start-up grows with N (128 robots on 2 cores are not all alive after 30 s)."""
+robots than cores start-up grows with N."""
 FAULT_POLL_S = 0.02
 """Wall period of the launcher's loop while process faults are pending."""
 TLS_DIR = "tls"

@@ -457,8 +457,8 @@ def world_tick_costs(n: int, ticks: int, out_dir: Path) -> dict[str, Any]:
     """
     import numpy as np
 
+    from eifp_wire import CommandMsg, PosesMsg
     from orchestrator.experiments.families import circles
-    from protocol import CommandMsg, PosesMsg
     from world.recorder import RunRecorder
     from world.sim.dynamics import WorldSim
 

@@ -21,7 +21,7 @@ from agent.node import CpuMeter, PoseInbox, cpu_token
 from agent.planning.controller import RobotController
 from agent.process import StallWatch
 from agent.robot_cycle import RobotCycle
-from protocol import PosesMsg, RunConfigMsg
+from eifp_wire import PosesMsg, RunConfigMsg
 from world.sim.schedule import PlanSchedule
 
 
@@ -32,7 +32,7 @@ def test_a_robot_process_imports_only_what_it_needs() -> None:
 import json, sys
 import agent.node
 from agent.startup import make_controller, warm_up
-from protocol import RunConfigMsg
+from eifp_wire import RunConfigMsg
 from agent.core.config import PlannerConfig
 from agent.core.scenario import RobotSpec
 spec = RobotSpec(0, (0.0, 0.0, 0.0), (10.0, 0.0), planner="eifp-mpc")

@@ -13,8 +13,7 @@ import pytest
 import zenoh
 
 from agent.process import StopFlag
-from orchestrator.experiments.distributed import free_tcp_endpoint
-from protocol import (
+from eifp_wire import (
     MAX_CMD_AHEAD_S,
     CommandMsg,
     ControlMsg,
@@ -25,6 +24,7 @@ from protocol import (
     scoped_cn,
     session_settings,
 )
+from orchestrator.experiments.distributed import free_tcp_endpoint
 from tests.unit.world.test_world_cycle import TWO_ROBOTS
 from world.node import WorldNode, WorldOptions, parse_args, run_configs
 from world.recorder import RunRecorder
@@ -135,7 +135,7 @@ def test_liveliness_join_loss_and_rejoin(rig: Rig) -> None:
 def test_a_robot_back_after_a_loss_numbers_on_from_time_and_old_commands_stay_stale(
         rig: Rig) -> None:
     """The lease closed a robot's link and it came back: its seq follows time
-    (`protocol.next_seq`), so the world keeps its last seq as the bar: a command replayed
+    (`eifp_wire.clock.next_seq`), so the world keeps its last seq as the bar: a command replayed
     from before the loss is stale, one beyond what the time allows is refused."""
     node = rig.node
     pub0 = rig.client.declare_publisher(rig.keys.cmd(0))
@@ -317,7 +317,7 @@ def test_a_pose_subscriber_puts_each_sample_on_the_robots_queue(rig: Rig) -> Non
     import queue
 
     from agent.process import enqueue_on_receive
-    from protocol import PoseDecoder
+    from eifp_wire import PoseDecoder
 
     handler = enqueue_on_receive(queue.SimpleQueue().put)
     if isinstance(handler, zenoh.handlers.Callback):

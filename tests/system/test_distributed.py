@@ -26,6 +26,7 @@ import psutil
 import pytest
 
 from agent.process import ExitCode
+from eifp_wire import CommandMsg, ControlMsg, PosesMsg, ProtocolError, RunKeys, session_settings
 from orchestrator.experiments.distributed import (
     free_tcp_endpoint,
     robot_command,
@@ -34,7 +35,6 @@ from orchestrator.experiments.distributed import (
     stop_processes,
     world_command,
 )
-from protocol import CommandMsg, ControlMsg, PosesMsg, ProtocolError, RunKeys, session_settings
 
 pytestmark = [pytest.mark.system, pytest.mark.timeout(240)]
 

@@ -22,8 +22,8 @@ import psutil
 import pytest
 
 from agent.process import ExitCode
+from eifp_wire import CommandMsg, PosesMsg, ProtocolError, RunKeys
 from orchestrator.experiments.distributed import free_tcp_endpoint, run_distributed
-from protocol import CommandMsg, PosesMsg, ProtocolError, RunKeys
 from tests.system.test_distributed import (
     RUN_S,
     STARTUP_S,

@@ -1,6 +1,6 @@
 """The schedule of a run: pose slots, planning slots and the transport lease (pure).
 
-The world publishes tick t's poses on ``poses/<t mod K>`` (`protocol.RunKeys.poses_slot`);
+The world publishes tick t's poses on ``poses/<t mod K>`` (`eifp_wire.keys.RunKeys.poses_slot`);
 a robot that plans once a control period on a fixed tick needs only its slot. The lockstep
 loop (`world.sim.lockstep`) and the processes (`world.node`, `agent.node`) share these; a
 robot process plans on the slots of a `PlanSchedule`.

@@ -21,7 +21,7 @@ from agent.robot_cycle import (
     is_world,
     worth_logging,
 )
-from protocol import CommandMsg, ControlMsg, PosesMsg, RunConfigMsg
+from eifp_wire import CommandMsg, ControlMsg, PosesMsg, RunConfigMsg
 from world.sim.link import FaultyLink, LinkFaults, link_rng
 from world.sim.schedule import PlanSchedule
 

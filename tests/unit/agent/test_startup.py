@@ -13,7 +13,7 @@ from agent.core.config import PlannerConfig
 from agent.core.scenario import RobotSpec
 from agent.process import ExitCode, StopFlag
 from agent.startup import AgentOptions, RobotExit, fetch_config, make_controller, parse_args
-from protocol import RunConfigMsg, RunKeys
+from eifp_wire import RunConfigMsg, RunKeys
 
 
 def _config(robot: RobotSpec, **fields: object) -> RunConfigMsg:

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from agent.core.types import PlanDebug, PlanResult, PlanStatus
-from protocol import (
+from eifp_wire import (
     MAX_CMD_AHEAD_S,
     CommandMsg,
     ControlMsg,

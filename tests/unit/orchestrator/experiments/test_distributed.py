@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pytest
 
+from eifp_wire import ProtocolError
 from orchestrator.experiments.distributed import (
     fleet_command,
     free_tcp_endpoint,
@@ -15,7 +16,6 @@ from orchestrator.experiments.distributed import (
     run_distributed,
     world_command,
 )
-from protocol import ProtocolError
 from world.scenario_file import ScenarioError
 
 
