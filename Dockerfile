@@ -56,7 +56,8 @@ CMD ["help"]
 USER eifp
 # The matplotlib font cache, built once here rather than at every orchestrator start.
 RUN python -c 'import matplotlib.pyplot'
-COPY --chown=1000:1000 pyproject.toml README.md protocol.py /tmp/src/
+COPY --chown=1000:1000 pyproject.toml README.md /tmp/src/
+COPY --chown=1000:1000 eifp_wire /tmp/src/eifp_wire
 COPY --chown=1000:1000 agent /tmp/src/agent
 COPY --chown=1000:1000 world /tmp/src/world
 COPY --chown=1000:1000 orchestrator /tmp/src/orchestrator

@@ -16,7 +16,7 @@ import socket
 import sys
 from typing import NoReturn
 
-from protocol import ProtocolError, router_cn, validate_run_id, validate_zid
+from eifp_wire import ProtocolError, router_cn, validate_run_id, validate_zid
 from world.sim.link import LinkFaults
 
 MAX_SHOWN_CHARS = 200

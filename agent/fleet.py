@@ -21,16 +21,16 @@ the robots run N steps nicer than the parent (a world sharing their machine stay
 
 Start-up is throttled: at most ``--max-starting`` (`MAX_STARTING`) children are between
 their fork and their liveliness token at once; each reports ready through a pipe and the
-parent forks the next. 128 robots forked in one burst all connect, query and warm up at
-the same moment, and on a loaded 2-core machine that starved the router's Zenoh threads
-past the 1 s transport lease: the world dropped most of them and they left (docs/scale.md).
+parent forks the next. Robots forked in one burst all connect, query and warm up at the
+same moment, which on a loaded host can starve the router's Zenoh threads past the 1 s
+transport lease: the world then drops most of them and they leave (docs/scale.md).
 
 CPU tokens (``--cpu-tokens N``, off by default): the children share a semaphore of N; a
-robot holds one while it senses and plans (`agent.node.RobotNode.sense_and_plan`), so at
+robot holds one while it senses and plans (`agent.node.cpu_token`), so at
 most N compute at once, each to the end of its cycle, instead of 100 runnable robots
 time-sliced against each other (and against the world) when they want more CPU than the
-host has. Measured with N = 2 on 2 cores it kept every robot's lease but raised the
-deadline misses (the queue's wait adds to every late cycle), so it is off (docs/scale.md).
+host has. It is off by default: it keeps every robot's lease, but the wait for a token adds
+to every late cycle, so more cycles miss their deadline (docs/scale.md).
 """
 
 from __future__ import annotations
@@ -119,8 +119,8 @@ def warm_up_planners() -> None:
     """Import every planner and plan once with each (a throwaway robot), before forking."""
     from agent.core.config import PLANNER_NAMES, PlannerConfig
     from agent.core.scenario import RobotSpec
-    from agent.node import warm_up
-    from protocol import RunConfigMsg
+    from agent.startup import warm_up
+    from eifp_wire import RunConfigMsg
 
     for k, name in enumerate(PLANNER_NAMES):
         spec = RobotSpec(k, (0.0, 0.0, 0.0), (10.0, 0.0), planner=name)
@@ -175,6 +175,112 @@ def _child(argv: list[str], log_path: Path, parent_pid: int, nice: int = 0,
             os._exit(code)
 
 
+def _bad_args(args: argparse.Namespace) -> str | None:
+    """What is wrong with the fleet's arguments, or None."""
+    if args.nice < 0:
+        return f"--nice must be >= 0, got {args.nice}"
+    if args.max_starting < 1:
+        return f"--max-starting must be >= 1, got {args.max_starting}"
+    if args.cpu_tokens < 0:
+        return f"--cpu-tokens must be >= 0, got {args.cpu_tokens}"
+    unknown = sorted(set(dict(args.connect_id)) - set(args.ids))
+    if unknown:
+        return f"--connect-id for robots not in --ids: {unknown}"
+    return None
+
+
+class _StartSlots:
+    """The children between their fork and their ready report, at most `limit` at once.
+
+    A child reports ready by writing its pid and a newline to `ready_w` (`_child`); one that
+    exits, or has been starting for `READY_TIMEOUT_S`, frees its slot too.
+    """
+
+    def __init__(self, limit: int) -> None:
+        self.limit = limit
+        self.starting: dict[int, float] = {}  # pid -> monotonic fork time, until ready
+        self.exited: dict[int, int] = {}  # pid -> wait status, reaped while forking
+        self.ready_r, self.ready_w = os.pipe()
+        os.set_blocking(self.ready_r, False)
+        self._buffered = b""
+
+    def wait(self, pending: list[int]) -> None:
+        """Until a slot is free or a signal is `pending`."""
+        while len(self.starting) >= self.limit and not pending:
+            with contextlib.suppress(InterruptedError):
+                select.select([self.ready_r], [], [], 0.05)
+            with contextlib.suppress(BlockingIOError, InterruptedError):
+                self._buffered += os.read(self.ready_r, 4096)
+            *lines, self._buffered = self._buffered.split(b"\n")
+            for line in lines:
+                self.starting.pop(int(line), None)
+            self._reap_starting()
+            now = time.monotonic()
+            for pid, t0 in list(self.starting.items()):
+                if now - t0 > READY_TIMEOUT_S:
+                    self.starting.pop(pid)
+
+    def _reap_starting(self) -> None:
+        """Reap the children that died while starting (their status is kept for later)."""
+        while True:
+            try:
+                pid, status = os.waitpid(-1, os.WNOHANG)
+            except ChildProcessError:
+                return
+            if pid == 0:
+                return
+            self.exited[pid] = status
+            self.starting.pop(pid, None)
+
+    def started(self, pid: int) -> None:
+        self.starting[pid] = time.monotonic()
+
+    def close(self) -> None:
+        os.close(self.ready_w)
+        os.close(self.ready_r)
+
+
+def _fork(argv: list[str], log_path: Path, parent: int, nice: int, slots: _StartSlots,
+          cpu_tokens: object | None) -> int:
+    """Fork one robot process; returns its pid, with the forwarded signals still blocked
+    (the caller unblocks them once it knows the child, so that a signal reaches it too).
+    In the child the signals wait until it has its own handlers (`_forward` never runs
+    there); the child never returns."""
+    signal.pthread_sigmask(signal.SIG_BLOCK, FORWARDED)
+    pid = os.fork()
+    if pid == 0:
+        for signum in FORWARDED:
+            signal.signal(signum, signal.SIG_DFL)
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, FORWARDED)
+        os.close(slots.ready_r)
+        _child(argv, log_path, parent, nice, slots.ready_w, cpu_tokens)
+    return pid
+
+
+def _reap(children: dict[int, int], exited: dict[int, int]) -> int:
+    """Wait for every child (those in `exited` already are); returns the largest robot exit
+    status (128 + N for a robot killed by signal N)."""
+    worst = 0
+    while children:
+        if exited:
+            pid, status = exited.popitem()
+        else:
+            try:
+                pid, status = os.waitpid(-1, 0)
+            except ChildProcessError:
+                break
+            except InterruptedError:
+                continue
+        rid = children.pop(pid, None)
+        if rid is None:
+            continue
+        code = os.waitstatus_to_exitcode(status)
+        code = code if code >= 0 else 128 - code
+        worst = max(worst, code)
+        log.info("fleet: robot %d (pid %d) exited %d", rid, pid, code)
+    return worst
+
+
 def run_fleet(args: argparse.Namespace) -> int:
     """Warm up, fork one child per robot, pass signals on, reap; returns the exit status.
 
@@ -182,24 +288,14 @@ def run_fleet(args: argparse.Namespace) -> int:
     a starting child reports ready (its token is declared), exits, or has been starting
     for `READY_TIMEOUT_S`.
     """
-    if args.nice < 0:
-        log.error("--nice must be >= 0, got %d", args.nice)
+    problem = _bad_args(args)
+    if problem:
+        log.error("%s", problem)
         return 2
-    if args.max_starting < 1:
-        log.error("--max-starting must be >= 1, got %d", args.max_starting)
-        return 2
-    n_tokens = args.cpu_tokens
-    if n_tokens < 0:
-        log.error("--cpu-tokens must be >= 0, got %d", n_tokens)
-        return 2
-    # A POSIX semaphore in shared memory, inherited by every child (see
-    # agent.node.RobotNode.sense_and_plan).
-    cpu_tokens = multiprocessing.get_context("fork").Semaphore(n_tokens) if n_tokens else None
+    # A POSIX semaphore in shared memory, inherited by every child (see agent.node.cpu_token).
+    cpu_tokens = (multiprocessing.get_context("fork").Semaphore(args.cpu_tokens)
+                  if args.cpu_tokens else None)
     overrides = dict(args.connect_id)
-    unknown = sorted(set(overrides) - set(args.ids))
-    if unknown:
-        log.error("--connect-id for robots not in --ids: %s", unknown)
-        return 2
     args.log_dir.mkdir(parents=True, exist_ok=True)
     warm_up_planners()
     gc.collect()
@@ -207,35 +303,7 @@ def run_fleet(args: argparse.Namespace) -> int:
     parent = os.getpid()
     children: dict[int, int] = {}
     pending: list[int] = []
-    starting: dict[int, float] = {}  # pid -> monotonic fork time, until ready
-    exited: dict[int, int] = {}  # pid -> wait status, reaped while forking
-    ready_r, ready_w = os.pipe()
-    os.set_blocking(ready_r, False)
-    buffered = b""
-
-    def _wait_for_a_start_slot() -> None:
-        nonlocal buffered
-        while len(starting) >= args.max_starting and not pending:
-            with contextlib.suppress(InterruptedError):
-                select.select([ready_r], [], [], 0.05)
-            with contextlib.suppress(BlockingIOError, InterruptedError):
-                buffered += os.read(ready_r, 4096)
-            *lines, buffered = buffered.split(b"\n")
-            for line in lines:
-                starting.pop(int(line), None)
-            while True:  # children that died while starting
-                try:
-                    pid, status = os.waitpid(-1, os.WNOHANG)
-                except ChildProcessError:
-                    break
-                if pid == 0:
-                    break
-                exited[pid] = status
-                starting.pop(pid, None)
-            now = time.monotonic()
-            for pid, t0 in list(starting.items()):
-                if now - t0 > READY_TIMEOUT_S:
-                    starting.pop(pid)
+    slots = _StartSlots(args.max_starting)
 
     def _forward(signum: int, frame: FrameType | None) -> None:
         pending.append(signum)
@@ -246,46 +314,20 @@ def run_fleet(args: argparse.Namespace) -> int:
     previous = {s: signal.signal(s, _forward) for s in FORWARDED}
     try:
         for rid in args.ids:
-            _wait_for_a_start_slot()
+            slots.wait(pending)
             if pending:
                 break
             argv = robot_argv(args.run, rid, overrides.get(rid, args.connect),
                               args.startup_timeout_s, args.robot_arg, args.tls)
-            # Signals wait until the child has its own handlers (never run _forward there).
-            signal.pthread_sigmask(signal.SIG_BLOCK, FORWARDED)
-            pid = os.fork()
-            if pid == 0:
-                for signum in FORWARDED:
-                    signal.signal(signum, signal.SIG_DFL)
-                signal.pthread_sigmask(signal.SIG_UNBLOCK, FORWARDED)
-                os.close(ready_r)
-                _child(argv, args.log_dir / f"robot_{rid}.log", parent, args.nice, ready_w,
-                       cpu_tokens)
+            pid = _fork(argv, args.log_dir / f"robot_{rid}.log", parent, args.nice, slots,
+                        cpu_tokens)
             children[pid] = rid
-            starting[pid] = time.monotonic()
+            slots.started(pid)
             signal.pthread_sigmask(signal.SIG_UNBLOCK, FORWARDED)
-        os.close(ready_w)
-        os.close(ready_r)
-        log.info("fleet: %d robot processes forked, %d CPU tokens", len(children), n_tokens)
-        worst = 0
-        while children:
-            if exited:
-                pid, status = exited.popitem()
-            else:
-                try:
-                    pid, status = os.waitpid(-1, 0)
-                except ChildProcessError:
-                    break
-                except InterruptedError:
-                    continue
-            rid = children.pop(pid, None)
-            if rid is None:
-                continue
-            code = os.waitstatus_to_exitcode(status)
-            code = code if code >= 0 else 128 - code
-            worst = max(worst, code)
-            log.info("fleet: robot %d (pid %d) exited %d", rid, pid, code)
-        return worst
+        slots.close()
+        log.info("fleet: %d robot processes forked, %d CPU tokens", len(children),
+                 args.cpu_tokens)
+        return _reap(children, slots.exited)
     finally:
         for signum, handler in previous.items():
             signal.signal(signum, handler)

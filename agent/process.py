@@ -237,7 +237,7 @@ def zenoh_config(settings: Mapping[str, Any]) -> zenoh.Config:
 
 def open_session(settings: Mapping[str, Any], *, deadline: float | None = None,
                  stop: StopFlag | None = None) -> zenoh.Session | None:
-    """Open a Zenoh session with `settings` (`protocol.session_settings`).
+    """Open a Zenoh session with `settings` (`eifp_wire.transport.session_settings`).
 
     Args:
         settings: key path -> JSON5 value, inserted into a fresh config.
@@ -265,7 +265,8 @@ def open_session(settings: Mapping[str, Any], *, deadline: float | None = None,
 
 
 def check_tls_files(files: Any) -> str | None:
-    """Why the `protocol.TlsFiles` `files` cannot be used (one missing or unreadable), or None.
+    """Why the `eifp_wire.transport.TlsFiles` `files` cannot be used (one missing or
+    unreadable), or None.
 
     Checked before opening: zenoh would otherwise retry a client's connection forever, or
     fail with an unrelated hint."""

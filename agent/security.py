@@ -1,11 +1,12 @@
 """Certificates of a run: a per-run certificate authority and one certificate per process.
 
 The orchestrator calls `make_run_pki` before it starts the world and the robots; each process
-then opens its Zenoh session with its own files (`protocol.TlsFiles`, `protocol.tls_settings`)
-and the world's router enforces `protocol.access_control`, which tells processes apart by the
-common name (CN) of their certificate: ``world``, ``robot-<id>``, ``orchestrator``,
-``observer``, each scoped to the run (`protocol.scoped_cn`: ``robot-3@<run tag>``), so a
-certificate of another run, even from the same CA, holds no right in this one.
+then opens its Zenoh session with its own files (`eifp_wire.transport.TlsFiles`,
+`eifp_wire.transport.tls_settings`) and the world's router enforces
+`eifp_wire.access.access_control`, which tells processes apart by the common name (CN) of
+their certificate: ``world``, ``robot-<id>``, ``orchestrator``, ``observer``, each scoped to
+the run (`eifp_wire.access.scoped_cn`: ``robot-3@<run tag>``), so a certificate of another
+run, even from the same CA, holds no right in this one.
 
 EC P-256 keys, SHA-256 signatures. The CA is made fresh for each run and, by default, its
 key is never written: once every certificate is issued, nobody can mint another identity
@@ -17,7 +18,7 @@ without following symlinks (`agent.files`).
 
 Only routers' certificates have subjectAltNames: the names they are dialled by. The world's:
 ``world`` in compose, ``localhost``, ``127.0.0.1``, and any ``--hosts``; a relay router's
-(``router-<name>``, on another host, `protocol.relay_access_control`): ``router-<name>``,
+(``router-<name>``, on another host, `eifp_wire.access.relay_access_control`): ``router-<name>``,
 ``localhost``, ``127.0.0.1`` and the names of its host. rustls checks the dialled name
 against the SANs only, never the CN.
 """
@@ -35,7 +36,7 @@ from cryptography.hazmat.primitives.asymmetric import ec
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
 from agent.files import PRIVATE_FILE_MODE, create_run_dir, replace_file, reuse_dir, write_new
-from protocol import (
+from eifp_wire import (
     OBSERVER_CN,
     ORCHESTRATOR_CN,
     WORLD_CN,
@@ -139,7 +140,7 @@ class RunCA:
 
     def issue(self, cn: str, sans: Iterable[str] = ()) -> tuple[bytes, bytes]:
         """``(certificate PEM, private key PEM)`` of a leaf for `cn` (TLS server and client),
-        whose CN is `cn` scoped to the run (`protocol.scoped_cn`: ``robot-3@<run tag>``)."""
+        whose CN is `cn` scoped to the run (`eifp_wire.access.scoped_cn`: ``robot-3@<run tag>``)."""
         key = ec.generate_private_key(ec.SECP256R1())
         builder = (
             x509.CertificateBuilder().subject_name(_name(scoped_cn(cn, self.run_id), self.run_id))

@@ -46,8 +46,8 @@ def world(n: int, ticks: int = 1500) -> None:
     messages (synthetic: 21-point reference and prediction), step, encode the poses, record
     the tick."""
     from agent.core.types import PlanDebug
+    from eifp_wire import CommandMsg, PlanDebugMsg, PosesMsg
     from orchestrator.experiments.families import circles
-    from protocol import CommandMsg, PlanDebugMsg, PosesMsg
     from world.recorder import RunRecorder
     from world.sim.dynamics import WorldSim
 

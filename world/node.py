@@ -1,7 +1,10 @@
-"""The world process: ground truth of a distributed run (an I/O edge around `WorldSim`).
+"""The world process: ground truth of a distributed run (the I/O edge around `WorldCycle`).
 
 One process simulates every robot's unicycle and publishes poses; robots are separate
-processes that only sense poses and send velocity commands (see `protocol` for the keys).
+processes that only sense poses and send velocity commands (see `eifp_wire.keys`).
+What to do with each message, tick and liveliness change is decided by a
+`world.world_cycle.WorldCycle`; this module owns the Zenoh session, the pacing, the run
+directory and the logs.
 
 Lifecycle:
 1. Load the scenario, open the run directory (`RunRecorder`), open a Zenoh session (by
@@ -17,7 +20,7 @@ Lifecycle:
    queries and commands (all read from handler channels, never in callbacks), applies the
    newest command per robot (zero-order hold, `WorldSim.set_command`), steps the world,
    publishes one `PosesMsg` (DROP, express) on the tick's pose slot
-   (``poses/<tick mod K>``, `protocol.pose_slot_count`) and records the tick. The robots'
+   (``poses/<tick mod K>``, `world.sim.schedule.pose_slot_count`) and records the tick. The robots'
    plan internals (``debug/<id>``, `PlanDebugMsg`, through a ring) are validated and
    recorded into ``run.mcap`` (`RunRecorder.record_plan`).
 4. The run ends when every robot has arrived (``all_arrived``), when every robot has
@@ -26,16 +29,17 @@ Lifecycle:
    SIGTERM/SIGINT (``signal``): publish an ``end`` `ControlMsg`, write
    the ``end`` event, give robots a moment (``--linger-s``) to leave, close everything.
 
-Faults: a malformed command or plan-debug message is rejected (`ProtocolError`), counted
-and logged as a ``rejected`` event (the first `MAX_REJECT_EVENTS`); the ``end`` event always
-has the exact total (``rejected``) and tallies per key (``rejected_by_key``) and per reason
-(``rejected_by_reason``: the field or kind of error, e.g. ``cmd.v``). Valid commands pass
-through their robot's command link (`world.sim.link.FaultyLink`, ``--latency-ms`` ...: injected
-delay, loss, duplication, reordering, in sim time); a command whose ``seq`` does not
-increase is dropped as stale and counted. A robot whose liveliness
-token disappears (crash, or hang past the 1 s transport lease) is logged as ``robot_lost``
-and set offline (it brakes and stays as an obstacle); a returning token logs
-``robot_rejoined`` and brings it back (its sequence numbering restarts).
+Faults: a malformed command or plan-debug message is rejected (`ProtocolError`), counted and
+logged as a ``rejected`` event (the first `world.world_cycle.MAX_REJECT_EVENTS`); the
+``end`` event always has the exact total (``rejected``) and tallies per key
+(``rejected_by_key``) and per reason (``rejected_by_reason``: the field or kind of error,
+e.g. ``cmd.v``). Valid commands pass through their robot's command link
+(`world.sim.link.FaultyLink`, ``--latency-ms`` ...: injected delay, loss, duplication,
+reordering, in sim time); a command whose ``seq`` does not increase is dropped as stale and
+counted. A robot whose liveliness token disappears (crash, or hang past the 1 s transport
+lease) is logged as ``robot_lost`` and set offline (it brakes and stays as an obstacle); a
+returning token logs ``robot_rejoined`` and brings it back (its sequence numbering
+restarts).
 
 Events (``events.jsonl``, sim time ``t``; ``wall`` is Unix time where detection latency
 matters): world_ready, robot_joined, robot_lost, robot_rejoined, robot_left, unknown_robot,
@@ -75,20 +79,14 @@ from agent.process import (
     open_session,
     stop_on_signals,
 )
-from protocol import (
-    MAX_CMD_AHEAD_S,
+from eifp_wire import (
     WORLD_CN,
-    CommandMsg,
     ControlMsg,
-    PlanDebugMsg,
     PosesMsg,
-    ProtocolError,
     RunConfigMsg,
     RunKeys,
     TlsFiles,
     access_control,
-    check_seq,
-    max_seq,
     pose_slot_count,
     pose_slot_of_tick,
     router_cn,
@@ -96,23 +94,14 @@ from protocol import (
 )
 from world.recorder import RunRecorder
 from world.scenario_file import ScenarioError, load_scenario
-from world.sim.dynamics import WorldSim
-from world.sim.link import LINK_COMMANDS, FaultyLink, LinkFaults, link_rng
+from world.sim.link import LinkFaults
+from world.world_cycle import LOST_GRACE_S, WorldCycle
 
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
-MAX_REJECT_EVENTS = 100
-"""Only this many ``rejected`` events are written (a flood must not fill the disk)."""
 FLUSH_TICKS = 5
 """trajectory.csv and commands.csv are flushed every this many ticks (0.1 s at 50 Hz)."""
-MAX_TALLY_KEYS = 64
-"""Distinct keys (and reasons) tallied in the ``end`` event; the rest count as ``other``."""
 IDLE_POLL_S = 0.01
 """Wall period of the waiting and lingering loops."""
-LOST_GRACE_S = 5.0
-"""Default sim time a lost robot is waited for (`WorldOptions.lost_grace_s`) before it no
-longer holds the run open: once every robot has arrived or been lost this long, the run
-ends (``arrived_or_lost``) instead of running on to its time limit. Five lease periods: a
-robot whose link merely dropped is back well within it."""
 
 log = logging.getLogger("world")
 
@@ -122,7 +111,7 @@ class WorldOptions:
     """Command-line options of the world process.
 
     Args:
-        run_id: run id (safe characters, see `protocol.validate_run_id`).
+        run_id: run id (safe characters, see `eifp_wire.keys.validate_run_id`).
         scenario_path: scenario YAML file.
         listen: endpoint to listen on as a router (None when `connect` is given).
         connect: endpoint of an existing router to join as a client.
@@ -136,17 +125,17 @@ class WorldOptions:
         link: faults injected on every robot's command link (sim-time delays).
         fault_seed: seeds the command links (with the link kind and the robot id).
         tls_dir: directory with ``ca.pem``, ``world.pem``, ``world.key``: mutual TLS, and
-            as a router the run's access control (`protocol.access_control`); endpoints
+            as a router the run's access control (`eifp_wire.access.access_control`); endpoints
             are then ``tls/...``. None: plain TCP, no authentication. Not with `connect`:
             the world's own router is what enforces the access control.
         relays: relay routers on other hosts (``python -m world.router``), as
             ``(name, robot ids behind it)``: router ``router-<name>`` may speak for those
-            robots only (`protocol.access_control`).
+            robots only (`eifp_wire.access.access_control`).
         zid: the session's Zenoh id (None: random). Robots behind a relay check the source
             of poses against it (``python -m agent --world-zid``).
         lost_grace_s: sim time a lost robot may still come back (a stopped process that
             resumes, a restarted one); a robot lost longer than this, like one that
-            arrived, no longer holds the run open (`LOST_GRACE_S`).
+            arrived, no longer holds the run open (`world.world_cycle.LOST_GRACE_S`).
     """
 
     run_id: str
@@ -255,7 +244,7 @@ def run_configs(scenario: Scenario, options: WorldOptions) -> dict[int, bytes]:
 
 
 class WorldNode:
-    """The world's Zenoh edge: owns the declarations, the loops and the counters.
+    """The world's Zenoh edge around its `WorldCycle`: declarations, the loops, the recorder.
 
     Args:
         session: an open Zenoh session (closed by the caller).
@@ -269,29 +258,17 @@ class WorldNode:
                  recorder: RunRecorder, stop: StopFlag) -> None:
         self.keys = RunKeys(options.run_id)
         self.session_zid = session.zid()
-        self.scenario = scenario
         self.options = options
         self.recorder = recorder
         self.stop = stop
-        self.sim = WorldSim(scenario, cmd_timeout_s=options.cmd_timeout_s)
+        self.cycle = WorldCycle(scenario, options.run_id, cmd_timeout_s=options.cmd_timeout_s,
+                                link=options.link, fault_seed=options.fault_seed,
+                                lost_grace_s=options.lost_grace_s,
+                                configs=run_configs(scenario, options))
+        self.sim = self.cycle.sim
         self.dt_s = 1.0 / options.rate_hz
-        self.robot_ids = frozenset(int(r) for r in self.sim.robot_ids)
-        self.configs = run_configs(scenario, options)
-        self.alive: set[int] = set()
-        self.lost: set[int] = set()
-        self.lost_at_s: dict[int, float] = {}  # sim time each lost robot was lost
-        self.last_seq: dict[int, int] = {}
-        self.ended = False
-        self.counts = {"commands": 0, "rejected": 0, "stale": 0, "queries": 0,
-                       "bad_queries": 0, "overruns": 0, "plans": 0, "seq_jumps": 0,
-                       "future_cmds": 0}
         self.tick_s: list[float] = []
         """Wall time of every tick of the loop (`tick`: drain, step, publish, record)."""
-        self.rejected_by_key: dict[str, int] = {}
-        self.rejected_by_reason: dict[str, int] = {}
-        self.cmd_links: dict[int, FaultyLink[tuple[int, CommandMsg]]] = {
-            rid: FaultyLink(options.link, link_rng(options.fault_seed, LINK_COMMANDS, rid))
-            for rid in sorted(self.robot_ids)}
 
         n = len(scenario.robots)
         # Handler channels, read from the loop: callbacks never run project code.
@@ -303,7 +280,6 @@ class WorldNode:
         self.cmd_sub = session.declare_subscriber(self.keys.cmd_all, self._on_command)
         self.clock_id = monotonic_clock_id()
         # Plans' internals for run.mcap: a ring (a flood drops the oldest, never blocks).
-        self.known_ids = self.robot_ids | {o.id for o in scenario.obstacles}
         self.debug_sub = session.declare_subscriber(
             self.keys.debug_all, zenoh.handlers.RingChannel(max(256, 8 * n)))
         self.alive_sub = session.liveliness().declare_subscriber(
@@ -337,156 +313,77 @@ class WorldNode:
     def _event(self, kind: str, **fields: object) -> None:
         self.recorder.event(kind, self.sim.t_s, **fields)
 
+    def write_events(self) -> None:
+        """Write the cycle's events (with the wall time where it asks) and log its notices."""
+        for e in self.cycle.take_events():
+            extra = {"wall": time.time()} if e.wall else {}
+            self.recorder.event(e.kind, e.t_s, **e.fields, **extra)
+        for text in self.cycle.take_notices():
+            log.warning("%s", text)
+
     def poll_liveliness(self) -> None:
-        """Track which robot processes are alive; mark lost robots offline."""
+        """Track which robot processes are alive (`WorldCycle.liveliness`)."""
         while (sample := self.alive_sub.try_recv()) is not None:
-            key = str(sample.key_expr)
-            try:
-                rid = self.keys.robot_id_of_alive(key)
-            except ProtocolError:
-                rid = None
-            if rid is None or rid not in self.robot_ids:
-                if sample.kind == zenoh.SampleKind.PUT:
-                    self._event("unknown_robot", key=key)
-                continue
-            if sample.kind == zenoh.SampleKind.PUT:
-                if rid in self.alive:
-                    continue
-                self.alive.add(rid)
-                if rid in self.lost:
-                    self.lost.discard(rid)
-                    self.lost_at_s.pop(rid, None)
-                    # The same process, or a new one: either numbers on from the time of
-                    # its poses (`protocol.next_seq`), so its last seq stays the bar (an old
-                    # command replayed now is still stale).
-                    self.cmd_links[rid].clear()
-                    self.sim.set_offline(rid, False)
-                    self._event("robot_rejoined", robot=rid, wall=time.time())
-                    log.warning("robot %d rejoined", rid)
-                else:
-                    self._event("robot_joined", robot=rid, wall=time.time())
-            elif rid in self.alive:
-                self.alive.discard(rid)
-                if self.ended:
-                    self._event("robot_left", robot=rid, wall=time.time())
-                    continue
-                self.lost.add(rid)
-                self.lost_at_s[rid] = self.sim.t_s
-                self.sim.set_offline(rid, True)
-                self._event("robot_lost", robot=rid, wall=time.time())
-                log.warning("robot %d lost (liveliness token gone): braking it", rid)
+            self.cycle.liveliness(str(sample.key_expr), sample.kind == zenoh.SampleKind.PUT)
+        self.write_events()
 
     def serve_queries(self) -> None:
         """Answer configuration queries: ``config/<id>`` -> that robot's `RunConfigMsg`."""
         while (query := self.queryable.try_recv()) is not None:
             with query:
                 key = str(query.key_expr)
-                try:
-                    rid = self.keys.robot_id_of_config(key)
-                    payload = self.configs[rid]
-                except (ProtocolError, KeyError):
-                    self.counts["bad_queries"] += 1
+                reply = self.cycle.config_reply(key)
+                if reply is None:
                     query.reply_err(f"no robot configuration at {key}".encode())
-                    continue
-                query.reply(self.keys.config(rid), payload)
-                self.counts["queries"] += 1
-
-    def _reject(self, reason: str, key: str) -> None:
-        self.counts["rejected"] += 1
-        _tally(self.rejected_by_key, key[:200])
-        # The reason's field or kind ("cmd.v", "not valid msgpack", ...), not its value.
-        _tally(self.rejected_by_reason, reason.split(":", 1)[0][:80])
-        if self.counts["rejected"] <= MAX_REJECT_EVENTS:
-            self._event("rejected", key=key[:200], reason=reason[:200])
-        if self.counts["rejected"] in (1, 10, 100) or self.counts["rejected"] % 1000 == 0:
-            log.warning("rejected message #%d on %.200s: %.200s", self.counts["rejected"], key,
-                        reason)
+                else:
+                    query.reply(*reply)
 
     def apply_commands(self) -> None:
-        """Validate each command, pass it through its robot's command link, and hold the
-        newest one the link releases (zero-order hold; older ``seq`` are dropped)."""
+        """Hand each queued command to `WorldCycle.admit_command`, apply what the command
+        links release and record it."""
         while self.cmd_queue:
             rx_ns, sample = self.cmd_queue.popleft()
-            key = str(sample.key_expr)
-            try:
-                rid = self.keys.robot_id_of_cmd(key)
-            except ProtocolError as exc:
-                self._reject(f"key: {exc}", key)
-                continue
-            try:
-                msg = CommandMsg.decode(sample.payload.to_bytes(), known_ids=self.robot_ids,
-                                        expected_robot_id=rid)
-            except ProtocolError as exc:
-                self._reject(str(exc), key)
-                continue
-            # Bounds a forged but well-formed command cannot pass: a seq beyond what the time
-            # allows (which would make the robot's genuine commands stale), a plan from the
-            # future.
-            if check_seq(msg.seq, None, world_t_s=self.sim.t_s) == "seq_jump":
-                self.counts["seq_jumps"] += 1
-                self._reject(f"cmd.seq: {msg.seq} is beyond {max_seq(self.sim.t_s)}, the "
-                             f"bound at {self.sim.t_s:.3f} s", key)
-                continue
-            if msg.pose_stamp_s > self.sim.t_s + MAX_CMD_AHEAD_S:
-                self.counts["future_cmds"] += 1
-                self._reject(f"cmd.pose_stamp: {msg.pose_stamp_s:.3f} s is ahead of the "
-                             f"world's {self.sim.t_s:.3f} s", key)
-                continue
-            self.cmd_links[rid].send(self.sim.t_s, (rx_ns, msg))
-        for rid, link in self.cmd_links.items():
-            for rx_ns, msg in link.receive(self.sim.t_s):
-                self._hold(rid, msg, rx_ns)
+            self.cycle.admit_command(str(sample.key_expr), sample.payload.to_bytes(), rx_ns)
+        for applied in self.cycle.release_commands():
+            applied_ns = time.monotonic_ns()
+            rid, msg = applied.robot_id, applied.msg
+            self.recorder.record_command(
+                self.sim.t_s, rid, msg.seq, msg.pose_stamp_s, msg.v_mps, msg.omega_radps,
+                msg.plan_ms, msg.status, msg.side, msg.resolved_id)
+            w = msg.wall
+            self.recorder.record_timing(rid, msg.seq, (
+                w.clock_id, w.pose_clock_id, w.pose_pub_ns, w.pose_rx_ns, w.plan_start_ns,
+                w.plan_end_ns, w.pub_ns, applied.rx_ns, applied_ns))
+        self.write_events()
 
     def record_plans(self) -> None:
-        """Validate each robot's plan internals and record them (run.mcap only)."""
+        """Record each robot's valid plan internals (run.mcap only)."""
         while (sample := self.debug_sub.try_recv()) is not None:
-            key = str(sample.key_expr)
-            try:
-                rid = self.keys.robot_id_of_debug(key)
-                msg = PlanDebugMsg.decode(sample.payload.to_bytes(), known_ids=self.known_ids,
-                                          expected_robot_id=rid)
-            except ProtocolError as exc:
-                self._reject(str(exc), key)
-                continue
-            self.counts["plans"] += 1
-            self.recorder.record_plan(msg.t_s, rid, msg.debug, v_mps=msg.v_mps,
-                                      omega_radps=msg.omega_radps, status=msg.status)
+            got = self.cycle.plan_debug(str(sample.key_expr), sample.payload.to_bytes())
+            if got is not None:
+                rid, msg = got
+                self.recorder.record_plan(msg.t_s, rid, msg.debug, v_mps=msg.v_mps,
+                                          omega_radps=msg.omega_radps, status=msg.status)
+        self.write_events()
 
     def _on_command(self, sample: zenoh.Sample) -> None:
         """Zenoh's thread: stamp the arrival and enqueue (the deque drops the oldest)."""
         self.cmd_queue.append((time.monotonic_ns(), sample))
-
-    def _hold(self, rid: int, msg: CommandMsg, rx_ns: int) -> None:
-        """Apply one released command unless its ``seq`` is not newer."""
-        if check_seq(msg.seq, self.last_seq.get(rid), world_t_s=self.sim.t_s) is not None:
-            self.counts["stale"] += 1
-            return
-        self.last_seq[rid] = msg.seq
-        self.sim.set_command(rid, msg.v_mps, msg.omega_radps, msg.hold_s)
-        applied_ns = time.monotonic_ns()
-        self.counts["commands"] += 1
-        self.recorder.record_command(
-            self.sim.t_s, rid, msg.seq, msg.pose_stamp_s, msg.v_mps, msg.omega_radps,
-            msg.plan_ms, msg.status, msg.side, msg.resolved_id)
-        w = msg.wall
-        self.recorder.record_timing(rid, msg.seq, (
-            w.clock_id, w.pose_clock_id, w.pose_pub_ns, w.pose_rx_ns, w.plan_start_ns,
-            w.plan_end_ns, w.pub_ns, rx_ns,
-            applied_ns))
 
     # --- phases ------------------------------------------------------------------------------
 
     def wait_for_robots(self) -> bool:
         """Until every robot is alive (True) or the deadline / a signal (False)."""
         deadline = time.monotonic() + self.options.wait_robots_s
+        robot_ids = self.cycle.robot_ids
         while not self.stop:
             self.poll_liveliness()
             self.serve_queries()
             self.apply_commands()
-            if self.alive >= self.robot_ids:
+            if self.cycle.alive >= robot_ids:
                 return True
             if time.monotonic() > deadline:
-                missing = sorted(self.robot_ids - self.alive)
+                missing = sorted(robot_ids - self.cycle.alive)
                 self._event("startup_timeout", missing=missing)
                 log.error("robots %s not alive after %.1f s", missing, self.options.wait_robots_s)
                 return False
@@ -507,19 +404,13 @@ class WorldNode:
         self.serve_queries()
         self.apply_commands()
         self.record_plans()
-        events = self.sim.step(self.dt_s)
+        self.cycle.step(self.dt_s)
         self.publish_poses()
         self.recorder.record_tick(self.sim.t_s, self.sim.robot_ids, self.sim.pose,
                                   self.sim.applied)
         if self.sim.tick % FLUSH_TICKS == 0:  # watchers (the launcher's fault schedule)
             self.recorder.flush()             # follow sim time in trajectory.csv
-        for rid in events.arrivals:
-            self._event("arrived", robot=rid)
-        for a, b, overlap in events.new_contacts:
-            self._event("contact", a=a, b=b, overlap_m=round(overlap, 6))
-            log.warning("contact %d-%d, overlap %.3f m at t=%.2f", a, b, overlap, self.sim.t_s)
-        for rid in events.timeouts:
-            self._event("cmd_timeout", robot=rid)
+        self.write_events()
 
     def run_loop(self) -> str:
         """The fixed-rate loop; returns the end reason."""
@@ -533,7 +424,7 @@ class WorldNode:
             if delay > 0.0:
                 time.sleep(delay)
             elif delay < -period_wall:
-                self.counts["overruns"] += 1
+                self.cycle.counts.overruns += 1
                 next_wall = time.monotonic()  # resynchronise rather than burst to catch up
             next_wall += period_wall
             if self.stop:
@@ -541,63 +432,42 @@ class WorldNode:
             t0 = time.perf_counter()
             self.tick()
             self.tick_s.append(time.perf_counter() - t0)
-            if self.sim.all_arrived():
-                return "all_arrived"
-            if self.lost and self.arrived_or_gone():
-                return "arrived_or_lost"
-            if self.sim.t_s >= self.scenario.time_limit_s - 1e-9:
-                return "time_limit"
-
-    def arrived_or_gone(self) -> bool:
-        """Every robot has arrived or has been lost for `WorldOptions.lost_grace_s`."""
-        gone_before = self.sim.t_s - self.options.lost_grace_s + 1e-9
-        waiting = [int(r) for r in self.sim.robot_ids[~self.sim.arrived]]
-        return all(self.lost_at_s.get(r, math.inf) <= gone_before for r in waiting)
+            reason = self.cycle.end_reason()
+            if reason is not None:
+                return reason
 
     def finish(self, reason: str) -> int:
         """Announce the end, record the summary, let robots leave; return the exit status."""
-        self.ended = True
-        self.put_control(ControlMsg("end", self.sim.t_s, reason))
-        success = self.sim.all_arrived() and self.sim.contact_count == 0
-        arrived = [int(r) for r in self.sim.robot_ids[self.sim.arrived]]
-        self._event(
-            "end", reason=reason, success=success, all_arrived=self.sim.all_arrived(),
-            arrived=arrived, contacts=self.sim.contact_count, ticks=self.sim.tick,
-            min_gap_m=round(self.sim.min_gap_m, 6) if math.isfinite(self.sim.min_gap_m)
-            else None,
-            lost=sorted(self.lost), cmd_timeouts=self.sim.timeout_count,
-            cmd_hold_expiries=self.sim.hold_expiry_count, **self.counts,
-            rejected_by_key=self.rejected_by_key, rejected_by_reason=self.rejected_by_reason,
-            cmd_link={k: sum(getattr(link.counts, k) for link in self.cmd_links.values())
-                      for k in ("dropped", "duplicated", "reordered")},
-            tick_ms=_tick_summary(self.tick_s),
-        )
+        cycle, sim = self.cycle, self.sim
+        end = cycle.end(reason, tick_ms=_tick_summary(self.tick_s))
+        self.put_control(ControlMsg("end", sim.t_s, reason))
+        self.recorder.event(end.kind, end.t_s, **end.fields)
         log.info("end: %s at t=%.2f s, %d/%d arrived, %d contacts, %d rejected, %d stale",
-                 reason, self.sim.t_s, len(arrived), len(self.robot_ids),
-                 self.sim.contact_count, self.counts["rejected"], self.counts["stale"])
+                 reason, sim.t_s, len(end.fields["arrived"]), len(cycle.robot_ids),
+                 sim.contact_count, cycle.counts.rejected, cycle.counts.stale)
         # Robots leave on the end message; a further signal cuts the wait short.
         deadline = time.monotonic() + self.options.linger_s
         signals = self.stop.count
-        while self.alive and time.monotonic() < deadline and self.stop.count == signals:
+        while cycle.alive and time.monotonic() < deadline and self.stop.count == signals:
             self.poll_liveliness()
             time.sleep(IDLE_POLL_S)
-        return ExitCode.of_run(contacts=self.sim.contact_count,
-                               all_arrived=self.sim.all_arrived(), robots_lost=bool(self.lost),
-                               interrupted=reason == "signal")
+        return ExitCode.of_run(contacts=sim.contact_count, all_arrived=sim.all_arrived(),
+                               robots_lost=bool(cycle.lost), interrupted=reason == "signal")
 
     def run(self) -> int:
         """Wait for the robots, run, finish."""
-        self._event("world_ready", run=self.options.run_id, n_robots=len(self.robot_ids),
+        n_robots = len(self.cycle.robot_ids)
+        self._event("world_ready", run=self.options.run_id, n_robots=n_robots,
                     endpoint=self.options.listen or self.options.connect,
                     tls=self.options.tls_dir is not None, zid=str(self.session_zid),
                     relays={router_cn(name): list(ids) for name, ids in self.options.relays},
                     wall=time.time())
-        log.info("run %s: waiting for %d robots", self.options.run_id, len(self.robot_ids))
+        log.info("run %s: waiting for %d robots", self.options.run_id, n_robots)
         if not self.wait_for_robots():
             self.finish("signal" if self.stop else "startup_timeout")
             return ExitCode.INTERRUPTED if self.stop else ExitCode.ROBOT_LOST
         self.put_control(ControlMsg("start", self.sim.t_s))
-        self._event("start", mode="distributed", n_robots=len(self.robot_ids),
+        self._event("start", mode="distributed", n_robots=n_robots,
                     cmd_link=self.options.link.as_dict(), fault_seed=self.options.fault_seed,
                     world_rate_hz=self.options.rate_hz,
                     control_rate_hz=self.options.control_rate_hz,
@@ -615,13 +485,6 @@ def _tick_summary(tick_s: list[float]) -> dict[str, float] | None:
     return {"p50": round(ordered[n // 2] * 1e3, 4),
             "p99": round(ordered[min(n - 1, math.ceil(0.99 * n) - 1)] * 1e3, 4),
             "mean": round(sum(ordered) / n * 1e3, 4), "max": round(ordered[-1] * 1e3, 4)}
-
-
-def _tally(counts: dict[str, int], name: str) -> None:
-    """Count `name`, or ``other`` once `MAX_TALLY_KEYS` distinct names are taken."""
-    if name not in counts and len(counts) >= MAX_TALLY_KEYS:
-        name = "other"
-    counts[name] = counts.get(name, 0) + 1
 
 
 def world_settings(options: WorldOptions, scenario: Scenario) -> dict[str, str]:

@@ -27,7 +27,7 @@ import numpy as np
 from agent.core.scenario import Scenario
 from agent.core.types import PlanDebug
 from agent.files import check_own_dir, open_new
-from protocol import TIMING_COLUMNS
+from eifp_wire import TIMING_COLUMNS
 
 if TYPE_CHECKING:
     from world.mcap_log import LiveView

@@ -6,11 +6,11 @@ dials the world's router. The world's poses then cross the link between the two 
 per tick and fan out on the relay's host; each robot's commands cross it once.
 
 Security (with ``--tls``): the relay presents the certificate ``router-<name>`` to the
-robots and to the world's router, and enforces `protocol.relay_access_control`: the robots
+robots and to the world's router, and enforces `eifp_wire.access.relay_access_control`: the robots
 ``--robots`` may use their own keys only (as on the world's router), any other identity of
 the run may connect and do nothing, and the link to the world's router carries the rest.
 The world's router, started with ``--relay <name>=<ids>``, lets this certificate speak for
-those robots only (`protocol.access_control`). Without ``--tls``: plain TCP, nothing is
+those robots only (`eifp_wire.access.access_control`). Without ``--tls``: plain TCP, nothing is
 enforced, and the relay listens on one address only.
 
 A relay serves one run: it leaves once the world's liveliness token has come and gone and
@@ -44,7 +44,7 @@ from agent.process import (
     open_session,
     stop_on_signals,
 )
-from protocol import (
+from eifp_wire import (
     ProtocolError,
     RunKeys,
     TlsFiles,
@@ -71,7 +71,7 @@ class RouterOptions:
         connect: the world's router, e.g. ``tls/world:7447`` (dialled and redialled in the
             background: the relay may start first).
         tls_dir: directory with ``ca.pem``, ``router-<name>.pem`` and ``.key``: mutual TLS
-            and `protocol.relay_access_control`. None: plain TCP, nothing enforced.
+            and `eifp_wire.access.relay_access_control`. None: plain TCP, nothing enforced.
         wait_world_s: wall deadline for the world's token to appear.
     """
 
@@ -114,7 +114,7 @@ def parse_args(argv: list[str] | None = None) -> RouterOptions:
 
 def router_settings(options: RouterOptions) -> dict[str, str]:
     """The relay's Zenoh settings: a router on `options.listen` that dials `options.connect`;
-    with TLS, mutual TLS as ``router-<name>`` and `protocol.relay_access_control`.
+    with TLS, mutual TLS as ``router-<name>`` and `eifp_wire.access.relay_access_control`.
 
     Raises:
         ValueError: a plain endpoint with TLS, plain TCP on every interface, or a TLS file

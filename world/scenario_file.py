@@ -83,7 +83,7 @@ from agent.core.config import (
 from agent.core.scenario import ObstacleSpec, RobotSpec, Scenario
 from agent.files import replace_file
 from agent.planning.routing import StaticMap, unreachable_reason
-from protocol import (
+from eifp_wire import (
     MAX_COORD_M,
     MAX_OBSTACLES,
     MAX_RADIUS_M,
@@ -424,7 +424,8 @@ def validate_scenario(scenario: Scenario, source: str = "<scenario>") -> Scenari
     _check_config(ctx, "defaults", scenario.planner_config)
     if not scenario.robots:
         raise ctx.error("robots", "expected at least one robot, got an empty list")
-    # The wire's bounds (`protocol`): what passes here can be sent, so no run fails later.
+    # The wire's bounds (`eifp_wire.limits`): what passes here can be sent, so no run fails
+    # later.
     if len(scenario.robots) > MAX_ROBOTS:
         raise ctx.error("robots", f"at most {MAX_ROBOTS} robots, got {len(scenario.robots)}")
     if len(scenario.obstacles) > MAX_OBSTACLES:
@@ -502,7 +503,7 @@ def _check_reachable(ctx: _Ctx, scenario: Scenario) -> None:
 
 
 def _at_most(ctx: _Ctx, path: str, value: float, bound: float, unit: str) -> None:
-    """Refuse `value` above the wire's `bound` (`protocol`), naming the field."""
+    """Refuse `value` above the wire's `bound` (`eifp_wire.limits`), naming the field."""
     if value > bound:
         raise ctx.error(path, f"must be at most {bound:g} {unit}, got {value!r}")
 

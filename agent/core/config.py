@@ -45,8 +45,9 @@ def field_range_error(name: str, value: object) -> str | None:
     """What is wrong with `value` for the numeric config field `name`, or None.
 
     The one set of range rules for configurations: the scenario loader reports it with the
-    file and key (`world.scenario_file`), the wire loader as a `ProtocolError` (`protocol`), and
-    the dataclasses below refuse to be built with a value it rejects.
+    file and key (`world.scenario_file`), the wire loader as a `ProtocolError`
+    (`eifp_wire.codec.load_dataclass`), and the dataclasses below refuse to be built with a
+    value it rejects.
     """
     if value is None or isinstance(value, bool) or not isinstance(value, int | float):
         return None  # not numeric: the loaders check types

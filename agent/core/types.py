@@ -347,8 +347,8 @@ class PlanDebug:
     def trusted(cls, ego: np.ndarray, threat_ids: tuple[int, ...], via_points_m: np.ndarray,
                 reference_m: np.ndarray, predicted_m: np.ndarray) -> PlanDebug:
         """Built by a planner from its own finite arrays of the documented shapes (float):
-        the ids are made ints, nothing else is checked (`protocol.PlanDebugMsg` checks every
-        value before one is sent)."""
+        the ids are made ints, nothing else is checked (`eifp_wire.messages.PlanDebugMsg`
+        checks every value before one is sent)."""
         debug = object.__new__(cls)
         debug.__dict__.update(ego=ego, threat_ids=tuple(int(i) for i in threat_ids),
                               via_points_m=via_points_m, reference_m=reference_m,
@@ -438,7 +438,7 @@ class PoseSnapshot:
     @classmethod
     def trusted(cls, stamp_s: float, tick: int, ids: np.ndarray, pose: np.ndarray,
                 radius_m: np.ndarray) -> PoseSnapshot:
-        """A snapshot of arrays that were validated already (a decoded `protocol.PosesMsg`:
+        """A snapshot of arrays that were validated already (a decoded `eifp_wire.poses.PosesMsg`:
         int64 ids, finite (n, 3) poses and (n,) radii): nothing is converted or checked."""
         snapshot = object.__new__(cls)
         snapshot.__dict__.update(stamp_s=stamp_s, tick=tick, ids=ids, pose=pose,

@@ -31,7 +31,7 @@ MAX_COMPENSATED_AGE_S = 1.0
 """Poses older than this are not extrapolated further (the prediction would be fiction)."""
 COMMAND_HOLD_PERIODS = 1.5
 """Each command tells the world to apply it for at most this many control periods
-(`protocol.CommandMsg.hold_s`): one period plus half a period of jitter between two
+(`eifp_wire.messages.CommandMsg.hold_s`): one period plus half a period of jitter between two
 commands; a command that is not followed in time (lost or late on the link) then gives way
 to braking instead of acting until the world's time-out."""
 ESTIMATION_MARGIN_M = 5.0

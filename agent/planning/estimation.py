@@ -79,7 +79,7 @@ class NeighborTracker:
         self._row = -1
         self._last_ids: np.ndarray | None = None  # the previous snapshot's ids, and
         self._last_cols = np.zeros(0, dtype=np.int64)  # their columns (most ticks repeat them)
-        # The previous snapshot's read-only id array (a robot's `protocol.PoseDecoder` hands
+        # The previous snapshot's read-only id array (a robot's `eifp_wire.poses.PoseDecoder` hands
         # out the same one while the ids repeat), its other discs' rows, and where they go.
         self._same_ids: np.ndarray | None = None
         self._same_rows = np.zeros(0, dtype=np.int64)

@@ -17,7 +17,8 @@ One planning cycle, as `plan_ifp` runs it:
    others advanced to that time; the shortened leg is then checked again. A leg whose
    threats all lack candidates is left as it is.
 
-Choices the paper leaves open (documented here, tested in tests/agent/test_ifp.py):
+Choices the paper leaves open (documented here, tested in
+tests/unit/agent/planning/test_ifp.py):
 
 - Step 3 uses the measured velocity v_r as in Eq. (3). A robot that stands still (v_r = 0)
   sees no static obstacle as a threat under Eq. (5), so when Eq. (5) finds nothing the

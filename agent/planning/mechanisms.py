@@ -56,9 +56,7 @@ class Mechanisms:
         commitment: a head-on threat that the last plan resolved first stays first while
             its TCPA is within `PRIMARY_HOLD_S` of the most imminent one's, so the first
             via-point (where the robot heads now) does not flip between two nearly
-            simultaneous threats. (Keeping every resolved threat while its DCPA stays within
-            L + 0.5 m, against the robot's own swerve pushing it past L, did not earn its
-            place: more reversals on the tuning seeds of `orchestrator benchmark`.)
+            simultaneous threats.
         via_margin_m: how far outside its inflated disc a via-point is placed [m].
         escape_band_m: an escape goes on from the same disc until the robot is this far
             outside it, towards a point that far out (0: only while inside) [m].

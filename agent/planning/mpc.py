@@ -444,9 +444,9 @@ class MpcTracker:
             eps_rel=tuning.eps_rel,
             check_termination=5,
             # Iteration-based rho adaptation (deterministic, unlike the time-based one).
-            # A tolerance of 2 rather than 5 re-tunes rho sooner: it cut the iterations
+            # A tolerance of 2 rather than 5 re-tunes rho sooner, which the degenerate QP
             # of a robot held in front of a neighbour (all half-planes active and
-            # parallel, a degenerate QP) about four-fold in our runs.
+            # parallel) needs to converge in few iterations.
             adaptive_rho=1,
             adaptive_rho_interval=_RHO_INTERVAL,
             adaptive_rho_tolerance=2.0,
@@ -654,8 +654,8 @@ class MpcTracker:
                 return status_val, total, z, y
             first_before = first
             # No warm start here: with warm starting on, the next solve goes on from OSQP's
-            # own iterates (x, z, y). A warm start would reset z = A x, and restarting so
-            # made ADMM slower (every 25 iterations) or diverge (every 5) in our tests.
+            # own iterates (x, z, y). A warm start would reset z = A x, and restarting
+            # from there slows ADMM down or makes it diverge.
 
     def _set_half_planes(self, xb: np.ndarray, preds: np.ndarray, clear: np.ndarray) -> int:
         """Write the linearised neighbour half-planes; returns how many neighbours are used.

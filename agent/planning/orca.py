@@ -10,8 +10,8 @@ among those outside every neighbour's reciprocal velocity obstacle. Here, per cy
    observed position with its estimated velocity. Every disc is inflated by
    d_safety / 2, so a pair's combined radius is r_i + r_j + d_safety, the clearance the
    other planners use. The others get `max_neighbors = 0`: their own ORCA solve is
-   irrelevant and skipped. A fresh simulator (about 12 us for ten neighbours) was measured
-   faster than resetting a reused one, and RVO2 cannot remove agents safely
+   irrelevant and skipped. A fresh simulator costs less than resetting a reused one, and
+   RVO2 cannot remove agents safely
    (`clear_agents` leaves dangling pointers in its k-d tree).
 2. `do_step()` once and read agent 0's new velocity v_orca.
 3. Turn it into a unicycle command with `unicycle.heading_law`: err = wrap(angle(v_orca) -
@@ -27,7 +27,8 @@ other planners do not reciprocate. The unicycle only follows v_orca after turnin
 the d_safety margin partly absorbs. And ORCA deadlocks in symmetric crossings of three or
 more robots that start at rest in view of each other (the 4-robot cross stops all four at
 the centre, discs touching): the ORCA velocities stay symmetric and shrink to zero; plain
-holonomic RVO2 with the same parameters does the same (tests/agent/test_orca.py). No
+holonomic RVO2 with the same parameters does the same
+(tests/unit/agent/planning/test_orca.py). No
 perturbation is added: this is the plain method. Deterministic: no randomness, no clock,
 the same inputs give the same command.
 """

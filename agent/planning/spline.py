@@ -13,9 +13,9 @@ The spline is natural (zero second derivative at both ends) and hand-written: po
 complex numbers x + iy, so one polynomial carries both coordinates, and the M - 2 interior
 second derivatives come from one tridiagonal system solved by the Thomas algorithm in
 plain Python (M <= max_depth + 2, a handful). It matches
-`scipy.interpolate.CubicSpline(bc_type="natural")` to 1e-10 (tests/agent/test_spline.py)
-and builds about 10x faster (~25 us against ~250-400 us for 5 waypoints, measured with
-timeit on the 2-core CI machine), which matters at one reference per cycle.
+`scipy.interpolate.CubicSpline(bc_type="natural")` to 1e-10
+(tests/unit/agent/planning/test_spline.py) and, for a handful of points, builds several
+times faster, which matters at one reference per cycle.
 
 Timing: distance along the path follows the speed profile
 v_ref(s) = min(v_max, sqrt(2 a (S - s))) (cruise, then constant deceleration a to a stop

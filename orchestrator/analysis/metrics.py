@@ -58,23 +58,21 @@ do not exist (no robot arrived, no commands) are None in JSON.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
 
 from agent.core.scenario import Scenario
-from protocol import TIMING_COLUMNS
+from orchestrator.analysis.turns import (
+    REVERSAL_CAUSES,
+    PlanInForce,
+    oscillations,
+    reversal_causes,
+)
 
 CONTACT_OVERLAP_M = 1.0e-3
-TURN_RATE_MIN_RADPS = 0.05
-TURN_ANGLE_MIN_RAD = 0.1
-REVERSAL_WINDOW_S = 3.0
-# Below this speed a reversal is `slow` (module docstring, reversal causes) [m/s].
-SLOW_REVERSAL_MPS = 0.5
-REVERSAL_CAUSES = ("slow", "escape", "no_via_point", "side_flip", "threat_switch",
-                   "same_via_point", "unknown")
 NOT_PLANNING_STATUSES = frozenset({"arrived", "stale"})
 _TIME_EPS_S = 1.0e-6
 _CHUNK_TICKS = 2048
@@ -197,16 +195,6 @@ class RunSpec:
 
 
 @dataclass(frozen=True)
-class Turn:
-    """One turn of the heading: sign (+1 counter-clockwise), span and heading change."""
-
-    sign: int
-    start_s: float
-    end_s: float
-    angle_rad: float
-
-
-@dataclass(frozen=True)
 class ContactEpisode:
     """A pair came into contact at t_s (ids; obstacles negative) with this overlap."""
 
@@ -281,7 +269,7 @@ class RunMetrics:
     wall_latency_ms: dict[str, dict[str, float | None]] = field(default_factory=dict)
     wall_latency_ms_by_router: dict[str, dict[str, dict[str, float | None]]] = field(
         default_factory=dict)
-    """`wall_latency_ms` of the robots behind each router (`router_groups`): ``world`` for
+    """`wall_latency_ms` of the robots behind each router (`latency.router_groups`): ``world`` for
     the world's own router, ``router-<name>`` for a relay; empty in a run without relays."""
 
     def to_json_dict(self) -> dict[str, Any]:
@@ -290,217 +278,8 @@ class RunMetrics:
 
 
 # --------------------------------------------------------------------------------------
-# Wall-clock latency by stage
-# --------------------------------------------------------------------------------------
-
-WALL_STAGES: tuple[tuple[str, str, str, bool], ...] = (
-    ("pose_to_robot", "pose_pub_ns", "pose_rx_ns", True),
-    ("robot_wait", "pose_rx_ns", "plan_start_ns", False),
-    ("plan", "plan_start_ns", "plan_end_ns", False),
-    ("send", "plan_end_ns", "cmd_pub_ns", False),
-    ("cmd_to_world", "cmd_pub_ns", "cmd_rx_ns", True),
-    ("world_wait", "cmd_rx_ns", "applied_ns", False),
-    ("sense_to_act", "pose_pub_ns", "cmd_rx_ns", False),
-    ("end_to_end", "pose_pub_ns", "applied_ns", False),
-)
-"""(stage, from stamp, to stamp, crosses clocks). ``sense_to_act``: the world published a
-pose -> the world received the command planned on it; ``end_to_end``: ... and applied it.
-Both ends of those are the world's clock, so they hold across hosts too. A stage that
-crosses clocks (world <-> robot) is measured only for commands whose robot shares the
-world's clock (one host)."""
-TRANSPORT_STAGE = "transport"
-"""``sense_to_act`` less the robot's own time (pose received -> command published): the
-pose's way out plus the command's way back, through every router between. Each of its two
-differences is taken on one clock (the world's, the robot's), so it holds across hosts
-without synchronised clocks."""
-DIRECT_ROUTER = "world"
-"""`router_groups` name of the robots connected to the world's own router."""
-
-
-def _percentiles(ms: np.ndarray) -> dict[str, float | None]:
-    return {"p50": round(float(np.percentile(ms, 50)), 3),
-            "p99": round(float(np.percentile(ms, 99)), 3),
-            "max": round(float(ms.max()), 3), "n": int(ms.size)}
-
-
-def wall_latency_ms(stamps: np.ndarray) -> dict[str, dict[str, float | None]]:
-    """p50, p99 and max [ms] and the count of every `WALL_STAGES` stage and of
-    `TRANSPORT_STAGE`.
-
-    Args:
-        stamps: (K, 9) int64, one row per applied command, columns `TIMING_COLUMNS`
-            (0: not stamped).
-
-    Returns:
-        stage -> {"p50", "p99", "max", "n"}; stages with no measurable command are left out.
-    """
-    stamps = np.asarray(stamps, dtype=np.int64).reshape(-1, len(TIMING_COLUMNS))
-    col = {name: stamps[:, k] for k, name in enumerate(TIMING_COLUMNS)}
-    same_clock = (col["robot_clock"] == col["world_clock"]) & (col["robot_clock"] != 0)
-    out: dict[str, dict[str, float | None]] = {}
-    for stage, start, end, crosses in WALL_STAGES:
-        ok = (col[start] > 0) & (col[end] > 0)
-        if crosses:
-            ok &= same_clock
-        ms = (col[end][ok] - col[start][ok]) / 1e6
-        if ms.size:
-            out[stage] = _percentiles(ms)
-    ends = ("pose_pub_ns", "pose_rx_ns", "cmd_pub_ns", "cmd_rx_ns")
-    ok = np.all([col[name] > 0 for name in ends], axis=0)
-    world_ns = col["cmd_rx_ns"][ok] - col["pose_pub_ns"][ok]
-    robot_ns = col["cmd_pub_ns"][ok] - col["pose_rx_ns"][ok]
-    if world_ns.size:
-        out[TRANSPORT_STAGE] = _percentiles((world_ns - robot_ns) / 1e6)
-    return out
-
-
-def router_groups(robot_ids: Iterable[int], relays: Mapping[str, Iterable[int]]
-                  ) -> dict[str, list[int]]:
-    """Router name -> the robots connected to it: each relay's robots (`relays`, the world's
-    ``--relay`` list by certificate name), and `DIRECT_ROUTER` for the rest (those that
-    dial the world's router). Empty without relays."""
-    if not relays:
-        return {}
-    behind = {name: sorted(int(i) for i in ids) for name, ids in relays.items()}
-    relayed = {i for ids in behind.values() for i in ids}
-    direct = sorted(int(i) for i in robot_ids if int(i) not in relayed)
-    return {DIRECT_ROUTER: direct, **behind} if direct else behind
-
-
-def wall_latency_ms_by_group(robot: np.ndarray, stamps: np.ndarray,
-                             groups: Mapping[str, Iterable[int]]
-                             ) -> dict[str, dict[str, dict[str, float | None]]]:
-    """`wall_latency_ms` of the commands of each group of robots.
-
-    Args:
-        robot: (K,) the robot id of each row of `stamps`.
-        stamps: (K, 9) as `wall_latency_ms`.
-        groups: group name -> its robot ids (e.g. `router_groups`).
-    """
-    robot = np.asarray(robot, dtype=np.int64).reshape(-1)
-    stamps = np.asarray(stamps, dtype=np.int64).reshape(-1, len(TIMING_COLUMNS))
-    if robot.size != stamps.shape[0]:
-        raise ValueError(f"{robot.size} robot ids for {stamps.shape[0]} rows of stamps")
-    return {name: wall_latency_ms(stamps[np.isin(robot, np.fromiter(ids, dtype=np.int64))])
-            for name, ids in groups.items()}
-
-
-# --------------------------------------------------------------------------------------
 # Kernels
 # --------------------------------------------------------------------------------------
-
-def find_turns(t_s: np.ndarray, heading_rad: np.ndarray, *,
-               min_rate_radps: float = TURN_RATE_MIN_RADPS,
-               min_angle_rad: float = TURN_ANGLE_MIN_RAD) -> list[Turn]:
-    """The turns of one heading history (see the module docstring).
-
-    Args:
-        t_s: (T,) increasing times.
-        heading_rad: (T,) headings, wrapped or not.
-    """
-    t = np.asarray(t_s, dtype=float)
-    if t.size < 2:
-        return []
-    dtheta = np.diff(np.unwrap(np.asarray(heading_rad, dtype=float)))
-    rate = dtheta / np.diff(t)
-    sign = np.where(rate >= min_rate_radps, 1, np.where(rate <= -min_rate_radps, -1, 0))
-    # Run boundaries: where the sign changes (interval indices).
-    edges = np.flatnonzero(np.diff(sign)) + 1
-    starts = np.concatenate([[0], edges])
-    ends = np.concatenate([edges, [sign.size]])  # exclusive
-    turns = []
-    for i0, i1 in zip(starts.tolist(), ends.tolist()):
-        s = int(sign[i0])
-        if s == 0:
-            continue
-        angle = abs(float(dtheta[i0:i1].sum()))
-        if angle >= min_angle_rad:
-            turns.append(Turn(sign=s, start_s=float(t[i0]), end_s=float(t[i1]),
-                              angle_rad=angle))
-    return turns
-
-
-def find_reversals(turns: Sequence[Turn], window_s: float = REVERSAL_WINDOW_S
-                   ) -> list[tuple[Turn, Turn]]:
-    """(previous turn, reversing turn) for every turn that follows a turn of the opposite
-    sign and starts within window_s of its end."""
-    return [
-        (prev, cur) for prev, cur in zip(turns, turns[1:])
-        if cur.sign == -prev.sign and cur.start_s - prev.end_s <= window_s + _TIME_EPS_S
-    ]
-
-
-def count_reversals(turns: Sequence[Turn], window_s: float = REVERSAL_WINDOW_S) -> int:
-    """Turns that follow a turn of the opposite sign and start within window_s of its end."""
-    return len(find_reversals(turns, window_s))
-
-
-@dataclass(frozen=True)
-class PlanInForce:
-    """One robot's applied commands as a step function of time, for `reversal_causes`.
-
-    Args:
-        t_applied_s: (C,) increasing application times.
-        status: (C,) `PlanStatus` values.
-        side: (C,) -1 RIGHT, 0 NONE, +1 LEFT, or None when not recorded.
-        resolved: (C,) resolved threat id, NaN for none, or None when not recorded.
-    """
-
-    t_applied_s: np.ndarray
-    status: np.ndarray
-    side: np.ndarray | None
-    resolved: np.ndarray | None
-
-    def at(self, t_s: float) -> tuple[str, int, float] | None:
-        """(status, side, resolved id) of the last command applied at or before t_s."""
-        i = int(np.searchsorted(self.t_applied_s, t_s + _TIME_EPS_S, side="right")) - 1
-        if i < 0:
-            return None
-        side = int(self.side[i]) if self.side is not None else 0
-        resolved = float(self.resolved[i]) if self.resolved is not None else math.nan
-        return str(self.status[i]), side, resolved
-
-
-def reversal_causes(t_s: np.ndarray, heading_rad: np.ndarray, speed_mps: np.ndarray,
-                    plans: PlanInForce) -> dict[str, int]:
-    """The reversals of one heading history by cause (module docstring).
-
-    Args:
-        t_s, heading_rad, speed_mps: (T,) the robot's run.
-        plans: its applied commands.
-
-    Returns:
-        {cause: count} over `REVERSAL_CAUSES`; the counts sum to `oscillations`.
-    """
-    counts = dict.fromkeys(REVERSAL_CAUSES, 0)
-    t = np.asarray(t_s, dtype=float)
-    speed = np.asarray(speed_mps, dtype=float)
-    known = plans.side is not None and plans.resolved is not None
-    for prev, cur in find_reversals(find_turns(t, heading_rad)):
-        i = min(int(np.searchsorted(t, cur.start_s - _TIME_EPS_S)), t.size - 1)
-        a, b = plans.at(prev.start_s), plans.at(cur.start_s)
-        if abs(float(speed[i])) < SLOW_REVERSAL_MPS:
-            cause = "slow"
-        elif a is None or b is None:
-            cause = "unknown"
-        elif "escape" in (a[0], b[0]):
-            cause = "escape"
-        elif not known:
-            cause = "unknown"
-        elif math.isnan(a[2]) or math.isnan(b[2]) or 0 in (a[1], b[1]):
-            cause = "no_via_point"
-        elif a[2] != b[2]:
-            cause = "threat_switch"
-        else:
-            cause = "side_flip" if a[1] != b[1] else "same_via_point"
-        counts[cause] += 1
-    return counts
-
-
-def oscillations(t_s: np.ndarray, heading_rad: np.ndarray) -> int:
-    """Reversals of turning direction of one heading history."""
-    return count_reversals(find_turns(t_s, heading_rad))
-
 
 def path_length_m(xy_m: np.ndarray) -> float:
     """Length of a (T, 2) polyline."""
@@ -671,100 +450,121 @@ def compute_metrics(traj: Trajectory, commands: Commands, spec: RunSpec, *,
     if not np.array_equal(traj.robot_ids, spec.robot_ids):
         raise ValueError("trajectory robot columns must match the scenario's robot ids")
     scan = contact_episodes(traj, spec)
-    episodes, robot_min_gap = scan.episodes, scan.robot_min_gap_m
-    min_gap = float(robot_min_gap.min()) if robot_min_gap.size else math.inf
     for t_ev, a, b in contact_events:
         if not _confirmed(traj, spec, float(t_ev), int(a), int(b), world_dt_s):
-            episodes.append(ContactEpisode(float(t_ev), int(a), int(b), math.nan))
-    has_side = commands.side is not None and commands.resolved is not None
+            scan.episodes.append(ContactEpisode(float(t_ev), int(a), int(b), math.nan))
     planned = ~np.isin(commands.status, list(NOT_PLANNING_STATUSES))
+    per_robot = [
+        _robot_metrics(traj, spec, k, scan,
+                       _robot_commands(commands, int(rid), planned, control_period_s,
+                                       world_dt_s))
+        for k, rid in enumerate(spec.robot_ids.tolist())]
+    return _run_metrics(per_robot, traj, commands, spec, scan, planned,
+                        control_period_s=control_period_s, world_dt_s=world_dt_s)
 
-    per_robot: list[RobotMetrics] = []
-    for k, rid in enumerate(spec.robot_ids.tolist()):
-        t, xy, heading = _robot_run(traj, k, spec)
-        idx = arrival_index(t, xy, spec.goal_m[k], spec.goal_tolerance_m, spec.time_limit_s)
-        end = idx + 1 if idx is not None else t.size
-        straight = float(np.hypot(*(spec.goal_m[k] - spec.start_m[k])))
-        ideal = straight / float(spec.v_max_mps[k])
-        length = path_length_m(xy[:end])
-        reach = float(np.hypot(*(xy[idx] - xy[0]))) if idx is not None else 0.0
-        t_goal = float(t[idx]) if idx is not None else None
-        mine = commands.robot == rid
-        flips: tuple[int | None, int | None] = (None, None)
-        if has_side:
-            assert commands.side is not None and commands.resolved is not None
-            flips = side_flips(commands.seq[mine], commands.side[mine],
-                               commands.resolved[mine])
-        misses, cycles = deadline_misses(commands.seq[mine], commands.pose_stamp_s[mine],
-                                         control_period_s, world_dt_s)
-        plan = commands.plan_ms[mine & planned]
-        order = np.argsort(commands.t_applied_s[mine], kind="stable")
-        in_force = PlanInForce(
-            commands.t_applied_s[mine][order], commands.status[mine][order],
-            commands.side[mine][order] if has_side and commands.side is not None else None,
-            (commands.resolved[mine][order]
-             if has_side and commands.resolved is not None else None),
-        )
-        speed = _run_speed(traj, k, t.size)
-        gap_k = float(robot_min_gap[k])
-        per_robot.append(RobotMetrics(
-            id=int(rid),
-            arrived=idx is not None,
-            time_to_goal_s=t_goal,
-            ideal_time_s=ideal,
-            time_ratio=(t_goal / ideal if t_goal is not None and ideal > 0 else None),
-            path_length_m=length,
-            straight_m=straight,
-            path_ratio=(length / reach if idx is not None and reach > 0 else None),
-            oscillations=oscillations(t[:end], heading[:end]),
-            reversal_causes=reversal_causes(t[:end], heading[:end], speed[:end], in_force),
-            side_flips=flips[0],
-            side_flips_same_threat=flips[1],
-            contacts=sum(1 for e in episodes if rid in (e.id_a, e.id_b)),
-            min_gap_m=_finite(gap_k),
-            plan_ms_mean=float(plan.mean()) if plan.size else None,
-            plan_ms_p50=_pct(plan, 50),
-            plan_ms_p99=_pct(plan, 99),
-            plan_ms_max=float(plan.max()) if plan.size else None,
-            cycles=cycles,
-            deadline_misses=misses,
-        ))
 
-    arrived = [r for r in per_robot if r.arrived]
+def _plan_ms(plan_ms: np.ndarray) -> dict[str, float | None]:
+    """Mean, p50, p99 and largest planning time [ms] (None without plans)."""
+    return {"plan_ms_mean": float(plan_ms.mean()) if plan_ms.size else None,
+            "plan_ms_p50": _pct(plan_ms, 50), "plan_ms_p99": _pct(plan_ms, 99),
+            "plan_ms_max": float(plan_ms.max()) if plan_ms.size else None}
+
+
+@dataclass(frozen=True)
+class _RobotCommands:
+    """What one robot's applied commands give its metrics.
+
+    Args:
+        flips: `side_flips` (None, None without the side columns).
+        misses, cycles: `deadline_misses`.
+        plan_ms: (P,) planning times of the commands that planned.
+        in_force: its commands as a step function of time.
+    """
+
+    flips: tuple[int | None, int | None]
+    misses: int
+    cycles: int
+    plan_ms: np.ndarray
+    in_force: PlanInForce
+
+
+def _robot_commands(commands: Commands, rid: int, planned: np.ndarray,
+                    control_period_s: float, world_dt_s: float) -> _RobotCommands:
+    mine = commands.robot == rid
+    order = np.argsort(commands.t_applied_s[mine], kind="stable")
+    side = resolved = None
+    flips: tuple[int | None, int | None] = (None, None)
+    if commands.side is not None and commands.resolved is not None:
+        side, resolved = commands.side[mine], commands.resolved[mine]
+        flips = side_flips(commands.seq[mine], side, resolved)
+        side, resolved = side[order], resolved[order]
+    misses, cycles = deadline_misses(commands.seq[mine], commands.pose_stamp_s[mine],
+                                     control_period_s, world_dt_s)
+    in_force = PlanInForce(commands.t_applied_s[mine][order], commands.status[mine][order],
+                           side, resolved)
+    return _RobotCommands(flips, misses, cycles, commands.plan_ms[mine & planned], in_force)
+
+
+def _robot_metrics(traj: Trajectory, spec: RunSpec, k: int, scan: ContactScan,
+                   mine: _RobotCommands) -> RobotMetrics:
+    """The metrics of robot column k."""
+    rid = int(spec.robot_ids[k])
+    t, xy, heading = _robot_run(traj, k, spec)
+    idx = arrival_index(t, xy, spec.goal_m[k], spec.goal_tolerance_m, spec.time_limit_s)
+    end = idx + 1 if idx is not None else t.size
+    straight = float(np.hypot(*(spec.goal_m[k] - spec.start_m[k])))
+    ideal = straight / float(spec.v_max_mps[k])
+    length = path_length_m(xy[:end])
+    reach = float(np.hypot(*(xy[idx] - xy[0]))) if idx is not None else 0.0
+    t_goal = float(t[idx]) if idx is not None else None
+    speed = _run_speed(traj, k, t.size)
+    return RobotMetrics(
+        id=rid,
+        arrived=idx is not None,
+        time_to_goal_s=t_goal,
+        ideal_time_s=ideal,
+        time_ratio=(t_goal / ideal if t_goal is not None and ideal > 0 else None),
+        path_length_m=length,
+        straight_m=straight,
+        path_ratio=(length / reach if idx is not None and reach > 0 else None),
+        oscillations=oscillations(t[:end], heading[:end]),
+        reversal_causes=reversal_causes(t[:end], heading[:end], speed[:end], mine.in_force),
+        side_flips=mine.flips[0],
+        side_flips_same_threat=mine.flips[1],
+        contacts=sum(1 for e in scan.episodes if rid in (e.id_a, e.id_b)),
+        min_gap_m=_finite(float(scan.robot_min_gap_m[k])),
+        **_plan_ms(mine.plan_ms),
+        cycles=mine.cycles,
+        deadline_misses=mine.misses,
+    )
+
+
+def _run_metrics(per_robot: list[RobotMetrics], traj: Trajectory, commands: Commands,
+                 spec: RunSpec, scan: ContactScan, planned: np.ndarray, *,
+                 control_period_s: float, world_dt_s: float) -> RunMetrics:
+    """The whole run's metrics from its robots'."""
+    episodes = scan.episodes
+    n = len(per_robot)
+    arrived = sum(r.arrived for r in per_robot)
     plan_all = commands.plan_ms[planned]
     latency = (commands.t_applied_s - commands.pose_stamp_s) * 1000.0
     cycles_total = sum(r.cycles for r in per_robot)
     misses_total = sum(r.deadline_misses for r in per_robot)
-    n = len(per_robot)
-    pairs = sorted({tuple(sorted((e.id_a, e.id_b))) for e in episodes})
+    robot_gaps = scan.robot_min_gap_m
     return RunMetrics(
         robots=n,
-        arrived=len(arrived),
-        success=bool(n > 0 and len(arrived) == n and not episodes),
+        arrived=arrived,
+        success=bool(n > 0 and arrived == n and not episodes),
         contacts=len(episodes),
-        contact_pairs=[list(p) for p in pairs],
-        min_gap_m=_finite(min_gap),
+        contact_pairs=[list(p) for p in sorted({tuple(sorted((e.id_a, e.id_b)))
+                                                for e in episodes})],
+        min_gap_m=_finite(float(robot_gaps.min()) if robot_gaps.size else math.inf),
         min_gap_robots_m=_finite(scan.robots_min_gap_m),
         min_gap_obstacles_m=_finite(scan.obstacles_min_gap_m),
-        path_length_mean_m=_mean(r.path_length_m for r in arrived),
-        path_ratio_mean=_mean(r.path_ratio for r in arrived),
-        time_to_goal_mean_s=_mean(r.time_to_goal_s for r in arrived),
-        time_ratio_mean=_mean(r.time_ratio for r in arrived),
-        makespan_s=(max(r.time_to_goal_s or 0.0 for r in arrived)
-                    if arrived and len(arrived) == n else None),
-        oscillations_per_robot=float(np.mean([r.oscillations for r in per_robot])) if n else 0.0,
-        oscillations_total=sum(r.oscillations for r in per_robot),
-        oscillations_max=max((r.oscillations for r in per_robot), default=0),
-        reversal_causes_per_robot={
-            c: (float(np.mean([r.reversal_causes[c] for r in per_robot])) if n else 0.0)
-            for c in REVERSAL_CAUSES
-        },
-        side_flips_per_robot=(float(np.mean([r.side_flips or 0 for r in per_robot]))
-                              if has_side and n else None),
-        plan_ms_mean=float(plan_all.mean()) if plan_all.size else None,
-        plan_ms_p50=_pct(plan_all, 50),
-        plan_ms_p99=_pct(plan_all, 99),
-        plan_ms_max=float(plan_all.max()) if plan_all.size else None,
+        **_arrival_means(per_robot),
+        **_turning(per_robot, has_side=commands.side is not None
+                   and commands.resolved is not None),
+        **_plan_ms(plan_all),
         plan_cycles=int(plan_all.size),
         sim_latency_ms_p50=_pct(latency, 50),
         sim_latency_ms_p99=_pct(latency, 99),
@@ -776,6 +576,36 @@ def compute_metrics(traj: Trajectory, commands: Commands, spec: RunSpec, *,
         world_dt_s=float(world_dt_s),
         per_robot=per_robot,
     )
+
+
+def _arrival_means(per_robot: list[RobotMetrics]) -> dict[str, float | None]:
+    """Means over the robots that arrived, and the makespan if every robot did."""
+    arrived = [r for r in per_robot if r.arrived]
+    return {
+        "path_length_mean_m": _mean(r.path_length_m for r in arrived),
+        "path_ratio_mean": _mean(r.path_ratio for r in arrived),
+        "time_to_goal_mean_s": _mean(r.time_to_goal_s for r in arrived),
+        "time_ratio_mean": _mean(r.time_ratio for r in arrived),
+        "makespan_s": (max(r.time_to_goal_s or 0.0 for r in arrived)
+                       if arrived and len(arrived) == len(per_robot) else None),
+    }
+
+
+def _turning(per_robot: list[RobotMetrics], *, has_side: bool) -> dict[str, Any]:
+    """Oscillations (per robot, total, largest), their causes per robot and the side flips
+    per robot (None without the side columns)."""
+    n = len(per_robot)
+    counts = [r.oscillations for r in per_robot]
+    return {
+        "oscillations_per_robot": float(np.mean(counts)) if n else 0.0,
+        "oscillations_total": sum(counts),
+        "oscillations_max": max(counts, default=0),
+        "reversal_causes_per_robot": {
+            c: (float(np.mean([r.reversal_causes[c] for r in per_robot])) if n else 0.0)
+            for c in REVERSAL_CAUSES},
+        "side_flips_per_robot": (float(np.mean([r.side_flips or 0 for r in per_robot]))
+                                 if has_side and n else None),
+    }
 
 
 def _run_speed(traj: Trajectory, k: int, size: int) -> np.ndarray:

@@ -19,9 +19,10 @@ from matplotlib.patches import Circle
 
 from agent.core.scenario import Scenario
 from agent.files import replace_file
-from orchestrator.analysis.metrics import WALL_STAGES, RunSpec, contact_episodes
+from eifp_wire import TIMING_COLUMNS
+from orchestrator.analysis.latency import WALL_STAGES
+from orchestrator.analysis.metrics import RunSpec, contact_episodes
 from orchestrator.analysis.rundir import RunData, read_run_dir, read_timing
-from protocol import TIMING_COLUMNS
 
 DISC_INTERVAL_S = 10.0
 """Robot discs are drawn every this many seconds along the paths."""
@@ -337,13 +338,13 @@ def latency_axis_ms(ms: np.ndarray) -> tuple[float, float, int]:
 
 
 def plot_wall_latency(stamps: np.ndarray, path: Path) -> Path | None:
-    """latency.png: a histogram per wall-clock stage (`metrics.WALL_STAGES`), p50 and p99
+    """latency.png: a histogram per wall-clock stage (`latency.WALL_STAGES`), p50 and p99
     marked, each x axis clipped just past the p99 (`latency_axis_ms`; the panel says how
     many samples lie beyond, and the largest); None (nothing written) if no stage could be
     measured.
 
     Args:
-        stamps: (K, 9) timing.csv stamps (`protocol.TIMING_COLUMNS`).
+        stamps: (K, 9) timing.csv stamps (`eifp_wire.messages.TIMING_COLUMNS`).
         path: the PNG to write.
     """
     stamps = np.asarray(stamps, dtype=np.int64).reshape(-1, len(TIMING_COLUMNS))

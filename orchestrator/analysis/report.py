@@ -14,8 +14,8 @@ from typing import Any
 
 import numpy as np
 
-from orchestrator.analysis.metrics import REVERSAL_CAUSES
 from orchestrator.analysis.rundir import find_run_dirs, read_json
+from orchestrator.analysis.turns import REVERSAL_CAUSES
 from world.scenario_file import ScenarioError, load_scenario
 
 # The paper's four metrics (Table I, Fig. "plots"): key in metrics.json, label.

@@ -20,17 +20,9 @@ import numpy as np
 
 from agent.core.scenario import Scenario
 from agent.files import replace_file
-from orchestrator.analysis.metrics import (
-    Commands,
-    RunMetrics,
-    RunSpec,
-    Trajectory,
-    compute_metrics,
-    router_groups,
-    wall_latency_ms,
-    wall_latency_ms_by_group,
-)
-from protocol import TIMING_COLUMNS
+from eifp_wire import TIMING_COLUMNS
+from orchestrator.analysis.latency import router_groups, wall_latency_ms, wall_latency_ms_by_group
+from orchestrator.analysis.metrics import Commands, RunMetrics, RunSpec, Trajectory, compute_metrics
 from world.scenario_file import load_scenario
 
 REQUIRED_COMMAND_COLUMNS = ("t_applied", "robot", "seq", "pose_stamp", "v", "omega",
@@ -238,8 +230,8 @@ def run_relays(events: Iterable[dict[str, Any]]) -> dict[str, list[int]]:
 
 
 def read_timing_by_robot(run_dir: Path) -> tuple[np.ndarray, np.ndarray]:
-    """timing.csv as ``(robot ids (K,), stamps (K, 9))`` int64 (`protocol.TIMING_COLUMNS`);
-    K = 0 if there is none."""
+    """timing.csv as ``(robot ids (K,), stamps (K, 9))`` int64
+    (`eifp_wire.messages.TIMING_COLUMNS`); K = 0 if there is none."""
     path = Path(run_dir) / "timing.csv"
     robots: list[int] = []
     rows: list[list[int]] = []
@@ -261,7 +253,7 @@ def read_timing_by_robot(run_dir: Path) -> tuple[np.ndarray, np.ndarray]:
 
 
 def read_timing(run_dir: Path) -> np.ndarray:
-    """timing.csv's stamps as (K, 9) int64 (`protocol.TIMING_COLUMNS`); (0, 9) if none."""
+    """timing.csv's stamps as (K, 9) int64 (`eifp_wire.messages.TIMING_COLUMNS`); (0, 9) if none."""
     return read_timing_by_robot(run_dir)[1]
 
 

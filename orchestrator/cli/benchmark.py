@@ -16,11 +16,14 @@ import datetime as dt
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from agent.core.config import PLANNER_NAMES
 from agent.process import ExitCode
 from orchestrator.cli.common import DEFAULT_RUNS_DIR, BadInput, split_list
+
+if TYPE_CHECKING:
+    from orchestrator.experiments.benchmark import Case
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -81,20 +84,7 @@ def run(args: argparse.Namespace) -> int:
     from orchestrator.experiments import benchmark as bm
 
     planners = _planners(args.planners)
-    try:
-        seeds = bm.parse_seeds(args.seeds, quick=args.quick)
-        families = ["all"] if args.families.strip() == "all" else split_list(args.families)
-        cases = bm.select_cases(bm.QUICK_SUITE if args.quick else bm.SUITE, families)
-    except ValueError as exc:
-        raise BadInput(str(exc)) from None
-    if args.max_cases is not None:
-        if args.max_cases < 1:
-            raise BadInput(f"--max-cases: must be >= 1, got {args.max_cases}")
-        cases = cases[:args.max_cases]
-    if args.jobs < 1:
-        raise BadInput(f"--jobs: must be >= 1, got {args.jobs}")
-    if not args.time_scale > 0:
-        raise BadInput(f"--time-scale: must be > 0, got {args.time_scale}")
+    cases, seeds = _cases_and_seeds(args)
     stamp = dt.datetime.now().strftime("%Y%m%d-%H%M%S")
     out = Path(args.out) if args.out else DEFAULT_RUNS_DIR / f"benchmark-{stamp}"
     jobs = bm.plan_jobs(cases, planners, seeds, mode=args.mode, out=out,
@@ -116,13 +106,7 @@ def run(args: argparse.Namespace) -> int:
     wall0 = time.monotonic()
 
     def done(count: int, record: dict[str, Any]) -> None:
-        what = (f"error: {record['error']}" if record.get("error") else
-                f"success {'yes' if record.get('success') else 'no'}, arrived "
-                f"{record.get('arrived')}/{record.get('robots')}, contacts "
-                f"{record.get('contacts')}")
-        print(f"  [{count}/{len(jobs)}] {record['case']} {record['planner']} "
-              f"s{record['seed']}: {what} ({record['wall_s']:.1f} s)", file=sys.stderr,
-              flush=True)
+        print(f"  [{count}/{len(jobs)}] {_outcome(record)}", file=sys.stderr, flush=True)
 
     records = bm.run_jobs(jobs, workers=args.jobs, on_done=done)
     wall_s = time.monotonic() - wall0
@@ -134,25 +118,68 @@ def run(args: argparse.Namespace) -> int:
              "wall_s": round(wall_s, 1), "argv": list(getattr(args, "argv", []))}
     paths = bm.write_outputs(out, rows, records, suite)
     if args.readme is not None:
-        try:
-            text = args.readme.read_text(encoding="utf-8")
-            table = (bm.format_readme_summary(rows) + "\nEvery case, seed and column: "
-                     "[docs/results.md](docs/results.md) (`benchmark.md` of the run).\n")
-            args.readme.write_text(bm.replace_results(
-                text, table, bm.portable_command(getattr(args, "argv", []))),
-                encoding="utf-8")
-        except (OSError, ValueError) as exc:
-            raise BadInput(f"--readme: {args.readme}: {exc}") from None
+        _update_readme(args.readme, rows, getattr(args, "argv", []))
         paths.append(args.readme)
     print(bm.format_text(rows))
     print()
     print(bm.TABLE_NOTES)
     print(f"\n{len(jobs)} runs in {wall_s:.1f} s wall; wrote " +
           ", ".join(str(p) for p in paths))
-    broken = [r for r in records if r.get("error")]
-    for r in broken:
-        print(f"error: {r['case']} {r['planner']} s{r['seed']}: {r['error']} ({r['dir']})",
-              file=sys.stderr)
+    return _worst_ending(records)
+
+
+def _cases_and_seeds(args: argparse.Namespace) -> tuple[tuple[Case, ...], tuple[int, ...]]:
+    """The suite's cases (``--families``, ``--quick``, ``--max-cases``) and the seeds; raises
+    `BadInput` for any argument out of range."""
+    from orchestrator.experiments import benchmark as bm
+
+    try:
+        seeds = bm.parse_seeds(args.seeds, quick=args.quick)
+        families = ["all"] if args.families.strip() == "all" else split_list(args.families)
+        cases = bm.select_cases(bm.QUICK_SUITE if args.quick else bm.SUITE, families)
+    except ValueError as exc:
+        raise BadInput(str(exc)) from None
+    if args.max_cases is not None:
+        if args.max_cases < 1:
+            raise BadInput(f"--max-cases: must be >= 1, got {args.max_cases}")
+        cases = cases[:args.max_cases]
+    if args.jobs < 1:
+        raise BadInput(f"--jobs: must be >= 1, got {args.jobs}")
+    if not args.time_scale > 0:
+        raise BadInput(f"--time-scale: must be > 0, got {args.time_scale}")
+    return cases, seeds
+
+
+def _outcome(record: dict[str, Any]) -> str:
+    """One finished run, as the progress line names it."""
+    what = (f"error: {record['error']}" if record.get("error") else
+            f"success {'yes' if record.get('success') else 'no'}, arrived "
+            f"{record.get('arrived')}/{record.get('robots')}, contacts "
+            f"{record.get('contacts')}")
+    return (f"{record['case']} {record['planner']} s{record['seed']}: {what} "
+            f"({record['wall_s']:.1f} s)")
+
+
+def _update_readme(readme: Path, rows: list[dict[str, Any]], argv: list[str]) -> None:
+    """Replace the README's results table with this benchmark's (``--readme``)."""
+    from orchestrator.experiments import benchmark as bm
+
+    try:
+        text = readme.read_text(encoding="utf-8")
+        table = (bm.format_readme_summary(rows) + "\nEvery case, seed and column: "
+                 "[docs/results.md](docs/results.md) (`benchmark.md` of the run).\n")
+        readme.write_text(bm.replace_results(text, table, bm.portable_command(argv)),
+                          encoding="utf-8")
+    except (OSError, ValueError) as exc:
+        raise BadInput(f"--readme: {readme}: {exc}") from None
+
+
+def _worst_ending(records: list[dict[str, Any]]) -> ExitCode:
+    """Report the runs that broke; the worst ending of the runs (`ExitCode.worst`)."""
+    for r in records:
+        if r.get("error"):
+            print(f"error: {r['case']} {r['planner']} s{r['seed']}: {r['error']} ({r['dir']})",
+                  file=sys.stderr)
     worst = ExitCode.worst(r.get("exit", ExitCode.ERROR) for r in records)
     if worst != ExitCode.OK:
         print(f"benchmark: exit {int(worst)} ({worst.name}), the worst ending of its runs",

@@ -72,7 +72,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def _relay_hosts(text: str) -> tuple[str, tuple[str, ...]]:
     """``NAME[=HOST,...]`` of ``compose certs --relay``."""
-    from protocol import router_cn
+    from eifp_wire import router_cn
 
     name, _, hosts = text.partition("=")
     try:

@@ -6,6 +6,7 @@ import argparse
 import datetime as dt
 import math
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from agent.process import ExitCode
 from orchestrator.cli.common import (
@@ -13,6 +14,9 @@ from orchestrator.cli.common import (
     BadInput,
     make_dir,
 )
+
+if TYPE_CHECKING:
+    from orchestrator.analysis.report import RunRecord
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -34,7 +38,6 @@ def run(args: argparse.Namespace) -> int:
         ALL_METRICS,
         PAPER_METRICS,
         aggregate,
-        collect,
         identical_runs,
         paper_table,
         reversal_causes,
@@ -42,23 +45,9 @@ def run(args: argparse.Namespace) -> int:
         summary_table,
         write_stats_csv,
     )
-    from orchestrator.analysis.rundir import write_json
 
     paths = [Path(p) for p in args.dirs]
-    missing = [str(p) for p in paths if not p.exists()]
-    if missing:
-        raise BadInput(f"report: no such directory: {', '.join(missing)}")
-    records = collect(paths, by_dir=args.by_dir)
-    if not records:
-        raise BadInput(f"report: no run directories with metrics.json under "
-                       f"{', '.join(map(str, paths))}")
-    partial = [r for r in records if r.metrics.get("partial")]
-    records = [r for r in records if not r.metrics.get("partial")]
-    if partial:
-        print(f"{len(partial)} partial runs (interrupted before their end; left out of the "
-              f"means): {', '.join(str(r.path) for r in partial)}")
-    if not records:
-        raise BadInput("report: every run found is partial (interrupted)")
+    records, partial = _complete_runs(paths, by_dir=args.by_dir)
     stats = aggregate(records, ALL_METRICS)
     print(f"{len(records)} runs")
     print(summary_table(stats))
@@ -79,7 +68,44 @@ def run(args: argparse.Namespace) -> int:
     make_dir(out)
     bar_stats = {k: {m: (v[0], v[1]) for m, v in s.items()} for k, s in stats.items()}
     written = plot_report_bars(bar_stats, PAPER_METRICS, out)
-    write_json(out / "report.json", {
+    _write_report_json(out / "report.json", records, partial, same, stats, causes)
+    write_stats_csv(out / "report.csv", stats)
+    print(f"\nplots: {', '.join(str(p) for p in written)}")
+    print(f"tables: {out / 'report.csv'}, {out / 'report.json'}")
+    return ExitCode.OK
+
+
+def _complete_runs(paths: list[Path], *, by_dir: bool
+                   ) -> tuple[list[RunRecord], list[RunRecord]]:
+    """The run directories under `paths` with metrics.json, and the partial (interrupted)
+    ones, which are named and left out; raises `BadInput` if no complete run is left."""
+    from orchestrator.analysis.report import collect
+
+    missing = [str(p) for p in paths if not p.exists()]
+    if missing:
+        raise BadInput(f"report: no such directory: {', '.join(missing)}")
+    records = collect(paths, by_dir=by_dir)
+    if not records:
+        raise BadInput(f"report: no run directories with metrics.json under "
+                       f"{', '.join(map(str, paths))}")
+    partial = [r for r in records if r.metrics.get("partial")]
+    records = [r for r in records if not r.metrics.get("partial")]
+    if partial:
+        print(f"{len(partial)} partial runs (interrupted before their end; left out of the "
+              f"means): {', '.join(str(r.path) for r in partial)}")
+    if not records:
+        raise BadInput("report: every run found is partial (interrupted)")
+    return records, partial
+
+
+def _write_report_json(path: Path, records: list[RunRecord], partial: list[RunRecord],
+                       same: dict[tuple[str, str], tuple[int, int]],
+                       stats: dict[tuple[str, str], dict[str, tuple[float, float, int]]],
+                       causes: dict[tuple[str, str], dict[str, float]]) -> None:
+    """report.json: the runs, the partial ones, the identical ones and every group's stats."""
+    from orchestrator.analysis.rundir import write_json
+
+    write_json(path, {
         "runs": [str(r.path) for r in records],
         "partial_runs": [str(r.path) for r in partial],
         "identical_runs": [{"setup": k[0], "planner": k[1], "distinct": d, "runs": n}
@@ -89,10 +115,6 @@ def run(args: argparse.Namespace) -> int:
                        for m, v in s.items()},
                     "reversal_causes_per_robot": causes.get(k)} for k, s in stats.items()],
     })
-    write_stats_csv(out / "report.csv", stats)
-    print(f"\nplots: {', '.join(str(p) for p in written)}")
-    print(f"tables: {out / 'report.csv'}, {out / 'report.json'}")
-    return ExitCode.OK
 
 
 def default_report_dir() -> Path:

@@ -39,8 +39,8 @@ LAUNCHERS = ("auto", "spawn", "fork")
 FORK_ABOVE_ROBOTS = 64
 """With more robots than this on one machine, 'auto' forks them from one warmed-up parent: N
 interpreters importing numpy, scipy, osqp and zenoh and opening TLS sessions all at once
-outlast any start-up deadline (128 spawned robots on 2 cores are not all connected after
-64 s), while the fork launcher starts them a few at a time from a parent that imported once."""
+outlast any start-up deadline on a small host, while the fork launcher starts them a few at
+a time from a parent that imported once."""
 
 
 def choose_launcher(requested: str, robots: int, faults: Any) -> str:

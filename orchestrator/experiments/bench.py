@@ -67,8 +67,7 @@ WARMUP_ROUNDS = 2
 EPISODE_TIME_FACTOR = 4.0
 """An episode gives up after this many times the ideal time to cross the circle."""
 DEFAULT_CYCLES = 5000
-"""Cycles timed per row: p99 rests on 50 samples; a row of N = 64 eIFP-MPC took ~15 s on
-an idle core of the development machine."""
+"""Cycles timed per row: p99 rests on 50 samples."""
 CMD_TIMEOUT_S = 0.5
 EXCLUDED_STATUSES = (PlanStatus.ARRIVED, PlanStatus.STALE)
 STAGES = ("threats", "viapoints", "spline", "control", "obs")

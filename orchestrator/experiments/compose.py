@@ -52,7 +52,7 @@ RUN_MARGIN_S = 60.0
 if TYPE_CHECKING:
     import zenoh
 
-    from protocol import RunKeys
+    from eifp_wire import RunKeys
 
 log = logging.getLogger("orchestrator")
 
@@ -156,7 +156,7 @@ def _open_session(connect: str, deadline: float, stop: StopFlag,
                   tls_dir: Path | None = None) -> zenoh.Session | None:
     """A client session to `connect`, retrying until `deadline` (monotonic); None if not.
     With `tls_dir`: mutual TLS as the ``orchestrator`` identity."""
-    from protocol import ORCHESTRATOR_CN, TlsFiles, session_settings
+    from eifp_wire import ORCHESTRATOR_CN, TlsFiles, session_settings
 
     tls = TlsFiles.in_dir(tls_dir, ORCHESTRATOR_CN) if tls_dir is not None else None
     try:
@@ -188,7 +188,7 @@ def _drain(watch: RunWatch, robot_sub: zenoh.Subscriber, world_sub: zenoh.Subscr
     """Apply the liveliness changes waiting in the two channels; log what changed."""
     import zenoh
 
-    from protocol import ProtocolError
+    from eifp_wire import ProtocolError
 
     n = len(watch.robot_ids)
     while (sample := robot_sub.try_recv()) is not None:
@@ -225,9 +225,9 @@ def watch_run(options: SetupOptions, scenario: Scenario, connect: str, startup_t
         startup deadline), ``"world_stuck"`` (the world outlived the run's wall budget) or
         ``"signal"``.
     """
+    from eifp_wire import RunKeys
     from orchestrator.analysis.console import ProgressLine
-    from orchestrator.experiments.distributed import _EventTail, _progress
-    from protocol import RunKeys
+    from orchestrator.experiments.progress import EventTail, distributed_progress
 
     keys = RunKeys(options.run_id)
     t0 = time.monotonic()
@@ -236,7 +236,7 @@ def watch_run(options: SetupOptions, scenario: Scenario, connect: str, startup_t
         return "signal" if stop else "no_world"
     watch = RunWatch(frozenset(r.id for r in scenario.robots), set())
     progress = ProgressLine(f"{scenario.name} docker")
-    tail = _EventTail(options.run_dir / "events.jsonl")
+    tail = EventTail(options.run_dir / "events.jsonl")
     try:
         robot_sub = session.liveliness().declare_subscriber(keys.alive_robot_all, history=True)
         world_sub = session.liveliness().declare_subscriber(keys.alive_world, history=True)
@@ -258,7 +258,8 @@ def watch_run(options: SetupOptions, scenario: Scenario, connect: str, startup_t
                 return "world_stuck"
             if watch.all_alive_once:
                 tail.poll()
-                progress(_progress(tail.events, options.run_dir, t0, len(watch.robot_ids), ()))
+                progress(distributed_progress(tail.events, options.run_dir, t0,
+                                              len(watch.robot_ids), ()))
             time.sleep(POLL_S)
         return "done"
     finally:
@@ -345,7 +346,7 @@ def await_and_report(options: SetupOptions, connect: str, startup_timeout_s: flo
         view = start_live_view(live[0], live[1], scenario)
         tls = None
         if tls_dir is not None:
-            from protocol import ORCHESTRATOR_CN, TlsFiles
+            from eifp_wire import ORCHESTRATOR_CN, TlsFiles
 
             tls = TlsFiles.in_dir(tls_dir, ORCHESTRATOR_CN)
         bridge = LiveBridge(options.run_id, connect, scenario, view, tls=tls).start()

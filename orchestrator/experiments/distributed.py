@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import contextlib
 import json
-import math
 import os
 import re
 import signal
@@ -38,7 +37,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, Any
@@ -47,8 +46,14 @@ from agent.core.scenario import Scenario
 from agent.files import append_line, open_new, replace_file
 from agent.flags import endpoint_host, every_interface, unspecified_literal
 from agent.process import PARENT_PID_ENV, raise_interrupt
+from eifp_wire import OBSERVER_CN, TlsFiles, tls_endpoint, validate_run_id
 from orchestrator.analysis.metrics import RunMetrics
-from protocol import OBSERVER_CN, TlsFiles, tls_endpoint, validate_run_id
+from orchestrator.experiments.progress import (
+    DistributedProgress,
+    EventTail,
+    distributed_progress,
+    last_trajectory_time,
+)
 from world.scenario_file import load_scenario
 from world.sim.faults import FaultPlan, ProcessFault
 
@@ -68,7 +73,7 @@ STARTUP_S_MIN = 30.0
 STARTUP_S_PER_ROBOT = 0.5
 """The default start-up deadline is the larger of `STARTUP_S_MIN` and this per robot: every
 spawned robot imports numpy, scipy, osqp and zenoh and opens a TLS session, so with more
-robots than cores start-up grows with N (128 robots on 2 cores are not all alive after 30 s)."""
+robots than cores start-up grows with N."""
 FAULT_POLL_S = 0.02
 """Wall period of the launcher's loop while process faults are pending."""
 TLS_DIR = "tls"
@@ -78,85 +83,12 @@ REFUSED_COUNTERS = ("refused_poses", "refused_control", "refused_config")
 EXIT_LINE = re.compile(r"robot (\d+) exit: reason='([^']*)' code=(\d+)(.*)$", re.MULTILINE)
 
 
-@dataclass(frozen=True)
-class DistributedProgress:
-    """What `run_distributed` reports to `on_progress` about every `POLL_S` of wall time.
-
-    Args:
-        wall_s: wall time since the world was spawned.
-        started: the world has published the start.
-        sim_t_s: the newest sim time seen in the events or the trajectory file.
-        n_robots: robots in the scenario.
-        arrived: robot ids that have arrived.
-        contacts: contacts so far.
-        lost: robot ids whose processes the world has lost (and not seen rejoin).
-        robots_running: robot processes still running.
-        events: every event read so far, in order (parsed JSON lines).
-    """
-
-    wall_s: float
-    started: bool
-    sim_t_s: float
-    n_robots: int
-    arrived: frozenset[int]
-    contacts: int
-    lost: frozenset[int]
-    robots_running: int
-    events: tuple[dict, ...] = field(repr=False, default=())
-
-
 def free_tcp_endpoint(host: str = "127.0.0.1") -> str:
     """A ``tcp/<host>:<port>`` endpoint on a port that was free a moment ago."""
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
         sock.bind((host, 0))
         port = sock.getsockname()[1]
     return f"tcp/{host}:{port}"
-
-
-class _EventTail:
-    """Reads new complete lines of events.jsonl (the world appends and flushes per line)."""
-
-    def __init__(self, path: Path) -> None:
-        self.path = path
-        self.offset = 0
-        self.events: list[dict] = []
-
-    def poll(self) -> list[dict]:
-        try:
-            with open(self.path, "rb") as f:
-                f.seek(self.offset)
-                chunk = f.read()
-        except FileNotFoundError:
-            return []
-        end = chunk.rfind(b"\n") + 1
-        self.offset += end
-        new = []
-        for line in chunk[:end].splitlines():
-            try:
-                new.append(json.loads(line))
-            except ValueError:
-                continue
-        self.events.extend(new)
-        return new
-
-
-def _last_trajectory_time(path: Path) -> float:
-    """Sim time of the last complete row of trajectory.csv (0 if none yet)."""
-    try:
-        with open(path, "rb") as f:
-            f.seek(0, os.SEEK_END)
-            size = f.tell()
-            f.seek(max(0, size - 512))
-            tail = f.read()
-    except FileNotFoundError:
-        return 0.0
-    lines = tail.split(b"\n")
-    for line in reversed(lines[:-1]):  # the last piece may be a partial row
-        try:
-            return float(line.split(b",", 1)[0])
-        except ValueError:
-            continue
-    return 0.0
 
 
 def _tls_args(tls_dir: Path | None) -> list[str]:
@@ -230,7 +162,7 @@ def world_lost_grace_args(plan: FaultPlan | None, *, time_scale: float,
     """``--lost-grace-s`` of ``python -m world`` for a plan whose robots come back: a
     stopped robot is lost from the lease until it resumes (its stop's duration), a restarted
     one until its new process is up (at most the start-up deadline, in sim time). Without
-    such faults the world's default (`world.node.LOST_GRACE_S`) stands."""
+    such faults the world's default (`world.world_cycle.LOST_GRACE_S`) stands."""
     if plan is None:
         return []
     back_s = [f.duration_s + 1.0 for f in plan.process if f.kind == "stop"]
@@ -450,86 +382,152 @@ def run_distributed(
         raise ValueError("robot_launcher='fork' cannot inject faults: use 'spawn'")
     if robot_launcher not in ("spawn", "fork"):
         raise ValueError(f"robot_launcher must be 'spawn' or 'fork', got {robot_launcher!r}")
-    scenario = load_scenario(scenario_path)  # fail early, in the caller's process
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    endpoint = endpoint or free_tcp_endpoint()
-    robot_ids = [spec.id for spec in scenario.robots]
-    if startup_timeout_s is None:
-        startup_timeout_s = default_startup_timeout_s(len(robot_ids))
-    tls_dir: Path | None = None
-    if tls:
-        endpoint = tls_endpoint(endpoint)
-        robot_endpoints = {rid: tls_endpoint(ep) for rid, ep in (robot_endpoints or {}).items()}
-    elif every_interface(endpoint):
-        raise ValueError(f"{endpoint}: listening on every interface needs TLS")
-    joined = [*(robot_endpoints or {}).values()] or [endpoint]
-    if tls:
-        tls_dir = prepare_tls(out_dir, run_id, robot_ids, [endpoint, *joined], tls_ca)
-    _record_transport(out_dir, transport_info(joined, tls_dir))
-    world_cmd = world_command(run_id, scenario_path, out_dir, endpoint, rate_hz=rate_hz,
-                              time_scale=time_scale, wait_robots_s=startup_timeout_s,
-                              extra_args=[*world_fault_args(faults),
-                                          *world_lost_grace_args(
-                                              faults, time_scale=time_scale,
-                                              startup_timeout_s=startup_timeout_s),
-                                          *extra_world_args],
-                              tls_dir=tls_dir)
+    launch = _Launch.prepare(scenario_path, Path(out_dir), run_id, endpoint=endpoint,
+                             startup_timeout_s=startup_timeout_s, faults=faults,
+                             robot_endpoints=robot_endpoints, tls=tls, tls_ca=tls_ca,
+                             robot_args=robot_args)
+    world_cmd = world_command(
+        run_id, scenario_path, launch.out_dir, launch.endpoint, rate_hz=rate_hz,
+        time_scale=time_scale, wait_robots_s=launch.startup_timeout_s,
+        extra_args=[*world_fault_args(faults),
+                    *world_lost_grace_args(faults, time_scale=time_scale,
+                                           startup_timeout_s=launch.startup_timeout_s),
+                    *extra_world_args],
+        tls_dir=launch.tls_dir)
     if faults is not None:
-        faults.check(robot_ids)
+        faults.check(launch.robot_ids)
     # A world that cannot keep pace runs slower than time_scale: be generous before giving up.
-    world_limit_s = (2.0 * startup_timeout_s + 3.0 * scenario.time_limit_s / time_scale
-                     + EXIT_MARGIN_S)
-
-    in_main = threading.current_thread() is threading.main_thread()
-    previous: dict[int, Any] = {}
-    if in_main:
-        # Unwinds through the teardown below, then the caller's interrupted-run path.
-        previous = {s: signal.signal(s, raise_interrupt) for s in (signal.SIGTERM, signal.SIGHUP)}
-
-    world: subprocess.Popen | None = None
-    robots: list[subprocess.Popen] = []
-    scheduler: ProcessFaultScheduler | None = None
-    bridge = None
-    try:
+    world_limit_s = (2.0 * launch.startup_timeout_s
+                     + 3.0 * launch.scenario.time_limit_s / time_scale + EXIT_MARGIN_S)
+    children = _Children(launch)
+    with _torn_down_on_exit(children.teardown):
         t0 = time.monotonic()
-        world = spawn_logged(world_cmd, out_dir / "world.log")
+        children.world = spawn_logged(world_cmd, launch.out_dir / "world.log")
         if live is not None:
-            from orchestrator.experiments.live import LiveBridge
-
-            # Read-only: the observer's certificate (the access control lets it subscribe).
-            bridge = LiveBridge(
-                run_id, endpoint if not every_interface(endpoint)
-                else joined[0], scenario, live,
-                tls=TlsFiles.in_dir(tls_dir, OBSERVER_CN) if tls_dir is not None else None,
-            ).start()
-
-        def spawn_robot(rid: int, restart: int = 0) -> subprocess.Popen:
-            name = f"robot_{rid}.log" if not restart else f"robot_{rid}.restart{restart}.log"
-            address = (robot_endpoints or {}).get(rid, endpoint)
-            proc = spawn_logged(robot_command(run_id, rid, address,
-                                              startup_timeout_s=startup_timeout_s,
-                                              extra_args=[*robot_fault_args(faults, rid),
-                                                          *robot_args],
-                                              tls_dir=tls_dir),
-                                out_dir / name)
-            robots.append(proc)
-            return proc
-
-        current: dict[int, subprocess.Popen] = {}
+            children.bridge = launch.live_bridge(live)
         if robot_launcher == "fork":  # one process group: teardown reaches every robot
-            robots.append(spawn_logged(
-                fleet_command(run_id, robot_ids, endpoint, out_dir,
-                              startup_timeout_s=startup_timeout_s,
-                              robot_endpoints=robot_endpoints, nice=robot_nice,
-                              cpu_tokens=cpu_tokens, robot_args=robot_args,
-                              tls_dir=tls_dir),
-                out_dir / "fleet.log"))
+            children.robots.append(spawn_logged(
+                launch.fleet_command(robot_nice=robot_nice, cpu_tokens=cpu_tokens),
+                launch.out_dir / "fleet.log"))
+            current: dict[int, subprocess.Popen] = {}
         else:
-            current = {rid: spawn_robot(rid) for rid in robot_ids}
-        scheduler = ProcessFaultScheduler(faults.process if faults else (), current,
-                                          spawn_robot, out_dir / "faults.jsonl")
-        tail = _EventTail(out_dir / "events.jsonl")
+            current = {rid: children.spawn_robot(rid) for rid in launch.robot_ids}
+        children.scheduler = ProcessFaultScheduler(faults.process if faults else (), current,
+                                                   children.spawn_robot,
+                                                   launch.out_dir / "faults.jsonl")
+        code = children.supervise(t0, world_limit_s, on_progress)
+        return code if code >= 0 else 128 - code
+
+
+@dataclass(frozen=True)
+class _Launch:
+    """What one distributed run starts: where, with which certificates and arguments.
+
+    Args:
+        run_id: the run id.
+        out_dir: the run directory (made by `prepare`).
+        scenario: the run's scenario.
+        endpoint: the world's router endpoint.
+        robot_endpoints: robot id -> the endpoint it dials instead of `endpoint`.
+        joined: the endpoints a client joins the run at (run.json's ``zenoh``).
+        tls_dir: the run's certificates, or None (plain TCP).
+        startup_timeout_s: the start-up deadline.
+        faults: the faults to inject, or None.
+        robot_args: further ``python -m agent`` arguments for every robot.
+    """
+
+    run_id: str
+    out_dir: Path
+    scenario: Scenario
+    endpoint: str
+    robot_endpoints: Mapping[int, str]
+    joined: list[str]
+    tls_dir: Path | None
+    startup_timeout_s: float
+    faults: FaultPlan | None
+    robot_args: Sequence[str]
+
+    @staticmethod
+    def prepare(scenario_path: Path, out_dir: Path, run_id: str, *, endpoint: str | None,
+                startup_timeout_s: float | None, faults: FaultPlan | None,
+                robot_endpoints: Mapping[int, str] | None, tls: bool, tls_ca: Path | None,
+                robot_args: Sequence[str]) -> _Launch:
+        """Load the scenario, make the run directory, settle the endpoints, make the
+        certificates and record the transport in run.json (see `run_distributed`)."""
+        scenario = load_scenario(scenario_path)  # fail early, in the caller's process
+        out_dir.mkdir(parents=True, exist_ok=True)
+        endpoint = endpoint or free_tcp_endpoint()
+        robot_ids = [spec.id for spec in scenario.robots]
+        if startup_timeout_s is None:
+            startup_timeout_s = default_startup_timeout_s(len(robot_ids))
+        dialled = dict(robot_endpoints or {})
+        if tls:
+            endpoint = tls_endpoint(endpoint)
+            dialled = {rid: tls_endpoint(ep) for rid, ep in dialled.items()}
+        elif every_interface(endpoint):
+            raise ValueError(f"{endpoint}: listening on every interface needs TLS")
+        joined = [*dialled.values()] or [endpoint]
+        tls_dir = (prepare_tls(out_dir, run_id, robot_ids, [endpoint, *joined], tls_ca)
+                   if tls else None)
+        _record_transport(out_dir, transport_info(joined, tls_dir))
+        return _Launch(run_id, out_dir, scenario, endpoint, dialled, joined, tls_dir,
+                       startup_timeout_s, faults, robot_args)
+
+    @property
+    def robot_ids(self) -> list[int]:
+        return [spec.id for spec in self.scenario.robots]
+
+    def robot_command(self, rid: int) -> list[str]:
+        """The command line of robot `rid`'s process."""
+        return robot_command(self.run_id, rid, self.robot_endpoints.get(rid, self.endpoint),
+                             startup_timeout_s=self.startup_timeout_s,
+                             extra_args=[*robot_fault_args(self.faults, rid), *self.robot_args],
+                             tls_dir=self.tls_dir)
+
+    def fleet_command(self, *, robot_nice: int, cpu_tokens: int | None) -> list[str]:
+        """The command line of the one `agent.fleet` process that forks every robot."""
+        return fleet_command(self.run_id, self.robot_ids, self.endpoint, self.out_dir,
+                             startup_timeout_s=self.startup_timeout_s,
+                             robot_endpoints=self.robot_endpoints, nice=robot_nice,
+                             cpu_tokens=cpu_tokens, robot_args=self.robot_args,
+                             tls_dir=self.tls_dir)
+
+    def live_bridge(self, live: LiveView) -> Any:
+        """A started passive client republishing the run to `live`; read-only: the
+        observer's certificate (the access control lets it subscribe)."""
+        from orchestrator.experiments.live import LiveBridge
+
+        endpoint = self.endpoint if not every_interface(self.endpoint) else self.joined[0]
+        tls = (TlsFiles.in_dir(self.tls_dir, OBSERVER_CN) if self.tls_dir is not None
+               else None)
+        return LiveBridge(self.run_id, endpoint, self.scenario, live, tls=tls).start()
+
+
+@dataclass
+class _Children:
+    """The processes of one distributed run, and what tears them down."""
+
+    launch: _Launch
+    world: subprocess.Popen | None = None
+    robots: list[subprocess.Popen] = field(default_factory=list)
+    scheduler: ProcessFaultScheduler | None = None
+    bridge: Any = None
+
+    def spawn_robot(self, rid: int, restart: int = 0) -> subprocess.Popen:
+        """Start robot `rid`'s process (its `restart`-th replacement if > 0)."""
+        name = f"robot_{rid}.log" if not restart else f"robot_{rid}.restart{restart}.log"
+        proc = spawn_logged(self.launch.robot_command(rid), self.launch.out_dir / name)
+        self.robots.append(proc)
+        return proc
+
+    def supervise(self, t0: float, world_limit_s: float,
+                  on_progress: Callable[[DistributedProgress], None] | None) -> int:
+        """Until the world exits (or overruns `world_limit_s` and is stopped): send the
+        process faults when due, report progress; returns the world's return code."""
+        world, scheduler = self.world, self.scheduler
+        assert world is not None and scheduler is not None
+        out_dir, n_robots = self.launch.out_dir, len(self.launch.robot_ids)
+        tail = EventTail(out_dir / "events.jsonl")
         while True:
             try:
                 world.wait(timeout=FAULT_POLL_S if scheduler.pending else POLL_S)
@@ -537,36 +535,56 @@ def run_distributed(
             except subprocess.TimeoutExpired:
                 pass
             if scheduler.pending:
-                scheduler.poll(_last_trajectory_time(out_dir / "trajectory.csv"))
+                scheduler.poll(last_trajectory_time(out_dir / "trajectory.csv"))
             if time.monotonic() - t0 > world_limit_s:
                 stop_processes([world], 0.0, WORLD_TERM_GRACE_S)
                 break
             if on_progress is not None:
                 tail.poll()
-                on_progress(_progress(tail.events, out_dir, t0, len(robot_ids), robots))
+                on_progress(distributed_progress(tail.events, out_dir, t0, n_robots, self.robots))
         if on_progress is not None:
             tail.poll()
-            on_progress(_progress(tail.events, out_dir, t0, len(robot_ids), robots))
-        code = world.returncode
-        return code if code >= 0 else 128 - code
+            on_progress(distributed_progress(tail.events, out_dir, t0, n_robots, self.robots))
+        return world.returncode
+
+    def teardown(self) -> None:
+        """The world first (so it records the end), then the robots; robots.json."""
+        if self.bridge is not None:
+            self.bridge.stop()
+        if self.world is not None:
+            stop_processes([self.world], 0.0, WORLD_TERM_GRACE_S)
+        if self.scheduler is not None:
+            self.scheduler.release()
+        stop_processes(self.robots, ROBOT_EXIT_GRACE_S, ROBOT_TERM_GRACE_S)
+        with contextlib.suppress(OSError):
+            out_dir = self.launch.out_dir
+            replace_file(out_dir / "robots.json",
+                         (json.dumps(collect_robot_exits(out_dir), indent=1) + "\n").encode())
+
+
+@contextlib.contextmanager
+def _torn_down_on_exit(teardown: Callable[[], None]) -> Iterator[None]:
+    """Run the block, then `teardown` however the block ends.
+
+    In the main thread, SIGTERM and SIGHUP interrupt the block (`raise_interrupt`: it
+    unwinds through the teardown, then the caller's interrupted-run path), and the teardown
+    runs with SIGINT, SIGTERM and SIGHUP ignored: it is bounded (`WORLD_TERM_GRACE_S` +
+    `ROBOT_EXIT_GRACE_S` + `ROBOT_TERM_GRACE_S`), and a second Ctrl-C or SIGTERM must not
+    cut it short and leave orphans. The previous handlers are back afterwards.
+    """
+    in_main = threading.current_thread() is threading.main_thread()
+    previous: dict[int, Any] = {}
+    if in_main:
+        previous = {s: signal.signal(s, raise_interrupt) for s in (signal.SIGTERM, signal.SIGHUP)}
+    try:
+        yield
     finally:
-        # Teardown is bounded (WORLD_TERM_GRACE_S + ROBOT_EXIT_GRACE_S + ROBOT_TERM_GRACE_S);
-        # a second Ctrl-C or SIGTERM must not cut it short and leave orphans.
         if in_main:
             previous[signal.SIGINT] = signal.signal(signal.SIGINT, signal.SIG_IGN)
             for signum in (signal.SIGTERM, signal.SIGHUP):
                 signal.signal(signum, signal.SIG_IGN)
         try:
-            if bridge is not None:
-                bridge.stop()
-            if world is not None:
-                stop_processes([world], 0.0, WORLD_TERM_GRACE_S)
-            if scheduler is not None:
-                scheduler.release()
-            stop_processes(robots, ROBOT_EXIT_GRACE_S, ROBOT_TERM_GRACE_S)
-            with contextlib.suppress(OSError):
-                replace_file(out_dir / "robots.json",
-                             (json.dumps(collect_robot_exits(out_dir), indent=1) + "\n").encode())
+            teardown()
         finally:
             for signum, handler in previous.items():
                 signal.signal(signum, handler if handler is not None else signal.SIG_DFL)
@@ -630,37 +648,3 @@ def run_scenario_distributed(scenario: Scenario, out_dir: Path, seed: int, *,
         return None, status
     write_metrics(out_dir, metrics)
     return metrics, status
-
-
-def _progress(events: list[dict], out_dir: Path, t0: float, n_robots: int,
-              robots: Sequence[subprocess.Popen]) -> DistributedProgress:
-    arrived: set[int] = set()
-    lost: set[int] = set()
-    contacts = 0
-    started = False
-    sim_t = 0.0
-    for e in events:
-        kind = e.get("kind")
-        sim_t = max(sim_t, float(e.get("t", 0.0)))
-        if kind == "start":
-            started = True
-        elif kind == "arrived":
-            arrived.add(int(e["robot"]))
-        elif kind == "contact":
-            contacts += 1
-        elif kind == "robot_lost":
-            lost.add(int(e["robot"]))
-        elif kind == "robot_rejoined":
-            lost.discard(int(e["robot"]))
-    sim_t = max(sim_t, _last_trajectory_time(out_dir / "trajectory.csv"))
-    return DistributedProgress(
-        wall_s=time.monotonic() - t0,
-        started=started,
-        sim_t_s=sim_t if math.isfinite(sim_t) else 0.0,
-        n_robots=n_robots,
-        arrived=frozenset(arrived),
-        contacts=contacts,
-        lost=frozenset(lost),
-        robots_running=sum(p.poll() is None for p in robots),
-        events=tuple(events),
-    )

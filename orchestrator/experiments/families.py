@@ -23,6 +23,7 @@ import numpy as np
 
 from agent.core.config import PLANNER_NAMES, profile_config
 from agent.core.scenario import ObstacleSpec, RobotSpec, Scenario
+from eifp_wire import MAX_ROBOTS
 from orchestrator.experiments.liveness_families import GENERATORS as LIVENESS_GENERATORS
 from orchestrator.experiments.scenario_blocks import (
     LANE_SPACING_M,
@@ -44,7 +45,6 @@ from orchestrator.experiments.scenario_blocks import (
     require,
     robot_spec,
 )
-from protocol import MAX_ROBOTS
 from world.scenario_file import ScenarioError, load_scenario, validate_scenario
 
 SETUPS_DIR = Path(__file__).resolve().parent.parent / "setups"

@@ -2,11 +2,11 @@
 
     python -m orchestrator.experiments.linkbench [--rounds 2000] [--repeat 3] [--robots 64]
 
-A world-like router process (the run's `protocol.session_settings`, with TLS its
-`protocol.access_control` for ``--robots`` robots) echoes every command it gets on
+A world-like router process (the run's `eifp_wire.transport.session_settings`, with TLS its
+`eifp_wire.access.access_control` for ``--robots`` robots) echoes every command it gets on
 ``cmd/0`` back on ``poses/0`` from a router-local subscriber, as the world answers a robot;
-this process, a client with robot 0's certificate, sends a ~530-byte payload and waits for
-the echo: two hops per round trip. Modes: ``tcp`` (plain, what ``--insecure`` runs) and
+this process, a client with robot 0's certificate, sends a `PAYLOAD_BYTES` payload and waits
+for the echo: two hops per round trip. Modes: ``tcp`` (plain, what ``--insecure`` runs) and
 ``tls`` (mutual TLS + access control, the default). Declared, express publishers on both
 sides. Prints p50 / p99 / mean round-trip times per mode and repeat, and the median p50
 difference. Pin it to a core (``taskset -c 1``) on a busy machine: p99 is other tenants.
@@ -24,10 +24,13 @@ from pathlib import Path
 
 RUN = "linkbench"
 WARMUP = 200
+PAYLOAD_BYTES = 496
+"""Size of each ping (opaque bytes, only echoed: nothing decodes them), about a pose message
+of a dozen robots."""
 
 
 def _settings(mode: str, role: str, port: int, tls_dir: Path, robots: int) -> dict[str, str]:
-    from protocol import TlsFiles, access_control, robot_cn, session_settings
+    from eifp_wire import TlsFiles, access_control, robot_cn, session_settings
 
     proto = "tls" if mode == "tls" else "tcp"
     ep = f"{proto}/127.0.0.1:{port}"
@@ -44,7 +47,7 @@ def serve(mode: str, port: int, tls_dir: Path, robots: int) -> None:
     import zenoh
 
     from agent.process import open_session
-    from protocol import RunKeys
+    from eifp_wire import RunKeys
 
     keys = RunKeys(RUN)
     session = open_session(_settings(mode, "router", port, tls_dir, robots))
@@ -61,11 +64,10 @@ def ping(mode: str, port: int, tls_dir: Path, rounds: int) -> list[float]:
     """Round-trip times [ms] of `rounds` pings (after `WARMUP`)."""
     import threading
 
-    import msgpack
     import zenoh
 
     from agent.process import open_session
-    from protocol import RunKeys
+    from eifp_wire import RunKeys
 
     keys = RunKeys(RUN)
     session = open_session(_settings(mode, "client", port, tls_dir, 0),
@@ -79,7 +81,7 @@ def ping(mode: str, port: int, tls_dir: Path, rounds: int) -> list[float]:
         if time.monotonic() > deadline:
             raise RuntimeError("the publisher never matched the router's subscriber")
         time.sleep(0.01)
-    payload = msgpack.packb({"schema": 2, "type": "cmd", "data": bytes(470)})
+    payload = bytes(PAYLOAD_BYTES)
     out = []
     for k in range(WARMUP + rounds):
         got.clear()

@@ -25,7 +25,7 @@ import zenoh
 
 from agent.core.scenario import Scenario
 from agent.process import SessionError, StopFlag, close_session, open_session
-from protocol import (
+from eifp_wire import (
     CommandMsg,
     PlanDebugMsg,
     PosesMsg,

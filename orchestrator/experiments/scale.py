@@ -33,7 +33,7 @@ processes that map them; RSS where the kernel gives no PSS). Per N it reports:
   each of ``--hosts``);
 - cpu_ms_per_plan_sense / _plan / _send / _loop / _threads: where a robot process's CPU
   went, per plan it sent: the robots' own thread and process CPU clocks over their loops
-  (`agent.node.RobotNode.cpu_summary`, from their exit lines in robots.json), summed over
+  (`agent.node.CpuMeter.summary`, from their exit lines in robots.json), summed over
   the robots and divided by all their plans. sense: decoding and observing poses; plan:
   estimates and the planner; send: encoding and publishing the command; loop: the rest of
   the main thread; threads: the other threads (Zenoh's runtime, the pose callback's).
@@ -79,7 +79,7 @@ ROBOT_NICE = 0
 starve too, and a missed 1 s lease loses the robot)."""
 
 CPU_PARTS = ("sense", "plan", "send", "loop", "threads")
-"""Parts of a robot process's CPU time (`agent.node.RobotNode.cpu_summary`)."""
+"""Parts of a robot process's CPU time (`agent.node.CpuMeter.summary`)."""
 
 COLUMNS = (
     "agents", "family", "planner", "success", "arrived", "contacts", "min_gap_m",
@@ -264,54 +264,81 @@ def scale_row(metrics: dict[str, Any], events: Sequence[dict], sampler: Resource
 
     `exits`: the run's robots.json (`orchestrator.experiments.distributed.collect_robot_exits`).
     """
+    lost = {int(e["robot"]) for e in events if e.get("kind") == "robot_lost" and "robot" in e}
+    end = next((e for e in reversed(events) if e.get("kind") == "end"), {})
+    sim_time_s = float(metrics.get("sim_time_s") or 0.0)
+    return {
+        "agents": n,
+        "family": family,
+        "planner": planner,
+        **_metric_columns(metrics),
+        **_cpu_shares(events, sampler, spawn_wall=spawn_wall, spawn_mono=spawn_mono,
+                      sim_time_s=sim_time_s, time_scale=time_scale),
+        **_memory_columns(sampler, launcher),
+        "alive_s": _alive_s(events, n, spawn_wall),
+        "sim_time_s": sim_time_s,
+        "wall_s": wall_s,
+        "world_overruns": end.get("overruns"),
+        "robots_lost": len(lost),
+        "world_status": world_status,
+        "connections": dict(sorted(sampler.connections.items())),
+        **cpu_per_plan_ms(exits or {}),
+    }
+
+
+def _metric_columns(metrics: dict[str, Any]) -> dict[str, Any]:
+    """The columns taken from metrics.json."""
+    sense_to_act = (metrics.get("wall_latency_ms") or {}).get("sense_to_act") or {}
+    return {
+        "success": bool(metrics.get("success")),
+        **{k: metrics.get(k) for k in ("arrived", "contacts", "min_gap_m", "plan_ms_p50",
+                                       "plan_ms_p99", "sim_latency_ms_p50",
+                                       "sim_latency_ms_p99")},
+        "sense_to_act_ms_p50": sense_to_act.get("p50"),
+        "sense_to_act_ms_p99": sense_to_act.get("p99"),
+        "deadline_miss_rate": metrics.get("deadline_miss_rate"),
+    }
+
+
+def _alive_s(events: Sequence[dict], n: int, spawn_wall: float) -> float | None:
+    """Wall time from the spawn until every robot's first token (None if some never came)."""
     first_join: dict[int, float] = {}  # a robot's first token (re-joins come later)
     for e in events:
         if e.get("kind") == "robot_joined" and "wall" in e and "robot" in e:
             first_join.setdefault(int(e["robot"]), float(e["wall"]))
     joined = list(first_join.values())
-    lost = {int(e["robot"]) for e in events if e.get("kind") == "robot_lost" and "robot" in e}
+    return (max(joined) - spawn_wall) if len(joined) >= n else None
+
+
+def _cpu_shares(events: Sequence[dict], sampler: ResourceSampler, *, spawn_wall: float,
+                spawn_mono: float, sim_time_s: float, time_scale: float
+                ) -> dict[str, float | None]:
+    """The robots' and the world's share of the machine's CPUs from the start to the end,
+    and the robots' CPU percent per robot (None before a start)."""
     start = next((e for e in events if e.get("kind") == "start"), None)
-    end = next((e for e in reversed(events) if e.get("kind") == "end"), {})
-    alive_s = (max(joined) - spawn_wall) if len(joined) >= n else None
-    sim_time_s = float(metrics.get("sim_time_s") or 0.0)
-    cpu_robots = cpu_world = cpu_per_robot = None
-    if start is not None and "wall" in start:
-        t0 = spawn_mono + (float(start["wall"]) - spawn_wall)
-        # The end: robots leave within milliseconds of the world's end message. A world
-        # that fell behind real time took longer than sim time / time scale.
-        left = [float(e["wall"]) for e in events if e.get("kind") == "robot_left" and "wall" in e]
-        t1 = (spawn_mono + (min(left) - spawn_wall) if left
-              else t0 + sim_time_s / time_scale)
-        span = max(t1 - t0, 1e-9)
-        cpus = psutil.cpu_count() or 1
-        robots_s, n_robots = sampler.cpu_between("robot", t0, t1)
-        world_s, _ = sampler.cpu_between("world", t0, t1)
-        cpu_robots = robots_s / (span * cpus)
-        cpu_world = world_s / (span * cpus)
-        cpu_per_robot = 100.0 * robots_s / span / max(n_robots, 1)
+    if start is None or "wall" not in start:
+        return dict.fromkeys(("cpu_share_robots", "cpu_share_world", "cpu_pct_per_robot"))
+    t0 = spawn_mono + (float(start["wall"]) - spawn_wall)
+    # The end: robots leave within milliseconds of the world's end message. A world
+    # that fell behind real time took longer than sim time / time scale.
+    left = [float(e["wall"]) for e in events if e.get("kind") == "robot_left" and "wall" in e]
+    t1 = spawn_mono + (min(left) - spawn_wall) if left else t0 + sim_time_s / time_scale
+    span = max(t1 - t0, 1e-9)
+    cpus = psutil.cpu_count() or 1
+    robots_s, n_robots = sampler.cpu_between("robot", t0, t1)
+    world_s, _ = sampler.cpu_between("world", t0, t1)
+    return {"cpu_share_robots": robots_s / (span * cpus),
+            "cpu_share_world": world_s / (span * cpus),
+            "cpu_pct_per_robot": 100.0 * robots_s / span / max(n_robots, 1)}
+
+
+def _memory_columns(sampler: ResourceSampler, launcher: str) -> dict[str, Any]:
+    """Peak memory per robot, of the world, of the fleet launcher and in all; the launcher;
+    the most threads of one robot."""
     robots = [p for p in sampler.procs.values() if p.role == "robot" and p.mem_peak_b > 0]
     world = [p for p in sampler.procs.values() if p.role == "world"]
     fleet = [p for p in sampler.procs.values() if p.role == "fleet"]
     return {
-        "agents": n,
-        "family": family,
-        "planner": planner,
-        "success": bool(metrics.get("success")),
-        "arrived": metrics.get("arrived"),
-        "contacts": metrics.get("contacts"),
-        "min_gap_m": metrics.get("min_gap_m"),
-        "plan_ms_p50": metrics.get("plan_ms_p50"),
-        "plan_ms_p99": metrics.get("plan_ms_p99"),
-        "sim_latency_ms_p50": metrics.get("sim_latency_ms_p50"),
-        "sim_latency_ms_p99": metrics.get("sim_latency_ms_p99"),
-        "sense_to_act_ms_p50": ((metrics.get("wall_latency_ms") or {}).get("sense_to_act")
-                                or {}).get("p50"),
-        "sense_to_act_ms_p99": ((metrics.get("wall_latency_ms") or {}).get("sense_to_act")
-                                or {}).get("p99"),
-        "deadline_miss_rate": metrics.get("deadline_miss_rate"),
-        "cpu_share_robots": cpu_robots,
-        "cpu_share_world": cpu_world,
-        "cpu_pct_per_robot": cpu_per_robot,
         "mem_robot_mib": (sum(p.mem_peak_b for p in robots) / len(robots) / MIB
                           if robots else None),
         "mem_world_mib": world[0].mem_peak_b / MIB if world else None,
@@ -320,14 +347,6 @@ def scale_row(metrics: dict[str, Any], events: Sequence[dict], sampler: Resource
         "mem_total_mib": sampler.mem_total_peak_b / MIB if sampler.mem_total_peak_b else None,
         "mem_kind": sampler.mem_kind,
         "threads_per_robot": max((p.threads_peak for p in robots), default=None),
-        "alive_s": alive_s,
-        "sim_time_s": sim_time_s,
-        "wall_s": wall_s,
-        "world_overruns": end.get("overruns"),
-        "robots_lost": len(lost),
-        "world_status": world_status,
-        "connections": dict(sorted(sampler.connections.items())),
-        **cpu_per_plan_ms(exits or {}),
     }
 
 
@@ -438,8 +457,8 @@ def world_tick_costs(n: int, ticks: int, out_dir: Path) -> dict[str, Any]:
     """
     import numpy as np
 
+    from eifp_wire import CommandMsg, PosesMsg
     from orchestrator.experiments.families import circles
-    from protocol import CommandMsg, PosesMsg
     from world.recorder import RunRecorder
     from world.sim.dynamics import WorldSim
 

@@ -202,24 +202,30 @@ def aggregate(rows: Sequence[dict[str, Any]], keys: Sequence[str]) -> list[dict[
     groups: dict[tuple, list[dict[str, Any]]] = {}
     for r in rows:
         groups.setdefault((r["setup"], r["planner"], *(r[k] for k in keys)), []).append(r)
-    out = []
-    for key, rs in groups.items():
-        ok = [r for r in rs if r.get("error") is None]
-        out.append({
-            "setup": key[0], "planner": key[1], **dict(zip(keys, key[2:])),
-            "runs": len(rs), "errors": len(rs) - len(ok),
-            "success_rate": (sum(bool(r.get("success")) for r in ok) / len(ok)) if ok else None,
-            "contacts": sum(int(r.get("contacts") or 0) for r in ok),
-            "runs_with_contact": sum(1 for r in ok if (r.get("contacts") or 0) > 0),
-            "runs_incomplete": sum(1 for r in ok if int(r.get("arrived") or 0)
-                                   + int(r.get("lost") or 0) < int(r.get("robots") or 0)),
-            "arrived_frac": (sum(int(r.get("arrived") or 0) for r in ok)
-                             / max(1, sum(int(r.get("robots") or 0) for r in ok))) if ok else None,
-            "min_gap_m": _min([r.get("min_gap_m") for r in ok]),
-            "time_ratio_mean": _mean([r.get("time_ratio_mean") for r in ok]),
-            "ego_error_m_mean": _mean([r.get("ego_error_m_mean") for r in ok]),
-        })
-    return out
+    return [{"setup": key[0], "planner": key[1], **dict(zip(keys, key[2:])),
+             **_group_summary(rs)} for key, rs in groups.items()]
+
+
+def _group_summary(rs: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """The `aggregate` columns of one group's runs (those that ended in an error count only
+    as errors)."""
+    ok = [r for r in rs if r.get("error") is None]
+
+    def total(key: str) -> int:
+        return sum(int(r.get(key) or 0) for r in ok)
+
+    return {
+        "runs": len(rs), "errors": len(rs) - len(ok),
+        "success_rate": (sum(bool(r.get("success")) for r in ok) / len(ok)) if ok else None,
+        "contacts": total("contacts"),
+        "runs_with_contact": sum(1 for r in ok if (r.get("contacts") or 0) > 0),
+        "runs_incomplete": sum(1 for r in ok if int(r.get("arrived") or 0)
+                               + int(r.get("lost") or 0) < int(r.get("robots") or 0)),
+        "arrived_frac": total("arrived") / max(1, total("robots")) if ok else None,
+        "min_gap_m": _min([r.get("min_gap_m") for r in ok]),
+        "time_ratio_mean": _mean([r.get("time_ratio_mean") for r in ok]),
+        "ego_error_m_mean": _mean([r.get("ego_error_m_mean") for r in ok]),
+    }
 
 
 def envelope(table: Sequence[dict[str, Any]], keys: Sequence[str]

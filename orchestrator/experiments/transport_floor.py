@@ -1,13 +1,13 @@
 """The transport's floor: what a robot process costs per control cycle before its own code.
 
-`orchestrator bench --floor --robots N` runs one router that publishes a `protocol.PosesMsg`
-of N discs every world tick (50 Hz) on the pose slots, as the world does, and N client
-processes that do a robot's I/O and nothing else: each subscribes to one pose slot, takes
-every pose off the queue Zenoh's thread puts it on, copies its payload out
-(``payload.to_bytes()``) and publishes a command-sized payload, with Zenoh on one thread:
-the loop of `agent.node.RobotNode` with nothing in it. No decoding, sensing, planning or
-encoding. Each client reports its CPU per cycle: its main thread (waking, taking the pose,
-publishing) and Zenoh's threads (receiving, queueing, sending, the lease).
+`orchestrator bench --floor --robots N` runs one router that publishes an
+`eifp_wire.poses.PosesMsg` of N discs every world tick (50 Hz) on the pose slots, as the
+world does, and N client processes that do a robot's I/O and nothing else: each subscribes
+to one pose slot, takes every pose off the queue Zenoh's thread puts it on, copies its
+payload out (``payload.to_bytes()``) and publishes a command-sized payload, with Zenoh on
+one thread: the loop of `agent.node.RobotNode` with nothing in it. No decoding, sensing,
+planning or encoding. Each client reports its CPU per cycle: its main thread (waking, taking
+the pose, publishing) and Zenoh's threads (receiving, queueing, sending, the lease).
 `orchestrator bench --process` minus this is what the robot's own code costs.
 
 Plain TCP on loopback (TLS made no measurable difference to `bench --process`).
@@ -29,9 +29,10 @@ TICK_S = 0.02
 POSE_SLOTS = 5
 """Pose slots: a client receives every fifth pose, 10 per second, as a robot does."""
 COMMAND_BYTES = 200
-"""About the size of an encoded `protocol.CommandMsg`."""
+"""About the size of an encoded `eifp_wire.messages.CommandMsg`."""
 STARTUP_TIMEOUT_S = 60.0
-_KEY = "eifp-floor"
+RUN_ID = "transport-floor"
+"""The floor's own run id: its keys are a run's (`eifp_wire.keys.RunKeys`)."""
 
 
 @dataclass(frozen=True)
@@ -61,7 +62,7 @@ def pose_payload(n: int) -> bytes:
     import numpy as np
 
     from agent.core.types import PoseSnapshot
-    from protocol import PosesMsg
+    from eifp_wire import PosesMsg
 
     angle = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
     pose = np.column_stack([10.0 * np.cos(angle), 10.0 * np.sin(angle), angle + np.pi])
@@ -120,7 +121,7 @@ def format_floor_row(row: FloorRow) -> str:
 
 
 def _settings(mode: str, endpoint: str) -> dict[str, str]:
-    from protocol import session_settings
+    from eifp_wire import session_settings
 
     if mode == "router":
         return session_settings(mode="router", listen=[endpoint])
@@ -131,17 +132,19 @@ def _router(endpoint: str, n: int, seconds: float) -> int:
     import zenoh
 
     from agent.process import close_session, open_session
+    from eifp_wire import ControlMsg, RunKeys
 
+    keys = RunKeys(RUN_ID)
     payload = pose_payload(n)
     session = open_session(_settings("router", endpoint))
     assert session is not None
     try:
-        pubs = [session.declare_publisher(f"{_KEY}/poses/{k}",
+        pubs = [session.declare_publisher(keys.poses_slot(k),
                                           congestion_control=zenoh.CongestionControl.DROP,
                                           express=True) for k in range(POSE_SLOTS)]
         ready: queue.SimpleQueue = queue.SimpleQueue()
-        sink = session.declare_subscriber(f"{_KEY}/cmd/*", lambda sample: None)
-        alive = session.liveliness().declare_subscriber(f"{_KEY}/alive/*", ready.put,
+        sink = session.declare_subscriber(keys.cmd_all, lambda sample: None)
+        alive = session.liveliness().declare_subscriber(keys.alive_robot_all, ready.put,
                                                         history=True)
         deadline = time.monotonic() + STARTUP_TIMEOUT_S
         seen = 0
@@ -154,7 +157,7 @@ def _router(endpoint: str, n: int, seconds: float) -> int:
             pubs[tick % POSE_SLOTS].put(payload)
             tick += 1
             time.sleep(max(0.0, start + tick * TICK_S - time.monotonic()))
-        session.put(f"{_KEY}/end", b"end")
+        session.put(keys.control, ControlMsg("end", tick * TICK_S, "time_limit").encode())
         time.sleep(1.0)
         alive.undeclare()
         sink.undeclare()
@@ -174,23 +177,25 @@ def _client(endpoint: str, index: int) -> int:
         open_session,
         use_one_zenoh_thread,
     )
+    from eifp_wire import RunKeys
 
+    keys = RunKeys(RUN_ID)
     use_one_zenoh_thread()
     session = open_session(_settings("client", endpoint),
                            deadline=time.monotonic() + STARTUP_TIMEOUT_S)
     assert session is not None
     command = bytes(COMMAND_BYTES)
     try:
-        pub = session.declare_publisher(f"{_KEY}/cmd/{index}",
+        pub = session.declare_publisher(keys.cmd(index),
                                         congestion_control=zenoh.CongestionControl.DROP,
                                         express=True)
         # As a robot: Zenoh's thread puts each pose sample on a queue the main thread
         # blocks on, at most a nap at a time.
         poses: queue.SimpleQueue = queue.SimpleQueue()
-        pose_sub = session.declare_subscriber(f"{_KEY}/poses/{index % POSE_SLOTS}",
+        pose_sub = session.declare_subscriber(keys.poses_slot(index % POSE_SLOTS),
                                               enqueue_on_receive(poses.put))
-        end = session.declare_subscriber(f"{_KEY}/end")
-        token = session.liveliness().declare_token(f"{_KEY}/alive/{index}")
+        end = session.declare_subscriber(keys.control)
+        token = session.liveliness().declare_token(keys.alive_robot(index))
         cycles, start, main_start = 0, 0.0, 0.0
         while end.try_recv() is None:
             try:

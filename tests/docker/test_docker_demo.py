@@ -55,7 +55,7 @@ KEEP_BASE_ENV = "EIFP_DOCKER_KEEP_BASE"
 """With EIFP_DOCKER_BUILD=1: keep the local base image the tests built (as
 eifp-swarm-base:bookworm, which the next run then reuses) instead of removing it; a CI
 machine's choice (`.ci/run`), saving the debootstrap (1-2 min) of every later run."""
-CONTEXT_FILES = ("pyproject.toml", "README.md", "protocol.py", "Dockerfile", "agent", "world",
+CONTEXT_FILES = ("pyproject.toml", "README.md", "Dockerfile", "eifp_wire", "agent", "world",
                  "orchestrator", "docker/entrypoint.sh")
 """What the Dockerfile copies (.dockerignore), for the temporary build context."""
 
@@ -565,7 +565,7 @@ too)."""
 RELAY_ROGUE = r"""
 import sys, time, zenoh
 from agent.process import zenoh_config
-from protocol import RunKeys, TlsFiles, session_settings
+from eifp_wire import RunKeys, TlsFiles, session_settings
 keys = RunKeys(sys.argv[1])
 tls = TlsFiles.in_dir("/tls", "robot-2")
 def session(endpoint):

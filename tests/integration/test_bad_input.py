@@ -289,7 +289,7 @@ def test_world_out_that_is_a_file_is_one_line_exit_2(tmp_path):
     ["-m", "agent", "--run", "r", "--id", "1", "--connect", "garbage"],
 ])
 def test_garbage_endpoints_are_usage_errors(argv, capsys):
-    from agent.node import parse_args as agent_args
+    from agent.startup import parse_args as agent_args
     from world.node import parse_args as world_args
 
     parse = world_args if argv[1] == "world" else agent_args
@@ -303,7 +303,7 @@ def test_garbage_endpoints_are_usage_errors(argv, capsys):
 
 def _parsers():
     from agent.fleet import build_parser as fleet_parser
-    from agent.node import parse_args as agent_args
+    from agent.startup import parse_args as agent_args
     from world.node import parse_args as world_args
     from world.router import parse_args as router_args
 

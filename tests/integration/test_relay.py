@@ -1,5 +1,5 @@
 """Two routers on loopback, in-process: the world's router (access control with a relay) and
-a relay router on "another host" (`protocol.relay_access_control`) that dials it, with robot
+a relay router on "another host" (`eifp_wire.access.relay_access_control`) that dials it, with robot
 clients behind each. What each router lets through, with real Zenoh sessions and the run's
 certificates: robots behind the relay reach the world and back; each router drops what its
 own robots may not send; a relay's certificate speaks only for the robots behind it."""
@@ -18,8 +18,7 @@ import zenoh
 
 from agent.process import ExitCode, zenoh_config
 from agent.security import make_run_pki
-from orchestrator.experiments.distributed import free_tcp_endpoint
-from protocol import (
+from eifp_wire import (
     WORLD_CN,
     RunKeys,
     TlsFiles,
@@ -30,6 +29,7 @@ from protocol import (
     session_settings,
     tls_endpoint,
 )
+from orchestrator.experiments.distributed import free_tcp_endpoint
 from world.router import RunFollower, parse_args, router_settings
 
 pytestmark = pytest.mark.timeout(90)

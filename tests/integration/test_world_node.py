@@ -13,8 +13,7 @@ import pytest
 import zenoh
 
 from agent.process import StopFlag
-from orchestrator.experiments.distributed import free_tcp_endpoint
-from protocol import (
+from eifp_wire import (
     MAX_CMD_AHEAD_S,
     CommandMsg,
     ControlMsg,
@@ -25,6 +24,8 @@ from protocol import (
     scoped_cn,
     session_settings,
 )
+from orchestrator.experiments.distributed import free_tcp_endpoint
+from tests.unit.world.test_world_cycle import TWO_ROBOTS
 from world.node import WorldNode, WorldOptions, parse_args, run_configs
 from world.recorder import RunRecorder
 from world.scenario_file import scenario_from_dict
@@ -32,16 +33,7 @@ from world.scenario_file import scenario_from_dict
 pytestmark = pytest.mark.timeout(60)
 
 DEADLINE_S = 10.0
-SCENARIO = {
-    "name": "node_test",
-    "time_limit": 20,
-    "defaults": {"radius": 0.3},
-    "robots": [
-        {"id": 0, "start": [-3.0, 0.0, 0.0], "goal": [3.0, 0.0]},
-        {"id": 4, "start": [3.0, 1.0, 3.14], "goal": [-3.0, 1.0]},
-    ],
-    "obstacles": [{"center": [0.0, 5.0], "radius": 0.5}],
-}
+SCENARIO = TWO_ROBOTS
 
 
 def open_session(mode: str, endpoint: str) -> zenoh.Session:
@@ -116,25 +108,25 @@ def test_serves_each_robot_its_configuration(rig: Rig) -> None:
                                       got.extend(filter(None, [replies.try_recv()]))),
           "the error reply")
     assert got[0].ok is None and b"no robot" in got[0].err.payload.to_bytes()
-    assert rig.node.counts["bad_queries"] == 1
+    assert rig.node.cycle.counts.bad_queries == 1
 
 
 def test_liveliness_join_loss_and_rejoin(rig: Rig) -> None:
     node = rig.node
     token = rig.client.liveliness().declare_token(rig.keys.alive_robot(0))
-    until(lambda: 0 in node.alive, node.poll_liveliness, "robot 0 to join")
+    until(lambda: 0 in node.cycle.alive, node.poll_liveliness, "robot 0 to join")
     assert rig.events("robot_joined")[0]["robot"] == 0
     stray = rig.client.liveliness().declare_token(rig.keys.alive_robot(99))
     until(lambda: bool(rig.events("unknown_robot")), node.poll_liveliness, "unknown robot")
 
     token.undeclare()
-    until(lambda: 0 in node.lost, node.poll_liveliness, "robot 0 to be lost")
+    until(lambda: 0 in node.cycle.lost, node.poll_liveliness, "robot 0 to be lost")
     assert bool(node.sim.offline[node.sim.index_of(0)])
     assert rig.events("robot_lost")[0]["robot"] == 0 and "wall" in rig.events("robot_lost")[0]
 
     token = rig.client.liveliness().declare_token(rig.keys.alive_robot(0))
-    until(lambda: 0 in node.alive, node.poll_liveliness, "robot 0 to rejoin")
-    assert not node.sim.offline[node.sim.index_of(0)] and not node.lost
+    until(lambda: 0 in node.cycle.alive, node.poll_liveliness, "robot 0 to rejoin")
+    assert not node.sim.offline[node.sim.index_of(0)] and not node.cycle.lost
     assert rig.events("robot_rejoined")[0]["robot"] == 0
     token.undeclare()
     stray.undeclare()
@@ -143,12 +135,12 @@ def test_liveliness_join_loss_and_rejoin(rig: Rig) -> None:
 def test_a_robot_back_after_a_loss_numbers_on_from_time_and_old_commands_stay_stale(
         rig: Rig) -> None:
     """The lease closed a robot's link and it came back: its seq follows time
-    (`protocol.next_seq`), so the world keeps its last seq as the bar: a command replayed
+    (`eifp_wire.clock.next_seq`), so the world keeps its last seq as the bar: a command replayed
     from before the loss is stale, one beyond what the time allows is refused."""
     node = rig.node
     pub0 = rig.client.declare_publisher(rig.keys.cmd(0))
     token = rig.client.liveliness().declare_token(rig.keys.alive_robot(0))
-    until(lambda: 0 in node.alive and pub0.matching_status.matching, node.poll_liveliness,
+    until(lambda: 0 in node.cycle.alive and pub0.matching_status.matching, node.poll_liveliness,
           "robot 0 to join")
 
     def cmd(seq: int, v: float) -> bytes:
@@ -156,19 +148,20 @@ def test_a_robot_back_after_a_loss_numbers_on_from_time_and_old_commands_stay_st
 
     for seq in range(0, 640, 32):  # up to seq 608
         pub0.put(cmd(seq, 0.2))
-    until(lambda: node.counts["commands"] == 20, node.apply_commands, "twenty commands")
+    until(lambda: node.cycle.counts.commands == 20, node.apply_commands, "twenty commands")
     token.undeclare()
-    until(lambda: 0 in node.lost, node.poll_liveliness, "robot 0 to be lost")
+    until(lambda: 0 in node.cycle.lost, node.poll_liveliness, "robot 0 to be lost")
     token = rig.client.liveliness().declare_token(rig.keys.alive_robot(0))
-    until(lambda: 0 in node.alive, node.poll_liveliness, "robot 0 to rejoin")
+    until(lambda: 0 in node.cycle.alive, node.poll_liveliness, "robot 0 to rejoin")
     pub0.put(cmd(max_seq(node.sim.t_s) + 1, 0.9))  # beyond what the time allows
     pub0.put(cmd(512, 0.1))  # replayed from before the loss
     pub0.put(cmd(612, 0.5))
     pub0.put(cmd(613, 0.6))
-    until(lambda: node.counts["commands"] + node.counts["rejected"] + node.counts["stale"] == 24,
+    counts = node.cycle.counts
+    until(lambda: counts.commands + counts.rejected + counts.stale == 24,
           node.apply_commands, "four more commands")
-    assert node.counts["seq_jumps"] == 1 and node.counts["commands"] == 22
-    assert node.counts["stale"] == 1 and node.last_seq[0] == 613
+    assert node.cycle.counts.seq_jumps == 1 and node.cycle.counts.commands == 22
+    assert node.cycle.counts.stale == 1 and node.cycle.last_seq[0] == 613
     assert node.sim.command[node.sim.index_of(0)][0] == pytest.approx(0.6)
     token.undeclare()
 
@@ -190,9 +183,10 @@ def test_commands_applied_stale_dropped_garbage_rejected(rig: Rig) -> None:
     pub4.put(b"\xc1garbage")  # not msgpack: rejected
     pub4.put(ControlMsg("end", 0.0).encode())  # wrong message type: rejected
     pub4.put(cmd(4, 0, 9.0))  # accepted, clamped to v_max by the world
-    until(lambda: node.counts["commands"] + node.counts["stale"] + node.counts["rejected"] == 7,
+    counts = node.cycle.counts
+    until(lambda: counts.commands + counts.stale + counts.rejected == 7,
           node.apply_commands, "seven commands")
-    assert node.counts == {**node.counts, "commands": 2, "stale": 2, "rejected": 3}
+    assert (counts.commands, counts.stale, counts.rejected) == (2, 2, 3)
     assert node.sim.command[node.sim.index_of(0)].tolist() == [0.7, 0.1]
     assert node.sim.command[node.sim.index_of(4)][0] == pytest.approx(1.1)  # default v_max
     reasons = [e["reason"] for e in rig.events("rejected")]
@@ -216,16 +210,16 @@ def test_a_seq_jump_or_a_plan_from_the_future_is_refused_not_stored(rig: Rig) ->
     pub0.put(cmd(bound + 1, 0.9))  # one beyond
     pub0.put(cmd(2, 0.4, stamp=MAX_CMD_AHEAD_S + 5.0))  # planned on a pose of the future
     pub0.put(cmd(bound, 0.3))  # the largest allowed now
-    until(lambda: node.counts["commands"] + node.counts["rejected"] == 5, node.apply_commands,
+    until(lambda: node.cycle.counts.commands + node.cycle.counts.rejected == 5, node.apply_commands,
           "five commands")
-    assert node.counts["seq_jumps"] == 2 and node.counts["future_cmds"] == 1
-    assert node.counts["commands"] == 2 and node.last_seq[0] == bound
+    assert node.cycle.counts.seq_jumps == 2 and node.cycle.counts.future_cmds == 1
+    assert node.cycle.counts.commands == 2 and node.cycle.last_seq[0] == bound
     assert node.sim.command[node.sim.index_of(0)][0] == pytest.approx(0.3)
     node.sim.step(0.5)  # half a second later, half a second more of seq
     pub0.put(cmd(bound + 500, 0.2))
-    until(lambda: node.counts["commands"] == 3, node.apply_commands, "a later command")
-    assert node.last_seq[0] == bound + 500
-    reasons = node.rejected_by_reason
+    until(lambda: node.cycle.counts.commands == 3, node.apply_commands, "a later command")
+    assert node.cycle.last_seq[0] == bound + 500
+    reasons = node.cycle.rejected_by_reason
     assert reasons["cmd.seq"] == 2 and reasons["cmd.pose_stamp"] == 1
 
 
@@ -323,7 +317,7 @@ def test_a_pose_subscriber_puts_each_sample_on_the_robots_queue(rig: Rig) -> Non
     import queue
 
     from agent.process import enqueue_on_receive
-    from protocol import PoseDecoder
+    from eifp_wire import PoseDecoder
 
     handler = enqueue_on_receive(queue.SimpleQueue().put)
     if isinstance(handler, zenoh.handlers.Callback):

@@ -26,6 +26,7 @@ import psutil
 import pytest
 
 from agent.process import ExitCode
+from eifp_wire import CommandMsg, ControlMsg, PosesMsg, ProtocolError, RunKeys, session_settings
 from orchestrator.experiments.distributed import (
     free_tcp_endpoint,
     robot_command,
@@ -34,7 +35,6 @@ from orchestrator.experiments.distributed import (
     stop_processes,
     world_command,
 )
-from protocol import CommandMsg, ControlMsg, PosesMsg, ProtocolError, RunKeys, session_settings
 
 pytestmark = [pytest.mark.system, pytest.mark.timeout(240)]
 
@@ -213,7 +213,7 @@ def test_head_on_run_completes_without_contact(tmp_path: Path) -> None:
         assert (out_dir / name).stat().st_size > 0
     assert progress and progress[-1].arrived == {0, 1} and progress[-1].started
     # Every applied command carries its wall stamps; on one host every stage is measured.
-    from orchestrator.analysis.metrics import TRANSPORT_STAGE, WALL_STAGES
+    from orchestrator.analysis.latency import TRANSPORT_STAGE, WALL_STAGES
     from orchestrator.analysis.rundir import metrics_from_run_dir, read_timing
 
     assert read_timing(out_dir).shape[0] == end[0]["commands"]

@@ -22,8 +22,8 @@ import psutil
 import pytest
 
 from agent.process import ExitCode
+from eifp_wire import CommandMsg, PosesMsg, ProtocolError, RunKeys
 from orchestrator.experiments.distributed import free_tcp_endpoint, run_distributed
-from protocol import CommandMsg, PosesMsg, ProtocolError, RunKeys
 from tests.system.test_distributed import (
     RUN_S,
     STARTUP_S,
@@ -138,7 +138,7 @@ def test_killed_robot_is_avoided_by_the_launchers_schedule(tmp_path: Path) -> No
     end = by_kind(events, "end")[0]
     assert end["contacts"] == 0 and end["lost"] == [1] and end["arrived"] == [0]
     # Robot 0 arrived, robot 1 was lost: the run ends once the lost robot's grace is over
-    # (`world.node.LOST_GRACE_S` of sim time after the loss), not at the 20 s limit.
+    # (`world.world_cycle.LOST_GRACE_S` of sim time after the loss), not at the 20 s limit.
     lost = by_kind(events, "robot_lost", 1)[0]
     assert 3.0 <= lost["t"] < 3.5
     arrived_t = by_kind(events, "arrived", 0)[0]["t"]

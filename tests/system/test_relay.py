@@ -19,6 +19,7 @@ import pytest
 
 from agent.process import ExitCode
 from agent.security import make_run_pki
+from eifp_wire import tls_endpoint
 from orchestrator.analysis.rundir import metrics_from_run_dir, write_metrics
 from orchestrator.experiments.distributed import (
     free_tcp_endpoint,
@@ -27,7 +28,6 @@ from orchestrator.experiments.distributed import (
     stop_processes,
     world_command,
 )
-from protocol import tls_endpoint
 from tests.system.test_distributed import (
     processes_of_run,
     unique_run_id,

@@ -29,16 +29,7 @@ import pytest
 
 from agent.process import ExitCode, SessionError, open_session
 from agent.security import make_run_pki
-from orchestrator.analysis.rundir import metrics_from_run_dir, write_metrics
-from orchestrator.experiments.distributed import (
-    collect_robot_exits,
-    free_tcp_endpoint,
-    robot_command,
-    spawn_logged,
-    stop_processes,
-    world_command,
-)
-from protocol import (
+from eifp_wire import (
     CommandMsg,
     ControlMsg,
     PosesMsg,
@@ -49,6 +40,15 @@ from protocol import (
     robot_cn,
     session_settings,
     tls_endpoint,
+)
+from orchestrator.analysis.rundir import metrics_from_run_dir, write_metrics
+from orchestrator.experiments.distributed import (
+    collect_robot_exits,
+    free_tcp_endpoint,
+    robot_command,
+    spawn_logged,
+    stop_processes,
+    world_command,
 )
 from tests.system.test_distributed import (
     processes_of_run,
@@ -365,7 +365,7 @@ def test_a_certificate_of_another_run_from_the_same_ca_is_refused(runs, tmp_path
     """Issue 40: with ``--tls-ca`` the access list checked the CN only, so robot 1's
     certificate of an earlier run by the same CA put commands in a new run, and that run's
     observer certificate read every command. Both now hold no right in this run: the CNs
-    carry the run (`protocol.scoped_cn`)."""
+    carry the run (`eifp_wire.access.scoped_cn`)."""
     import zenoh
 
     from agent.security import RunCA

@@ -38,6 +38,7 @@ from agent.planning.controller import RobotController
 from agent.planning.routing import StaticMap
 from world.sim.dynamics import WorldSim
 from world.sim.faults import FaultPlan
+from world.sim.lifecycle import EPS_S, ProcessState, RobotLifecycle, Transition
 from world.sim.link import LINK_COMMANDS, LINK_POSES, FaultyLink, link_rng
 from world.sim.schedule import LINK_LEASE_MS, plan_pose_slot, pose_slot_count, pose_slot_of_tick
 
@@ -47,7 +48,6 @@ RESTART_DELAY_S = 2.0
 """Sim time a restarted robot is away (a new process starting, as in distributed runs)."""
 PROGRESS_EVERY_S = 1.0
 """Sim time between two `on_progress` calls."""
-EPS_S = 1e-9
 
 
 class RunSink(Protocol):
@@ -100,7 +100,7 @@ class LockstepResult:
 
 @dataclass
 class _Robot:
-    """One robot of the loop: its controller, links, schedule and process state."""
+    """One robot of the loop: its controller, links, schedule and process lifecycle."""
 
     spec: RobotSpec
     ctrl: RobotController
@@ -111,10 +111,7 @@ class _Robot:
     pose_slot: int | None
     plan_delay_s: float
     seq: int = 0
-    state: str = "up"  # "up" | "stopped" | "down"
-    resume_s: float = math.inf
-    lease_s: float = math.inf
-    back_s: float = math.inf
+    life: RobotLifecycle = field(default_factory=RobotLifecycle)
 
     def plans_on(self, tick: int) -> bool:
         return (tick >= self.phase_ticks
@@ -128,6 +125,221 @@ def _ticks_per(world_rate_hz: float, rate_hz: float) -> int:
         raise ValueError(f"control rate {rate_hz} Hz must divide the world rate "
                          f"{world_rate_hz} Hz")
     return n
+
+
+@dataclass
+class _EgoError:
+    """How far each planning robot's own estimate was from the truth [m], summed."""
+
+    sum_m: float = 0.0
+    max_m: float = 0.0
+    plans: int = 0
+
+    def add(self, err_m: float) -> None:
+        self.sum_m += err_m
+        self.max_m = max(self.max_m, err_m)
+        self.plans += 1
+
+
+class _Loop:
+    """One lockstep run: the world, the robots and what the ``end`` event tallies.
+
+    Each `tick` runs the steps of the module docstring in order; the world's state is read
+    once per step, so no robot's result depends on another's order.
+    """
+
+    def __init__(self, scenario: Scenario, sink: RunSink, plan: FaultPlan, *,
+                 world_rate_hz: float, control_rate_hz: float) -> None:
+        self.scenario, self.sink, self.plan = scenario, sink, plan
+        self.world_rate_hz, self.control_rate_hz = world_rate_hz, control_rate_hz
+        self.dt_s = 1.0 / world_rate_hz
+        self.slots = pose_slot_count(world_rate_hz, control_rate_hz)
+        self.static_map = StaticMap.of_obstacles(scenario.obstacles)
+        self.robots = [self._robot(spec) for spec in scenario.robots]
+        self.by_id = {r.spec.id: r for r in self.robots}
+        self.pending = sorted(plan.process, key=lambda f: f.at_s)
+        self.world = WorldSim(scenario, cmd_timeout_s=CMD_TIMEOUT_S)
+        self.last_seq: dict[int, int] = {}
+        self.record_plan = getattr(sink, "record_plan", None)
+        self.ego = _EgoError()
+        self.stale_cmds = 0
+
+    def controller(self, spec: RobotSpec) -> RobotController:
+        rate_hz = self.plan.timing_of(spec.id).control_rate_hz or self.control_rate_hz
+        return RobotController(spec, self.scenario.planner_config,
+                               self.scenario.goal_tolerance_m,
+                               compensate_latency=self.plan.compensate_latency,
+                               control_period_s=1.0 / rate_hz, static_map=self.static_map)
+
+    def _robot(self, spec: RobotSpec) -> _Robot:
+        plan, world_rate_hz = self.plan, self.world_rate_hz
+        timing = plan.timing_of(spec.id)
+        rate_hz = timing.control_rate_hz or self.control_rate_hz
+        return _Robot(
+            spec=spec, ctrl=self.controller(spec),
+            pose_link=FaultyLink(plan.links, link_rng(plan.seed, LINK_POSES, spec.id)),
+            cmd_link=FaultyLink(plan.links, link_rng(plan.seed, LINK_COMMANDS, spec.id)),
+            ticks_per_cycle=_ticks_per(world_rate_hz, rate_hz),
+            phase_ticks=round(timing.phase_s * world_rate_hz),
+            pose_slot=plan_pose_slot(1.0 / rate_hz, timing.phase_s, self.dt_s, self.slots),
+            plan_delay_s=timing.plan_delay_ms * 1e-3)
+
+    def progress(self) -> SimProgress:
+        world = self.world
+        return SimProgress(sim_t_s=float(world.t_s), n_robots=len(self.robots),
+                           arrived=frozenset(int(r) for r in world.robot_ids[world.arrived]),
+                           contacts=int(world.contact_count),
+                           lost=frozenset(r.spec.id for r in self.robots if r.life.down))
+
+    def start(self) -> None:
+        """The ``start`` event, tick 0 and the robots that start at their goals."""
+        world, plan = self.world, self.plan
+        start: dict[str, Any] = {"mode": "lockstep", "n_robots": len(self.robots),
+                                 "world_rate_hz": self.world_rate_hz,
+                                 "control_rate_hz": self.control_rate_hz}
+        if plan.active:
+            start["faults"] = plan.to_json()
+        self.sink.event("start", 0.0, **start)
+        self.sink.record_tick(world.t_s, world.robot_ids, world.pose, world.applied)
+        for rid in world.robot_ids[world.arrived].tolist():
+            self.sink.event("arrived", world.t_s, robot=rid)
+
+    def end_reason(self, max_ticks: int) -> str | None:
+        """Why the run ends before the next tick, or None to go on."""
+        world = self.world
+        if world.all_arrived():
+            return "all_arrived"
+        # A killed robot that will not come back no longer holds the run open.
+        gone = np.array([r.life.gone_for_good for r in self.robots])
+        if gone.any() and bool(np.all(world.arrived | gone)):
+            return "arrived_or_lost"
+        if world.tick >= max_ticks:
+            return "time_limit"
+        return None
+
+    def _set_offline(self, rid: int, offline: bool, t: float) -> None:
+        """Take a robot offline (``robot_lost``) or bring it back (``robot_rejoined``: its
+        command numbering starts over)."""
+        self.world.set_offline(rid, offline)
+        if not offline:
+            self.last_seq.pop(rid, None)
+        self.sink.event("robot_lost" if offline else "robot_rejoined", t, robot=rid)
+
+    def _offline(self, rid: int) -> bool:
+        return bool(self.world.offline[self.world.index_of(rid)])
+
+    def apply_faults(self, t: float) -> None:
+        """1a. The process faults due by `t`."""
+        while self.pending and self.pending[0].at_s <= t + EPS_S:
+            f = self.pending.pop(0)
+            r = self.by_id[f.robot_id]
+            self.sink.event("fault", t, fault=f.kind, robot=f.robot_id, duration_s=f.duration_s)
+            died = r.life.fault(f.kind, t, f.duration_s, lease_s=LINK_LEASE_MS * 1e-3,
+                                restart_delay_s=RESTART_DELAY_S)
+            if died and not self._offline(r.spec.id):
+                self._set_offline(r.spec.id, True, t)
+
+    def advance_lifecycles(self, t: float) -> None:
+        """1b. The world's view of the processes: leases, resumptions, restarts."""
+        for r in self.robots:
+            rid = r.spec.id
+            for change in r.life.advance(t):
+                if change is Transition.LEASE_EXPIRED and not self._offline(rid):
+                    self._set_offline(rid, True, t)
+                elif change is Transition.RESUMED and self._offline(rid):
+                    self._set_offline(rid, False, t)
+                elif change is Transition.RESTARTED:
+                    r.seq, r.ctrl = 0, self.controller(r.spec)
+                    r.pose_link.clear()
+                    r.cmd_link.clear()
+                    self._set_offline(rid, False, t)
+
+    def sense_and_plan(self, t: float, tick: int) -> None:
+        """2-3. Sense through the pose links (the robot's slot), plan on the planning ticks."""
+        snapshot = self.world.snapshot()
+        slot = pose_slot_of_tick(tick, self.slots)
+        for k, r in enumerate(self.robots):
+            if r.pose_slot is None or r.pose_slot == slot:
+                r.pose_link.send(t, snapshot)
+            if r.life.state is ProcessState.STOPPED:
+                continue
+            for snap in r.pose_link.receive(t):
+                if r.life.up:
+                    r.ctrl.observe(snap)
+            if r.life.up and r.plans_on(tick):
+                self._plan(k, r, t)
+
+    def _plan(self, k: int, r: _Robot, t: float) -> None:
+        res = r.ctrl.plan(t)
+        if self.record_plan is not None and res.debug is not None:
+            self.record_plan(t, r.spec.id, res.debug, v_mps=res.v_mps,
+                             omega_radps=res.omega_radps, status=str(res.status.value))
+        obs = r.ctrl.last_observation
+        if obs is not None:
+            pose = self.world.pose
+            self.ego.add(math.hypot(obs.ego.x_m - pose[k, 0], obs.ego.y_m - pose[k, 1]))
+        stamp = r.ctrl.snapshot.stamp_s if r.ctrl.snapshot is not None else t
+        r.cmd_link.send(t + r.plan_delay_s, (r.seq, stamp, res))
+        r.seq += 1
+
+    def apply_commands(self, t: float) -> None:
+        """4a. The world applies what its command links release (the newest seq only)."""
+        for r in self.robots:
+            rid = r.spec.id
+            for seq, stamp, res in r.cmd_link.receive(t):
+                if seq <= self.last_seq.get(rid, -1):
+                    self.stale_cmds += 1
+                    continue
+                self.last_seq[rid] = seq
+                self.world.set_command(rid, res.v_mps, res.omega_radps, r.ctrl.command_hold_s)
+                self.sink.record_command(t, rid, seq, stamp, res.v_mps, res.omega_radps,
+                                         res.times.total_ms, str(res.status.value),
+                                         side=int(res.side), resolved=res.resolved_id)
+
+    def step(self) -> None:
+        """4b. Step the dynamics; record the tick and what happened in it."""
+        world, sink = self.world, self.sink
+        events = world.step(self.dt_s)
+        sink.record_tick(world.t_s, world.robot_ids, world.pose, world.applied)
+        for rid in events.arrivals:
+            sink.event("arrived", world.t_s, robot=rid)
+        for a, b, overlap in events.new_contacts:
+            sink.event("contact", world.t_s, a=a, b=b, overlap_m=round(overlap, 6))
+        for rid in events.timeouts:
+            sink.event("cmd_timeout", world.t_s, robot=rid)
+
+    def tick(self) -> None:
+        """One world tick: steps 1-4 of the module docstring."""
+        t, tick = self.world.t_s, self.world.tick
+        self.apply_faults(t)
+        self.advance_lifecycles(t)
+        self.sense_and_plan(t, tick)
+        self.apply_commands(t)
+        self.step()
+
+    def finish(self, reason: str) -> LockstepResult:
+        """The ``end`` event and the result."""
+        world, robots, ego = self.world, self.robots, self.ego
+        lost = tuple(sorted(r.spec.id for r in robots if r.life.down))
+        all_arrived = bool(world.all_arrived())
+        link_counts = {
+            link: {name: sum(getattr(getattr(r, link).counts, name) for r in robots)
+                   for name in ("dropped", "duplicated", "reordered")}
+            for link in ("pose_link", "cmd_link")}
+        self.sink.event(
+            "end", world.t_s, reason=reason,
+            success=all_arrived and world.contact_count == 0, all_arrived=all_arrived,
+            arrived=[int(r) for r in world.robot_ids[world.arrived]],
+            contacts=world.contact_count, ticks=world.tick,
+            min_gap_m=round(world.min_gap_m, 6) if math.isfinite(world.min_gap_m) else None,
+            lost=list(lost), cmd_timeouts=world.timeout_count,
+            cmd_hold_expiries=world.hold_expiry_count, stale=self.stale_cmds,
+            stale_poses=sum(r.ctrl.rejected_stale for r in robots), **link_counts,
+            ego_error_m_mean=round(ego.sum_m / ego.plans, 6) if ego.plans else None,
+            ego_error_m_max=round(ego.max_m, 6))
+        return LockstepResult(reason=reason, all_arrived=all_arrived,
+                              contacts=int(world.contact_count), sim_time_s=float(world.t_s),
+                              ticks=int(world.tick), lost=lost)
 
 
 def run_lockstep(scenario: Scenario, sink: RunSink, *, world_rate_hz: float = 50.0,
@@ -152,165 +364,16 @@ def run_lockstep(scenario: Scenario, sink: RunSink, *, world_rate_hz: float = 50
     _ticks_per(world_rate_hz, control_rate_hz)
     plan = faults if faults is not None else FaultPlan()
     plan.check([r.id for r in scenario.robots])
-    dt_s = 1.0 / world_rate_hz
-    slots = pose_slot_count(world_rate_hz, control_rate_hz)
-
-    static_map = StaticMap.of_obstacles(scenario.obstacles)
-
-    def controller(spec: RobotSpec) -> RobotController:
-        rate_hz = plan.timing_of(spec.id).control_rate_hz or control_rate_hz
-        return RobotController(spec, scenario.planner_config, scenario.goal_tolerance_m,
-                               compensate_latency=plan.compensate_latency,
-                               control_period_s=1.0 / rate_hz, static_map=static_map)
-
-    robots = []
-    for spec in scenario.robots:
-        timing = plan.timing_of(spec.id)
-        rate_hz = timing.control_rate_hz or control_rate_hz
-        robots.append(_Robot(
-            spec=spec, ctrl=controller(spec),
-            pose_link=FaultyLink(plan.links, link_rng(plan.seed, LINK_POSES, spec.id)),
-            cmd_link=FaultyLink(plan.links, link_rng(plan.seed, LINK_COMMANDS, spec.id)),
-            ticks_per_cycle=_ticks_per(world_rate_hz, rate_hz),
-            phase_ticks=round(timing.phase_s * world_rate_hz),
-            pose_slot=plan_pose_slot(1.0 / rate_hz, timing.phase_s, dt_s, slots),
-            plan_delay_s=timing.plan_delay_ms * 1e-3))
-    by_id = {r.spec.id: r for r in robots}
-    pending = sorted(plan.process, key=lambda f: f.at_s)
-    lease_s = LINK_LEASE_MS * 1e-3
-    world = WorldSim(scenario, cmd_timeout_s=CMD_TIMEOUT_S)
-    last_seq: dict[int, int] = {}
-    record_plan = getattr(sink, "record_plan", None)
+    loop = _Loop(scenario, sink, plan, world_rate_hz=world_rate_hz,
+                 control_rate_hz=control_rate_hz)
     max_ticks = math.ceil(scenario.time_limit_s * world_rate_hz - 1e-9)
     progress_ticks = max(1, round(PROGRESS_EVERY_S * world_rate_hz))
-    ego_err_sum, ego_err_max, plans, stale_cmds = 0.0, 0.0, 0, 0
-
-    def progress() -> SimProgress:
-        return SimProgress(sim_t_s=float(world.t_s), n_robots=len(robots),
-                           arrived=frozenset(int(r) for r in world.robot_ids[world.arrived]),
-                           contacts=int(world.contact_count),
-                           lost=frozenset(r.spec.id for r in robots if r.state == "down"))
-
-    start: dict[str, Any] = {"mode": "lockstep", "n_robots": len(robots),
-                             "world_rate_hz": world_rate_hz, "control_rate_hz": control_rate_hz}
-    if plan.active:
-        start["faults"] = plan.to_json()
-    sink.event("start", 0.0, **start)
-    sink.record_tick(world.t_s, world.robot_ids, world.pose, world.applied)
-    for rid in world.robot_ids[world.arrived].tolist():
-        sink.event("arrived", world.t_s, robot=rid)
-    reason = "time_limit"
-    while True:
-        if world.all_arrived():
-            reason = "all_arrived"
-            break
-        # A killed robot that will not come back no longer holds the run open.
-        gone = np.array([r.state == "down" and r.back_s == math.inf for r in robots])
-        if gone.any() and bool(np.all(world.arrived | gone)):
-            reason = "arrived_or_lost"
-            break
-        if world.tick >= max_ticks:
-            break
-        t, tick = world.t_s, world.tick
-        # 1. Process faults and the world's view of them (liveliness, lease).
-        while pending and pending[0].at_s <= t + EPS_S:
-            f = pending.pop(0)
-            r = by_id[f.robot_id]
-            sink.event("fault", t, fault=f.kind, robot=f.robot_id, duration_s=f.duration_s)
-            if f.kind == "stop" and r.state == "up":
-                r.state, r.resume_s, r.lease_s = "stopped", t + f.duration_s, t + lease_s
-            elif f.kind in ("kill", "restart") and r.state != "down":
-                r.state, r.resume_s, r.lease_s = "down", math.inf, math.inf
-                r.back_s = t + RESTART_DELAY_S if f.kind == "restart" else math.inf
-                if not world.offline[world.index_of(r.spec.id)]:
-                    world.set_offline(r.spec.id, True)
-                    sink.event("robot_lost", t, robot=r.spec.id)
-        for r in robots:
-            rid = r.spec.id
-            offline = bool(world.offline[world.index_of(rid)])
-            if r.state == "stopped" and t + EPS_S >= r.lease_s and not offline:
-                world.set_offline(rid, True)
-                sink.event("robot_lost", t, robot=rid)
-            if r.state == "stopped" and t + EPS_S >= r.resume_s:
-                r.state = "up"
-                if world.offline[world.index_of(rid)]:
-                    world.set_offline(rid, False)
-                    last_seq.pop(rid, None)
-                    sink.event("robot_rejoined", t, robot=rid)
-            if r.state == "down" and t + EPS_S >= r.back_s:
-                r.state, r.back_s, r.seq = "up", math.inf, 0
-                r.ctrl = controller(r.spec)
-                r.pose_link.clear()
-                r.cmd_link.clear()
-                world.set_offline(rid, False)
-                last_seq.pop(rid, None)
-                sink.event("robot_rejoined", t, robot=rid)
-        # 2-3. Sense through the pose links (the robot's slot), plan on the planning ticks.
-        snapshot = world.snapshot()
-        slot = pose_slot_of_tick(tick, slots)
-        for k, r in enumerate(robots):
-            if r.pose_slot is None or r.pose_slot == slot:
-                r.pose_link.send(t, snapshot)
-            if r.state == "stopped":
-                continue
-            for snap in r.pose_link.receive(t):
-                if r.state == "up":
-                    r.ctrl.observe(snap)
-            if r.state != "up" or not r.plans_on(tick):
-                continue
-            res = r.ctrl.plan(t)
-            if record_plan is not None and res.debug is not None:
-                record_plan(t, r.spec.id, res.debug, v_mps=res.v_mps,
-                            omega_radps=res.omega_radps, status=str(res.status.value))
-            obs = r.ctrl.last_observation
-            if obs is not None:
-                err = math.hypot(obs.ego.x_m - world.pose[k, 0], obs.ego.y_m - world.pose[k, 1])
-                ego_err_sum += err
-                ego_err_max = max(ego_err_max, err)
-                plans += 1
-            stamp = r.ctrl.snapshot.stamp_s if r.ctrl.snapshot is not None else t
-            r.cmd_link.send(t + r.plan_delay_s, (r.seq, stamp, res))
-            r.seq += 1
-        # 4. The world applies what its command links release (the newest seq only).
-        for r in robots:
-            rid = r.spec.id
-            for seq, stamp, res in r.cmd_link.receive(t):
-                if seq <= last_seq.get(rid, -1):
-                    stale_cmds += 1
-                    continue
-                last_seq[rid] = seq
-                world.set_command(rid, res.v_mps, res.omega_radps, r.ctrl.command_hold_s)
-                sink.record_command(t, rid, seq, stamp, res.v_mps, res.omega_radps,
-                                    res.times.total_ms, str(res.status.value),
-                                    side=int(res.side), resolved=res.resolved_id)
-        events = world.step(dt_s)
-        sink.record_tick(world.t_s, world.robot_ids, world.pose, world.applied)
-        for rid in events.arrivals:
-            sink.event("arrived", world.t_s, robot=rid)
-        for a, b, overlap in events.new_contacts:
-            sink.event("contact", world.t_s, a=a, b=b, overlap_m=round(overlap, 6))
-        for rid in events.timeouts:
-            sink.event("cmd_timeout", world.t_s, robot=rid)
-        if on_progress is not None and world.tick % progress_ticks == 0:
-            on_progress(progress())
-    lost = tuple(sorted(r.spec.id for r in robots if r.state == "down"))
-    all_arrived = bool(world.all_arrived())
-    link_counts = {
-        link: {name: sum(getattr(getattr(r, link).counts, name) for r in robots)
-               for name in ("dropped", "duplicated", "reordered")}
-        for link in ("pose_link", "cmd_link")}
-    sink.event("end", world.t_s, reason=reason,
-               success=all_arrived and world.contact_count == 0, all_arrived=all_arrived,
-               arrived=[int(r) for r in world.robot_ids[world.arrived]],
-               contacts=world.contact_count, ticks=world.tick,
-               min_gap_m=round(world.min_gap_m, 6) if math.isfinite(world.min_gap_m) else None,
-               lost=list(lost), cmd_timeouts=world.timeout_count,
-               cmd_hold_expiries=world.hold_expiry_count, stale=stale_cmds,
-               stale_poses=sum(r.ctrl.rejected_stale for r in robots), **link_counts,
-               ego_error_m_mean=round(ego_err_sum / plans, 6) if plans else None,
-               ego_error_m_max=round(ego_err_max, 6))
+    loop.start()
+    while (reason := loop.end_reason(max_ticks)) is None:
+        loop.tick()
+        if on_progress is not None and loop.world.tick % progress_ticks == 0:
+            on_progress(loop.progress())
+    result = loop.finish(reason)
     if on_progress is not None:
-        on_progress(progress())
-    return LockstepResult(reason=reason, all_arrived=all_arrived,
-                          contacts=int(world.contact_count), sim_time_s=float(world.t_s),
-                          ticks=int(world.tick), lost=lost)
+        on_progress(loop.progress())
+    return result

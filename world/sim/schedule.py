@@ -1,8 +1,9 @@
 """The schedule of a run: pose slots, planning slots and the transport lease (pure).
 
-The world publishes tick t's poses on ``poses/<t mod K>`` (`protocol.RunKeys.poses_slot`);
+The world publishes tick t's poses on ``poses/<t mod K>`` (`eifp_wire.keys.RunKeys.poses_slot`);
 a robot that plans once a control period on a fixed tick needs only its slot. The lockstep
-loop (`world.sim.lockstep`) and the processes (`world.node`, `agent.node`) share these.
+loop (`world.sim.lockstep`) and the processes (`world.node`, `agent.node`) share these; a
+robot process plans on the slots of a `PlanSchedule`.
 """
 
 from __future__ import annotations
@@ -13,6 +14,8 @@ MAX_POSE_SLOTS = 1000
 """Largest number of pose slots (a bound the wire format checks too)."""
 LINK_LEASE_MS = 1000
 """Transport lease: a hung (SIGSTOPped) peer is noticed after about this long."""
+STAMP_EPS_S = 1e-6
+"""Tolerance on sim-time comparisons (stamps are sums of float ticks)."""
 
 
 def pose_slot_count(world_rate_hz: float, control_rate_hz: float) -> int:
@@ -62,3 +65,63 @@ def plan_pose_slot(period_s: float, phase_s: float, tick_s: float, slots: int) -
     if step != 0:  # successive plans land on different slots
         return None
     return round(phase_ticks) % slots
+
+
+class PlanSchedule:
+    """When to plan, in sim time: every `period_s`, from the first pose's stamp or on a phase.
+
+    A plan is due when the newest pose's stamp reaches the next scheduled time. After a
+    plan the schedule advances by one period; slots that have already passed (the robot was
+    slow, or poses were lost) are skipped and counted, never planned as a backlog.
+
+    Args:
+        period_s: planning period in sim time (> 0).
+        phase_s: None: the first slot is the first stamp seen. Else the slots are
+            ``phase_s + k * period_s`` (k integer): the first one at or after the first
+            stamp seen. Robots on different phases spread their planning over the world's
+            ticks instead of all planning on the same pose.
+    """
+
+    def __init__(self, period_s: float, phase_s: float | None = None) -> None:
+        if not period_s > 0.0:
+            raise ValueError("period_s must be positive")
+        if phase_s is not None and not math.isfinite(phase_s):
+            raise ValueError("phase_s must be finite")
+        self.period_s = float(period_s)
+        self.phase_s = None if phase_s is None else float(phase_s)
+        self.next_s: float | None = None
+        self.skipped = 0
+
+    def _first(self, stamp_s: float) -> float:
+        if self.phase_s is None:
+            return stamp_s
+        k = math.ceil((stamp_s - self.phase_s) / self.period_s - STAMP_EPS_S)
+        return self.phase_s + k * self.period_s
+
+    def due(self, stamp_s: float) -> bool:
+        """True if a pose stamped `stamp_s` should be planned on now."""
+        if self.next_s is None:
+            self.next_s = self._first(stamp_s)
+        return stamp_s + STAMP_EPS_S >= self.next_s
+
+    def planned(self, stamp_s: float) -> int:
+        """Record a plan made on the pose stamped `stamp_s`; returns the slots skipped."""
+        if self.next_s is None:
+            self.next_s = self._first(stamp_s)
+        self.next_s += self.period_s
+        missed = 0
+        if self.next_s + STAMP_EPS_S <= stamp_s:
+            missed = math.floor((stamp_s - self.next_s) / self.period_s + STAMP_EPS_S) + 1
+            self.next_s += missed * self.period_s
+        self.skipped += missed
+        return missed
+
+
+def plan_phase_s(robot_id: int, period_s: float, tick_s: float) -> float:
+    """This robot's planning phase: robots spread evenly over the world ticks of a period.
+
+    With a 0.1 s period and 0.02 s ticks, robot k plans on the ticks ``k mod 5`` of every
+    period, so at any tick only a fifth of the robots plan (and compete for the CPU).
+    """
+    slots = max(1, round(period_s / tick_s))
+    return (robot_id % slots) * period_s / slots

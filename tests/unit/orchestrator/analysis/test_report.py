@@ -9,7 +9,6 @@ from pathlib import Path
 
 import pytest
 
-from orchestrator.analysis.metrics import REVERSAL_CAUSES
 from orchestrator.analysis.report import (
     RunRecord,
     aggregate,
@@ -17,6 +16,7 @@ from orchestrator.analysis.report import (
     reversal_causes,
     reversal_table,
 )
+from orchestrator.analysis.turns import REVERSAL_CAUSES
 
 
 def record(setup: str, causes: dict[str, float] | None) -> RunRecord:

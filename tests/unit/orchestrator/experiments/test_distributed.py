@@ -2,24 +2,20 @@
 
 from __future__ import annotations
 
-import json
 import socket
 import sys
 from pathlib import Path
 
 import pytest
 
+from eifp_wire import ProtocolError
 from orchestrator.experiments.distributed import (
-    _EventTail,
-    _last_trajectory_time,
-    _progress,
     fleet_command,
     free_tcp_endpoint,
     robot_command,
     run_distributed,
     world_command,
 )
-from protocol import ProtocolError
 from world.scenario_file import ScenarioError
 
 
@@ -65,41 +61,6 @@ def test_run_distributed_rejects_an_unknown_launcher(tmp_path: Path) -> None:
         run_distributed(tmp_path / "s.yaml", tmp_path, "r1", robot_launcher="thread")
 
 
-def test_event_tail_reads_only_complete_lines(tmp_path: Path) -> None:
-    path = tmp_path / "events.jsonl"
-    tail = _EventTail(path)
-    assert tail.poll() == []  # no file yet
-    path.write_text('{"kind": "start", "t": 0.0}\n{"kind": "arr')
-    assert [e["kind"] for e in tail.poll()] == ["start"]
-    with open(path, "a") as f:
-        f.write('ived", "t": 1.5, "robot": 2}\n')
-    assert tail.poll() == [{"kind": "arrived", "t": 1.5, "robot": 2}]
-    assert len(tail.events) == 2 and tail.poll() == []
-
-
-def test_last_trajectory_time(tmp_path: Path) -> None:
-    path = tmp_path / "trajectory.csv"
-    assert _last_trajectory_time(path) == 0.0
-    path.write_text("t,robot,x,y,theta,v,omega\n")
-    assert _last_trajectory_time(path) == 0.0
-    path.write_text("t,robot,x,y,theta,v,omega\n1.2000,0,0,0,0,0,0\n1.2200,0,0,0,0,0,0\n1.24")
-    assert _last_trajectory_time(path) == pytest.approx(1.22)
-
-
-def test_progress_summarises_events(tmp_path: Path) -> None:
-    events = [json.loads(line) for line in (
-        '{"kind": "start", "t": 0.0}',
-        '{"kind": "arrived", "t": 3.0, "robot": 1}',
-        '{"kind": "robot_lost", "t": 3.5, "robot": 0}',
-        '{"kind": "contact", "t": 4.0, "a": 0, "b": 2}',
-        '{"kind": "robot_lost", "t": 4.2, "robot": 2}',
-        '{"kind": "robot_rejoined", "t": 4.4, "robot": 2}',
-    )]
-    p = _progress(events, tmp_path, 0.0, 3, [])
-    assert p.started and p.arrived == {1} and p.lost == {0} and p.contacts == 1
-    assert p.sim_t_s == pytest.approx(4.4) and p.n_robots == 3 and p.robots_running == 0
-
-
 def test_bad_inputs_fail_before_anything_is_spawned(tmp_path: Path) -> None:
     with pytest.raises(ProtocolError):
         run_distributed(tmp_path / "missing.yaml", tmp_path / "out", "bad/run")
@@ -110,7 +71,7 @@ def test_bad_inputs_fail_before_anything_is_spawned(tmp_path: Path) -> None:
 
 def test_robot_args_reach_every_robot_through_the_fleet(tmp_path: Path) -> None:
     from agent.fleet import build_parser, robot_argv
-    from agent.node import parse_args
+    from agent.startup import parse_args
 
     cmd = fleet_command("r1", [0, 1], "tcp/127.0.0.1:9", tmp_path, robot_args=["--no-plan"])
     fleet_args = build_parser().parse_args(cmd[3:])
