@@ -1,6 +1,7 @@
 """LTV-MPC tracker of eIFP-MPC on the discrete unicycle (Eq. 1), solved with OSQP.
 
-Formulation ("Trajectory Smoothing and MPC Tracking", Eq. 1 and the cost J). Each cycle
+Formulation ("Trajectory Smoothing and MPC Tracking": the unicycle of Eq. 20, which is
+Eq. 1, the cost J of Eq. 21 and the input bounds of Eq. 22). Each cycle
 the unicycle is linearised about a nominal trajectory (xb_k, ub_k): the previous optimal
 inputs shifted by one step (the last one repeated), or the reference inputs on the first
 cycle, rolled out through Eq. (1) from the measured state x_0. The QP variables are the

@@ -61,7 +61,7 @@ def assert_within_limits(cmd, last):
 
 
 def run(tracker, x0, ref_at, cycles, neighbours=None, clearance=None):
-    """Closed loop: solve, check limits, apply the command for DT on Eq. (1)."""
+    """Closed loop: solve, check limits, apply the command for DT on the unicycle (Eq. 1)."""
     x, last = np.array(x0, dtype=float), np.zeros(2)
     states, results = [x], []
     for i in range(cycles):
