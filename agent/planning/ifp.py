@@ -3,11 +3,11 @@
 One planning cycle, as `plan_ifp` runs it:
 
 1. Neighbours: the others inside the sensing radius, at most `max_neighbors`.
-2. Escape: if the robot is inside an inflated disc (Q <= L, Eq. 7) the plan is
+2. Escape: if the robot is inside an inflated disc (Q <= L, Eq. 8) the plan is
    [P, escape point, goal], status ESCAPE (the deepest disc wins, ties by id); for a robot
    standing (below `ESCAPE_STANDING_MPS`) just [P, escape point] (see there).
-3. Threats of Eq. (5) at the robot's measured velocity, ranked by TCPA (Eq. 6). If there
-   are any, the nearest one is resolved from P: its RIGHT/LEFT candidates (Eqs. 8-13) are
+3. Threats of Eq. (6) at the robot's measured velocity, ranked by TCPA (Eq. 7). If there
+   are any, the nearest one is resolved from P: its RIGHT/LEFT candidates (Eqs. 9-14) are
    built and the selector picks one (IFP: the earliest, smallest lambda*). If neither
    survives the plan is [P, goal], status NO_FEASIBLE.
 4. Iteration (up to `max_depth` via-points in all): every leg of the waypoint list, from
@@ -21,10 +21,10 @@ Choices the paper leaves open (documented here, tested in
 tests/unit/agent/planning/test_ifp.py):
 
 - Step 3 uses the measured velocity v_r as in Eq. (3). A robot that stands still (v_r = 0)
-  sees no static obstacle as a threat under Eq. (5), so when Eq. (5) finds nothing the
+  sees no static obstacle as a threat under Eq. (6), so when Eq. (6) finds nothing the
   direct leg P -> goal still goes through the leg check of step 4
   (`Mechanisms.direct_leg_check`; not in the paper, off in its profile: then a cycle whose
-  Eq. (5) finds nothing plans [P, goal]).
+  Eq. (6) finds nothing plans [P, goal]).
 - The leg check counts other j as a threat when the closest approach on the leg is below
   its inflated radius L_j (not D_thresh, which is a detection radius): the plan must clear
   the inflated discs. Grazing within `LEG_GRAZE_TOL_M` is not a threat, so a leg that is
@@ -32,7 +32,7 @@ tests/unit/agent/planning/test_ifp.py):
 - The leg from a via-point's predecessor to the via-point is tangent to the disc it
   resolves, so that disc is excluded on that leg; it is checked on every other leg.
 - Via-points are pushed radially `VIA_MARGIN_M` out of the moving disc they resolve
-  (`viapoints.via_point_candidates(margin_m=...)`). On the boundary itself a via-point
+  (`viapoints.candidate_pair(margin_m=...)`). On the boundary itself a via-point
   would have no tangent to the same disc, and a next leg that cuts back into it (the
   usual case when the goal lies behind the obstacle) could not be fixed; from outside it
   gets a further tangent, so the iteration wraps the disc with a short polygon. The leg
@@ -92,7 +92,7 @@ robot keeps the goal in its escape plan (the reference then continues where it g
 # Closest approaches this close to L still clear the disc [m] (tangent legs, rounding).
 LEG_GRAZE_TOL_M = 1.0e-6
 
-# Eq. (5) threats whose TCPA exceeds the time to the goal at top speed by more than this
+# Eq. (6) threats whose TCPA exceeds the time to the goal at top speed by more than this
 # are not resolved [s].
 GOAL_TCPA_MARGIN_S = 0.5
 
@@ -161,7 +161,7 @@ class Mechanisms:
         via_margin_m: how far outside its inflated disc a via-point is placed [m].
         escape_band_m: an escape goes on from the same disc until the robot is this far
             outside it, towards a point that far out (0: only while inside) [m].
-        horizon_via_points: a candidate reached after more than T_max (lambda*, Eq. 13) is
+        horizon_via_points: a candidate reached after more than T_max (lambda*, Eq. 14) is
             infeasible: past the threat horizon the constant-velocity forecast that placed
             it is not to be trusted (for an other as fast as the robot, a tangent point
             receding nearly as fast is met kilometres down its track); and when the first
@@ -246,7 +246,7 @@ def is_head_on(heading_rad: float, speed_mps: float, other_velocity_mps: np.ndar
     return towards >= _HEAD_ON_COS
 
 # rule(others, index, tcpa, dcpa, inflated) -> (ignored ids, committed ids): eIFP's encounter
-# rules, given the cycle's neighbours and their Eq. (5) assessment (threat indices ranked,
+# rules, given the cycle's neighbours and their Eqs. (3)-(7) assessment (threat indices ranked,
 # TCPA, DCPA, inflated radii L), so the assessment is made once per cycle.
 EncounterRule = Callable[
     [Others, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
@@ -272,7 +272,7 @@ class ViaPlan:
         via_point_m: (2,) the first via-point after the robot's position, or None.
         side: side of `via_point_m` relative to the threat it resolves (NONE for escape).
         resolved_id: id of the other `via_point_m` resolves, or None.
-        threats: the threats of Eq. (5) at the measured velocity, ranked by TCPA.
+        threats: the threats of Eq. (6) at the measured velocity, ranked by TCPA.
         resolved_sides: (other id, side) for every via-point, in travel order.
         threats_s: wall time of the threat assessment, when a timer was given (else 0).
     """
@@ -408,7 +408,7 @@ def plan_via_points(
     speed = float(observation.limits.v_max_mps)
     radius = inflated_radius(observation.radius_m, others.radius_m, config.safety.d_safety_m)
 
-    # Eqs. (3)-(6) at the measured velocity.
+    # Eqs. (3)-(7) at the measured velocity.
     t_start = timer() if timer is not None else 0.0
     v_r = ego.v_mps * np.array([math.cos(ego.heading_rad), math.sin(ego.heading_rad)])
     d_thresh: float | np.ndarray = config.dcpa_threshold_m(observation.radius_m)
@@ -515,7 +515,7 @@ def plan_via_points(
         excluded[0:1] = [k, -1]
         chosen.insert(1, (k, split[1]))
     elif not mech.direct_leg_check:
-        # The paper declares threats by Eq. (5) alone: none, so the plan is [P, goal].
+        # The paper declares threats by Eq. (6) alone: none, so the plan is [P, goal].
         return ViaPlan(status=PlanStatus.OK, waypoints_m=np.stack((p, goal)), threats=threats,
                        threats_s=threats_s)
 
@@ -621,7 +621,7 @@ def _with_committed(
     committed_ids: frozenset[int],
     t_max_s: float,
 ) -> np.ndarray:
-    """Eq. (5)'s threats plus the committed others still approaching, re-ranked by TCPA.
+    """Eq. (6)'s threats plus the committed others still approaching, re-ranked by TCPA.
 
     Without this, a threat assessed at the measured velocity vanishes as soon as the robot
     swerves for it (its DCPA grows past D_thresh), the robot turns back to its goal, the
