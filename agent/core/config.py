@@ -70,7 +70,7 @@ def _check_ranges(config: object) -> None:
 
 @dataclass(frozen=True)
 class RobotLimits:
-    """Actuation limits of a unicycle robot (Eq. 2).
+    """Actuation limits (Eq. 2) of a unicycle robot.
 
     Args:
         v_max_mps: largest forward speed.
@@ -101,7 +101,7 @@ class SafetyConfig:
     """How much room the robots keep.
 
     Args:
-        d_safety_m: margin added to the pair's radii, L = r_i + r_j + d_safety (Eq. 7);
+        d_safety_m: margin added to the pair's radii, L = r_i + r_j + d_safety (Eq. 8);
             read by ifp, eifp and eifp-mpc (tangents, escape) and orca (every disc grows
             by half of it).
         braking_margin_m: gap eIFP-MPC's braking guard keeps (`agent.planning.safety`).
@@ -120,7 +120,7 @@ class ThreatConfig:
 
     Args:
         t_max_s: T_max of Eq. (6), the horizon of the threat test; also the latest a
-            via-point may be reached (lambda*, Eq. 13) in the default profile. Read by ifp,
+            via-point may be reached (lambda*, Eq. 14) in the default profile. Read by ifp,
             eifp and eifp-mpc.
         sensing_radius_m: others farther than this (centre to centre) are not seen; read by
             every planner and by the robot's estimator.
@@ -138,14 +138,14 @@ class ThreatConfig:
 
 @dataclass(frozen=True)
 class CostConfig:
-    """eIFP's via-point cost (Eq. 14) and its side commitment; read by eifp and eifp-mpc.
+    """eIFP's via-point cost (Eq. 15) and its side commitment; read by eifp and eifp-mpc.
 
     Args:
-        w_length: w_g, weight on the normalised length (Eq. 15).
+        w_length: w_g, weight on the normalised length (Eq. 16).
         w_distance: w_d, weight on the inverse distance to predicted paths [m].
-        w_angle: w_a, weight on the angular misalignment (Eq. 16).
+        w_angle: w_a, weight on the angular misalignment (Eq. 17).
         side_hysteresis: a via-point on the other side of a threat than last cycle's must
-            cost less than (1 - this) times the kept side's (0: plain argmin, Eq. 17).
+            cost less than (1 - this) times the kept side's (0: plain argmin, Eq. 18).
     """
 
     w_length: float = 1.0
@@ -317,7 +317,7 @@ PAPER_OVERRIDES: dict[str, object] = {
 }
 """What `paper_config` sets: the ``paper`` profile (every addition of this project off:
 `agent.planning.mechanisms.PAPER_MECHANISMS`, the paper's MPC weights and no braking guard,
-`agent.planning.mpc.PAPER_TUNING`), plain argmin (Eq. 17), and neither a sensing range nor
+`agent.planning.mpc.PAPER_TUNING`), plain argmin (Eq. 18), and neither a sensing range nor
 a neighbour cap, which the paper does not have."""
 
 

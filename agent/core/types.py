@@ -22,8 +22,8 @@ from agent.core.config import RobotLimits
 class Side(enum.IntEnum):
     """Side on which the robot passes the threat it resolves.
 
-    LEFT is the tangent at alpha + theta (Eq. 10): the robot turns counter-clockwise and
-    leaves the threat on its right. RIGHT is alpha - theta (Eq. 9).
+    LEFT is the tangent at alpha + theta (Eq. 11): the robot turns counter-clockwise and
+    leaves the threat on its right. RIGHT is alpha - theta (Eq. 10).
     """
 
     RIGHT = -1
@@ -102,7 +102,7 @@ class Others:
         position_m: (K, 2) observed positions.
         velocity_mps: (K, 2) velocities estimated from the observed history.
         radius_m: (K,) disc radii.
-        linearity: (K,) w_j in [0, 1], how straight the observed history is (Eq. 14).
+        linearity: (K,) w_j in [0, 1], how straight the observed history is (Eq. 15).
         track_start_m: (K, 2) s_j, the oldest position of the observed window (ghost path start).
         is_robot: (K,) bool, False for scenario obstacles.
         heading_rad: (K,) the observed headings (the world publishes full poses); None
@@ -303,7 +303,7 @@ class Observation:
 
 @dataclass(frozen=True)
 class Threat:
-    """One collision threat of Eq. (5)."""
+    """One collision threat of Eq. (6)."""
 
     other_id: int
     tcpa_s: float
@@ -331,7 +331,7 @@ class PlanDebug:
     Args:
         ego: (3,) x [m], y [m], heading [rad] the robot planned from (its own estimate,
             forward-predicted by the pose age).
-        threat_ids: ids of the threats of Eq. (5), ranked as the planner ranked them.
+        threat_ids: ids of the threats of Eq. (6), ranked as the planner ranked them.
         via_points_m: (K, 2) the via-points between the robot and its goal.
         reference_m: (M, 2) samples of the reference path the tracker follows.
         predicted_m: (N, 2) the MPC's predicted positions over its horizon (eIFP-MPC).
@@ -374,7 +374,7 @@ class PlanResult:
         via_point_m: (2,) the chosen via-point, or None when no threat needed one.
         side: side of the chosen via-point relative to the threat it resolves.
         resolved_id: id of the threat that via-point resolves, or None.
-        threats: the threats of Eq. (5), ranked by TCPA.
+        threats: the threats of Eq. (6), ranked by TCPA (Eq. 7).
         times: per-stage timings.
         solver_iterations: OSQP iterations (eIFP-MPC), else 0.
         debug: the planner's internals for viewing (`PlanDebug`), or None; not part of

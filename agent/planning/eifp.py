@@ -1,13 +1,13 @@
-"""eIFP: IFP whose via-points are chosen by the interaction-aware cost of Eqs. (14)-(16).
+"""eIFP: IFP whose via-points are chosen by the interaction-aware cost of Eqs. (15)-(17).
 
 The cycle is IFP's (`agent.planning.ifp`: TCPA-ranked threats, the nearest resolved first, legs
 re-checked up to `max_depth`); only the choice between a threat's RIGHT and LEFT candidate
 changes. Candidate i on the leg A -> B costs
 
-    J_i = w_g l_i + w_d sum_j w_j / d_ij + w_a sum_j w_j phi_ij            (Eq. 14)
+    J_i = w_g l_i + w_d sum_j w_j / d_ij + w_a sum_j w_j phi_ij            (Eq. 15)
 
-with l_i = (|A - v_i| + |v_i - B|) / (|A - B| + eps) (Eq. 15; A = robot, B = goal on the
-first leg) and phi_ij = 1 - cos(v_i - A, g_j - s_j) (Eq. 16). The sums run over every
+with l_i = (|A - v_i| + |v_i - B|) / (|A - B| + eps) (Eq. 16; A = robot, B = goal on the
+first leg) and phi_ij = 1 - cos(v_i - A, g_j - s_j) (Eq. 17). The sums run over every
 sensed other j (robots and moving or static obstacles alike; w_j decides how much each
 counts).
 
@@ -71,7 +71,7 @@ from agent.planning.viapoints import SIDES, inflated_radius
 
 GHOST_HORIZON_S = 4.0
 """How far ahead an other's predicted path and ghost goal are projected (d_ij and g_j of
-Eqs. 14 and 16) [s]: half the threat horizon T_max, the part of a constant-velocity
+Eqs. 15 and 17) [s]: half the threat horizon T_max, the part of a constant-velocity
 forecast the side choice leans on."""
 
 RIGHT_HAND_MARGIN = 0.05
@@ -79,10 +79,10 @@ RIGHT_HAND_MARGIN = 0.05
 cost (with the encounter rules): the shared right-hand convention then decides near-ties
 the same way for both robots of a mirrored encounter."""
 
-# Floor on the distance to a predicted path in Eq. (14) [m].
+# Floor on the distance to a predicted path in Eq. (15) [m].
 MIN_PATH_DISTANCE_M = 0.05
 
-# eps of Eq. (15) [m].
+# eps of Eq. (16) [m].
 LENGTH_EPS_M = 1.0e-6
 
 # Costs this close (relative) are a tie, broken to Side.RIGHT.
@@ -94,35 +94,8 @@ _NO_DIRECTION_M = 1.0e-9
 _RIGHT = SIDES.index(Side.RIGHT)
 
 
-def segment_distance(points_m: np.ndarray, start_m: np.ndarray, end_m: np.ndarray) -> np.ndarray:
-    """Distance from each of n points to each of K segments (d_ij of Eq. 14).
-
-    The plain (n, K, 2) form; `GhostPaths.distances` computes the same on complex numbers
-    with its per-cycle parts precomputed.
-
-    Args:
-        points_m: (n, 2) points [m].
-        start_m: (K, 2) segment starts [m].
-        end_m: (K, 2) segment ends [m]; a segment shorter than 1 nm is its start point.
-
-    Returns:
-        (n, K) distances [m].
-    """
-    seg = end_m - start_m
-    seg_sq = np.einsum("ij,ij->i", seg, seg)
-    rel = points_m[:, None, :] - start_m[None, :, :]
-    along = np.divide(
-        np.einsum("nkj,kj->nk", rel, seg),
-        seg_sq,
-        out=np.zeros((points_m.shape[0], seg.shape[0])),
-        where=seg_sq > _NO_DIRECTION_M * _NO_DIRECTION_M,  # shorter: a point
-    )
-    off = rel - np.clip(along, 0.0, 1.0)[:, :, None] * seg
-    return np.sqrt(np.einsum("nkj,nkj->nk", off, off))
-
-
 class GhostPaths:
-    """The per-cycle geometry of Eqs. (14)-(16): predicted and ghost paths of K others.
+    """The per-cycle geometry of Eqs. (15)-(17): predicted and ghost paths of K others.
 
     Everything that does not depend on the candidate is computed once here: the 2K
     segments (K predicted paths, then K ghost paths, as complex numbers x + iy) and, for
@@ -154,7 +127,8 @@ class GhostPaths:
         self.clearance_m = clearance_m
 
     def distances(self, points: np.ndarray) -> np.ndarray:
-        """(n, 2K) distances from n complex points to the predicted, then ghost, paths."""
+        """(n, 2K) distances from n complex points to the predicted, then ghost, paths (d_ij of
+        Eq. 15 and the discarding test); a segment shorter than 1 nm is its start point."""
         rel = points[:, None] - self.seg_start
         along = np.minimum(np.maximum((rel * self.seg_inv).real, 0.0), 1.0)
         return np.abs(rel - along * self.seg)
@@ -169,7 +143,7 @@ class GhostPaths:
         w_angle: float,
         skip: int,
     ) -> tuple[list[float], list[bool]]:
-        """J of Eq. (14) for n candidates on the leg A -> B, and whether each is clear.
+        """J of Eq. (15) for n candidates on the leg A -> B, and whether each is clear.
 
         Args:
             points: n candidates v_i as complex numbers x + iy [m].
@@ -198,8 +172,8 @@ class GhostPaths:
         cost = []
         for v, inv in zip(points, inverse):
             d_av = abs(v - a)
-            length = (d_av + abs(b - v)) / direct  # Eq. (15)
-            # sum_j w_j phi_ij of Eq. (16); phi = 0 for a candidate at A.
+            length = (d_av + abs(b - v)) / direct  # Eq. (16)
+            # sum_j w_j phi_ij of Eq. (17); phi = 0 for a candidate at A.
             angle = 0.0
             if d_av > _NO_DIRECTION_M:
                 angle = self.angle_total - ((v - a) * g_conj).real / d_av
@@ -346,7 +320,7 @@ def _plan_eifp(
     escape_id: int | None = None,
     previous: ViaPlan | None = None,
 ) -> tuple[ViaPlan, dict[int, Role] | None]:
-    """One eIFP cycle: IFP's iteration with cost-based candidate selection (Eqs. 14-16).
+    """One eIFP cycle: IFP's iteration with cost-based candidate selection (Eqs. 15-17).
 
     The cycle in its named steps: assess the threats (`ifp.assess_threats`), classify the
     encounters against other robots (`assess_encounters`, with the encounter rules), build
@@ -418,7 +392,7 @@ def assess_encounters(
 
     Args:
         observation: what the robot knows now (its pose and speed).
-        assessment: the cycle's neighbours and their Eqs. (4)-(6) assessment
+        assessment: the cycle's neighbours and their Eqs. (3)-(7) assessment
             (`ifp.assess_threats`).
         memory: the role memory of earlier cycles.
     """

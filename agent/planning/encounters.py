@@ -1,6 +1,6 @@
 """Encounter rules for eIFP: who gives way to whom, decided by each robot alone.
 
-Not in the paper. Its cost of Eqs. (14)-(16) is evaluated by every robot on its own view,
+Not in the paper. Its cost of Eqs. (15)-(17) is evaluated by every robot on its own view,
 and two robots in mirror-symmetric positions (setup A, the crossings of D, F and G) see
 mirrored costs: when one prefers its LEFT tangent the other prefers its RIGHT one, which
 are the two choices that do *not* fit together (each passes in front of the other). They
@@ -142,7 +142,7 @@ def encounter_roles(
         heading_rad, speed_mps, position_m: own pose and speed.
         others: the K others the cycle plans against.
         tcpa_s, dcpa_m: (K,) TCPA and DCPA at the measured velocities (Eqs. 4-5).
-        inflated_m: (K,) inflated radii L of each pair (Eq. 7).
+        inflated_m: (K,) inflated radii L of each pair (Eq. 8).
         memory: id -> role from earlier cycles (see `update_role_memory`).
         emergency_s: a stand-on other with TCPA below this and DCPA < L is given way to.
 
@@ -166,14 +166,14 @@ def update_role_memory(others: Others, roles: np.ndarray, tcpa_s: np.ndarray,
                        threat: np.ndarray, memory: Mapping[int, Role]) -> dict[int, Role]:
     """The role memory after a cycle.
 
-    An other's role is remembered from the first cycle it is a threat of Eq. (5), and kept
+    An other's role is remembered from the first cycle it is a threat of Eq. (6), and kept
     while it is sensed and still approaching (TCPA > 0).
 
     Args:
         others: the K others of the cycle.
         roles: (K,) their roles this cycle.
         tcpa_s: (K,) their TCPA [s].
-        threat: (K,) bool, which of them are threats of Eq. (5) this cycle (before any
+        threat: (K,) bool, which of them are threats of Eq. (6) this cycle (before any
             stand-on filtering).
         memory: the memory before the cycle.
     """

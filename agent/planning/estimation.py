@@ -4,7 +4,7 @@ A robot never receives another's velocity, plan or goal: it keeps a short histor
 poses it observed and estimates, per other disc,
 - velocity: least-squares slope of position against time over the last
   `window_s` (a constant-velocity fit; robust to one noisy sample, exact for straight motion);
-- linearity w_j of Eq. (14) (our choice, the paper leaves it open): the straightness index
+- linearity w_j of Eq. (15) (our choice, the paper leaves it open): the straightness index
   |p_last - p_first| / (path length over the window), in [0, 1]; 1 for a straight track,
   lower for a turning or dithering one, 0 for a disc that has not moved (< 1 cm);
 - s_j, the ghost path's start: the oldest position inside the window;

@@ -59,7 +59,7 @@ class RouteGuide:
 
     Args:
         static: the static map (may be empty).
-        d_safety_m: the safety margin of Eq. (7) [m].
+        d_safety_m: the safety margin of Eq. (8) [m].
         routes: plan routes over the map (`Mechanisms.routing`).
         liveness: monitor progress and change strategy when stuck (`Mechanisms.liveness`),
             with these thresholds; None: never.

@@ -3,11 +3,11 @@
 One planning cycle, as `plan_ifp` runs it:
 
 1. Neighbours: the others inside the sensing radius, at most `max_neighbors`.
-2. Escape: if the robot is inside an inflated disc (Q <= L, Eq. 7) the plan is
+2. Escape: if the robot is inside an inflated disc (Q <= L, Eq. 8) the plan is
    [P, escape point, goal], status ESCAPE (the deepest disc wins, ties by id); for a robot
    standing (below `ESCAPE_STANDING_MPS`) just [P, escape point] (see there).
-3. Threats of Eq. (5) at the robot's measured velocity, ranked by TCPA (Eq. 6). If there
-   are any, the nearest one is resolved from P: its RIGHT/LEFT candidates (Eqs. 8-13) are
+3. Threats of Eq. (6) at the robot's measured velocity, ranked by TCPA (Eq. 7). If there
+   are any, the nearest one is resolved from P: its RIGHT/LEFT candidates (Eqs. 9-14) are
    built and the selector picks one (IFP: the earliest, smallest lambda*). If neither
    survives the plan is [P, goal], status NO_FEASIBLE.
 4. Iteration (up to `max_depth` via-points in all): every leg of the waypoint list, from
@@ -21,10 +21,10 @@ Choices the paper leaves open (documented here, tested in
 tests/unit/agent/planning/test_ifp.py):
 
 - Step 3 uses the measured velocity v_r as in Eq. (3). A robot that stands still (v_r = 0)
-  sees no static obstacle as a threat under Eq. (5), so when Eq. (5) finds nothing the
+  sees no static obstacle as a threat under Eq. (6), so when Eq. (6) finds nothing the
   direct leg P -> goal still goes through the leg check of step 4
   (`Mechanisms.direct_leg_check`; not in the paper, off in its profile: then a cycle whose
-  Eq. (5) finds nothing plans [P, goal]).
+  Eq. (6) finds nothing plans [P, goal]).
 - The leg check counts other j as a threat when the closest approach on the leg is below
   its inflated radius L_j (not D_thresh, which is a detection radius): the plan must clear
   the inflated discs. Grazing within `LEG_GRAZE_TOL_M` is not a threat, so a leg that is
@@ -32,7 +32,7 @@ tests/unit/agent/planning/test_ifp.py):
 - The leg from a via-point's predecessor to the via-point is tangent to the disc it
   resolves, so that disc is excluded on that leg; it is checked on every other leg.
 - Via-points are pushed radially `VIA_MARGIN_M` out of the moving disc they resolve
-  (`viapoints.via_point_candidates(margin_m=...)`). On the boundary itself a via-point
+  (`viapoints.candidate_pair(margin_m=...)`). On the boundary itself a via-point
   would have no tangent to the same disc, and a next leg that cuts back into it (the
   usual case when the goal lies behind the obstacle) could not be fixed; from outside it
   gets a further tangent, so the iteration wraps the disc with a short polygon. The leg
@@ -45,7 +45,7 @@ tests/unit/agent/planning/test_ifp.py):
   overshoot points at whoever stands beyond it, and resolving that sends the robot round
   its goal. Such others still count on the legs of step 4.
 - With `Mechanisms.keep_plan` (eifp-mpc's default), the plan built in step 4 gives way to
-  last cycle's via-points while those still hold (`_keep_previous`).
+  last cycle's via-points while those still hold (`kept_plan.kept_waypoints`).
 - `ViaPlan.via_point_m` is the first via-point after P (where the robot heads now), with
   the side and the id of the threat that via-point resolves.
 
@@ -66,6 +66,7 @@ import numpy as np
 
 from agent.core.config import PlannerConfig
 from agent.core.types import Observation, Others, PlanStatus, Side, Threat
+from agent.planning.kept_plan import kept_waypoints
 from agent.planning.mechanisms import PAPER_MECHANISMS, Mechanisms, mechanisms
 from agent.planning.threats import (
     as_complex,
@@ -98,7 +99,7 @@ robot keeps the goal in its escape plan (the reference then continues where it g
 # Closest approaches this close to L still clear the disc [m] (tangent legs, rounding).
 LEG_GRAZE_TOL_M = 1.0e-6
 
-# Eq. (5) threats whose TCPA exceeds the time to the goal at top speed by more than this
+# Eq. (6) threats whose TCPA exceeds the time to the goal at top speed by more than this
 # are not resolved [s].
 GOAL_TCPA_MARGIN_S = 0.5
 
@@ -113,16 +114,6 @@ HEAD_ON_MIN_SPEED_MPS = 0.2
 """Below this speed (the robot's or the other's) a course has no direction: not head-on."""
 
 _HEAD_ON_COS = math.cos(math.radians(HEAD_ON_MAX_DEG))
-
-KEEP_PLAN_RATIO = 0.1
-"""With `Mechanisms.keep_plan`, last cycle's via-points are kept while every leg through
-them is still clear and the path through them is at most this fraction longer than the
-new plan's."""
-
-PASSED_VIA_M = 0.3
-"""A kept via-point closer to the robot than this, or behind it along the next leg, has
-been passed [m]."""
-
 
 def is_head_on(heading_rad: float, speed_mps: float, other_velocity_mps: np.ndarray) -> bool:
     """Whether an other's course lies within `HEAD_ON_MAX_DEG` of the reciprocal of the
@@ -153,7 +144,7 @@ class ViaPlan:
         via_point_m: (2,) the first via-point after the robot's position, or None.
         side: side of `via_point_m` relative to the threat it resolves (NONE for escape).
         resolved_id: id of the other `via_point_m` resolves, or None.
-        threats: the threats of Eq. (5) at the measured velocity, ranked by TCPA.
+        threats: the threats of Eq. (6) at the measured velocity, ranked by TCPA.
         resolved_sides: (other id, side) for every via-point, in travel order.
         threats_s: wall time of the threat assessment, when a timer was given (else 0).
     """
@@ -264,13 +255,13 @@ class Decisions:
 
 @dataclass(frozen=True)
 class Assessment:
-    """Step 1 and Eqs. (3)-(6) of one cycle: the neighbours and their threat ranking.
+    """Step 1 and Eqs. (3)-(7) of one cycle: the neighbours and their threat ranking.
 
     Args:
         position_m: (2,) the robot's position P [m].
         others: the neighbours (sensing radius and cap applied), K of them.
-        radius_m: (K,) their inflated radii L (Eq. 7) [m].
-        index: indices of Eq. (6)'s threats, ranked by TCPA (Eq. 6).
+        radius_m: (K,) their inflated radii L (Eq. 8) [m].
+        index: indices of Eq. (6)'s threats, ranked by TCPA (Eq. 7).
         tcpa_s, dcpa_m: (K,) Eqs. (4)-(5) at the measured velocity.
         speed_mps: the robot's top speed, the speed of the velocity cone [m/s].
     """
@@ -580,11 +571,12 @@ def keep_previous(previous: ViaPlan | None, new_wps: list[complex], assessment: 
                   threats_s: float) -> ViaPlan | None:
     """`Mechanisms.keep_plan`: last cycle's plan instead of the new one (`new_wps`, or
     [P, goal] when the cycle found no feasible via-point), if it still holds
-    (`_keep_previous`)."""
+    (`kept_plan.kept_waypoints`)."""
     if previous is None or not previous.resolved_sides:
         return None
     others = assessment.others
-    kept = _keep_previous(previous, new_wps, assessment.speed_mps,
+    kept = kept_waypoints(previous.waypoints_m, previous.resolved_sides, new_wps,
+                          assessment.speed_mps,
                           as_complex(others.position_m), as_complex(others.velocity_mps),
                           clearance, t_max_s, others.ids)
     if kept is None:
@@ -593,46 +585,6 @@ def keep_previous(previous: ViaPlan | None, new_wps: list[complex], assessment: 
     return ViaPlan(status=PlanStatus.OK, waypoints_m=kept_wps, via_point_m=kept_wps[1].copy(),
                    side=kept_sides[0][1], resolved_id=kept_sides[0][0], threats=threats,
                    resolved_sides=kept_sides, threats_s=threats_s)
-
-
-def _keep_previous(previous: ViaPlan, new_wps: list[complex], speed: float,
-                   position: np.ndarray, velocity: np.ndarray, clearance: np.ndarray,
-                   t_max_s: float, ids: np.ndarray,
-                   ) -> tuple[np.ndarray, tuple[tuple[int, Side], ...]] | None:
-    """Last cycle's via-points from the robot's position on, if they still hold.
-
-    They hold when every leg of [P, kept via-points, goal] is clear of every disc within
-    T_max at top speed (`threats.legs_threats`) and the path is at most `KEEP_PLAN_RATIO`
-    longer than the new plan's. Via-points the robot has passed are dropped first; None
-    when none is left, or the plan does not hold.
-    """
-    p, goal = new_wps[0], new_wps[-1]
-    vias = [complex(x, y) for x, y in previous.waypoints_m[1:-1]]
-    sides = list(previous.resolved_sides)
-    if len(vias) != len(sides):
-        return None
-    sensed = set(ids.tolist())
-    while vias:
-        nxt = vias[1] if len(vias) > 1 else goal
-        v = vias[0]
-        if abs(v - p) < PASSED_VIA_M or ((p - v) * (nxt - v).conjugate()).real > 0.0:
-            vias.pop(0)
-            sides.pop(0)
-        else:
-            break
-    if not vias or any(i not in sensed for i, _ in sides) :
-        return None
-    wps = [p, *vias, goal]
-    length = sum(abs(b - a) for a, b in zip(wps, wps[1:]))
-    new_length = sum(abs(b - a) for a, b in zip(new_wps, new_wps[1:]))
-    if length > (1.0 + KEEP_PLAN_RATIO) * new_length:
-        return None
-    arrival = [0.0, *itertools.accumulate(abs(b - a) / speed for a, b in zip(wps, wps[1:]))]
-    hit, _ = legs_threats(wps[:-1], wps[1:], arrival[:-1], speed, position, velocity,
-                          clearance, t_max_s)
-    if hit.any():
-        return None
-    return np.array([(z.real, z.imag) for z in wps]), tuple(sides)
 
 
 COMMIT_RELEASE_FACTOR = 2.0
@@ -647,7 +599,7 @@ def _with_committed(
     committed_ids: frozenset[int],
     t_max_s: float,
 ) -> np.ndarray:
-    """Eq. (5)'s threats plus the committed others still approaching, re-ranked by TCPA.
+    """Eq. (6)'s threats plus the committed others still approaching, re-ranked by TCPA.
 
     Without this, a threat assessed at the measured velocity vanishes as soon as the robot
     swerves for it (its DCPA grows past D_thresh), the robot turns back to its goal, the

@@ -62,7 +62,7 @@ class Mechanisms:
             outside it, towards a point that far out (0: only while inside) [m].
         escape_all: inside several inflated discs, the escape leads out of all of them
             (`viapoints.escape_point_many`), not straight out of the deepest into the next.
-        horizon_via_points: a candidate reached after more than T_max (lambda*, Eq. 13) is
+        horizon_via_points: a candidate reached after more than T_max (lambda*, Eq. 14) is
             infeasible: past the threat horizon the constant-velocity forecast that placed
             it is not to be trusted (for an other as fast as the robot, a tangent point
             receding nearly as fast is met kilometres down its track); and when the first
@@ -76,7 +76,7 @@ class Mechanisms:
             own approach to every disc it faces (`agent.planning.safety`): the MPC's
             half-planes are soft and can trade a stopped neighbour's gap away.
         keep_plan: last cycle's via-points are kept, minus those passed, while every leg
-            through them is still clear and the path is at most `ifp.KEEP_PLAN_RATIO` longer
+            through them is still clear and the path is at most `kept_plan.KEEP_PLAN_RATIO` longer
             than the one the cycle just built (`ifp.keep_previous`). Rebuilt from scratch each
             cycle, a plan in a crowd jumps between unrelated via-point sequences as the
             ranking of nearly simultaneous threats reorders; a plan that still holds is

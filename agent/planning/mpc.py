@@ -1,6 +1,7 @@
 """LTV-MPC tracker of eIFP-MPC on the discrete unicycle (Eq. 1), solved with OSQP.
 
-Formulation ("Trajectory Smoothing and MPC Tracking", Eq. 1 and the cost J). Each cycle
+Formulation ("Trajectory Smoothing and MPC Tracking": the unicycle of Eq. 20, which is
+Eq. 1, the cost J of Eq. 21 and the input bounds of Eq. 22). Each cycle
 the unicycle is linearised about a nominal trajectory (xb_k, ub_k): the previous optimal
 inputs shifted by one step (the last one repeated), or the reference inputs on the first
 cycle, rolled out through Eq. (1) from the measured state x_0. The QP variables are the
@@ -54,9 +55,11 @@ against 120 and 240 at N = 20, M = 4) for a larger KKT system to factor every cy
 The QP is set up once; each cycle writes the changing entries of A (B_k, the v-dependent
 column of A_k, the half-plane normals) through precomputed indices into A's CSC data, and
 q, l, u; OSQP is warm-started with the shifted solution (z = 0 primal, duals shifted by
-one step). The problem is equilibrated once, at setup, by a fixed diagonal (Ruiz)
-scaling, and OSQP's own scaling is off: it would redo Ruiz at every matrix update, which
-cost about four times the KKT refactorisation itself. The command period is taken equal
+one step). Every call goes through osqp's public API (`osqp.OSQP`: setup, update,
+warm_start, solve); its `update` clamps bounds beyond OSQP_INFTY to infinity. The problem
+is equilibrated once, at setup, by a fixed diagonal (Ruiz) scaling, and OSQP's own scaling
+is off: it would redo Ruiz at every matrix update, which cost about four times the KKT
+refactorisation itself. The command period is taken equal
 to dt (the rate bounds use it).
 
 The weights and solver settings are `MpcTuning` constants (`DEFAULT_TUNING`; the paper
@@ -80,6 +83,7 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -266,13 +270,17 @@ class MpcTracker:
         tuning: weights, constraint cap and OSQP settings.
         trust_weight: weight w_t of the trust-region term w_t ||u_k - ub_k||^2
             [1/(m/s)^2, 1/(rad/s)^2] (see the module docstring).
+        solver_factory: makes the QP solver, called once; the tracker uses osqp's public
+            API only (`setup`, `update`, `warm_start`, `solve`), so a subclass of
+            `osqp.OSQP` can stand in for it (the tests' way to make OSQP fail).
 
     Attributes:
         failures: number of cycles that ended in SOLVER_FAILED since construction.
     """
 
     def __init__(self, limits: RobotLimits, config: MpcConfig,
-                 tuning: MpcTuning = DEFAULT_TUNING, trust_weight: float = 1.0) -> None:
+                 tuning: MpcTuning = DEFAULT_TUNING, trust_weight: float = 1.0,
+                 solver_factory: Callable[[], osqp.OSQP] = osqp.OSQP) -> None:
         if trust_weight < 0.0:
             raise ValueError("trust_weight must be non-negative")
         if config.horizon_steps < 1 or config.dt_s <= 0.0 or tuning.max_constraints < 0:
@@ -428,7 +436,7 @@ class MpcTracker:
         self._chunk_iter = min(chunk, tuning.max_iter) if chunk > 0 else tuning.max_iter
         i_first = np.array([iu[0, 0], iu[0, 1]])
         self._i_first, self._d_first = i_first, d_var[i_first]
-        self._solver = osqp.OSQP()
+        self._solver = solver_factory()
         self._solver.setup(
             p_scaled,
             self._q * self._q_scale,
@@ -451,11 +459,6 @@ class MpcTracker:
             adaptive_rho_interval=_RHO_INTERVAL,
             adaptive_rho_tolerance=2.0,
         )
-        # osqp.OSQP wraps an extension solver with the same update/warm_start/solve calls;
-        # use it directly when present (osqp >= 1.0), else the public API.
-        ext = getattr(self._solver, "_solver", None)
-        calls = ("update_data_vec", "update_data_mat", "warm_start", "solve", "info", "solution")
-        self._ext = ext if all(hasattr(ext, c) for c in calls) else None
         self._u_prev: np.ndarray | None = None  # (N, 2) last optimal inputs
         self._y_prev: np.ndarray | None = None
         self._s_prev: np.ndarray | None = None
@@ -606,39 +609,19 @@ class MpcTracker:
             (status value, iterations, primal z~, dual y~), fresh arrays (or None).
 
         Raises:
-            osqp.OSQPException: OSQP refused an update, the warm start or the solve.
+            osqp.OSQPException: OSQP refused the warm start.
         """
-        np.maximum(lo, -_INF, out=lo)  # bounds beyond OSQP_INFTY are infinite
-        np.minimum(hi, _INF, out=hi)
-        ext = self._ext
-        if ext is None:
-            self._solver.update(q=q, l=lo, u=hi, Ax=a_data)
-            self._solver.warm_start(x=x_ws, y=y_ws)
-        else:
-            # The same calls one level down: the public wrapper re-checks, copies and
-            # builds a result namespace on every call, about 15 % of a warm-started cycle.
-            flags = (
-                ext.update_data_vec(q=q, l=lo, u=hi),
-                ext.update_data_mat(P_x=None, P_i=None, A_x=a_data, A_i=None),
-                ext.warm_start(x_ws, y_ws),
-            )
-            if any(flags):
-                raise osqp.OSQPException(next(f for f in flags if f))
+        self._solver.update(q=q, l=lo, u=hi, Ax=a_data)
+        flag = self._solver.warm_start(x=x_ws, y=y_ws)
+        if flag:
+            raise osqp.OSQPException(flag)
         # In chunks (`MpcTuning.settle_chunk_iter`): stop at the tolerances, at max_iter,
         # or once the first command has settled; each chunk resumes from OSQP's iterates.
         total, first_before = 0, None
         while True:
-            if ext is None:
-                res = self._solver.solve(raise_error=False)
-                status_val, iters = int(res.info.status_val), int(res.info.iter)
-                z, y = res.x, res.y
-            else:
-                flag = ext.solve()
-                if flag:
-                    raise osqp.OSQPException(flag)
-                info, solution = ext.info, ext.solution
-                status_val, iters = int(info.status_val), int(info.iter)
-                z, y = solution.x, solution.y
+            res = self._solver.solve(raise_error=False)
+            status_val, iters = int(res.info.status_val), int(res.info.iter)
+            z, y = res.x, res.y
             total += iters
             if status_val == _SOLVED or total >= self.tuning.max_iter or z is None or y is None:
                 return status_val, total, z, y

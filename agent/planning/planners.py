@@ -4,7 +4,7 @@
 
 - `ifp`: the baseline IFP (`agent.planning.ifp`): earliest feasible via-point, iterated; the spline
   is followed by the unicycle tracking law (`agent.planning.unicycle.track_reference`).
-- `eifp`: eIFP (`agent.planning.eifp`): TCPA ranking and the cost of Eqs. (14)-(16) with side
+- `eifp`: eIFP (`agent.planning.eifp`): TCPA ranking and the cost of Eqs. (15)-(17) with side
   memory; the spline followed by the same tracking law, as the paper's eIFP (no MPC).
 - `eifp-mpc`: eIFP whose spline is tracked by the OSQP LTV-MPC (`agent.planning.mpc`), with the
   neighbours' constant-velocity predictions as soft half-plane constraints. Not in the
@@ -134,7 +134,7 @@ def arrived_result(observation: Observation, period_s: float) -> PlanResult | No
 
 
 def _inside_any(observation: Observation, config: PlannerConfig) -> bool:
-    """Whether the robot is inside some other's inflated disc (Eq. 7): then it escapes
+    """Whether the robot is inside some other's inflated disc (Eq. 8): then it escapes
     instead of yielding."""
     others = observation.others
     if len(others) == 0:

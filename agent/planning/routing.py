@@ -22,7 +22,7 @@ The graph (`plan_route`):
 - Search: Dijkstra (`scipy.sparse.csgraph.dijkstra`) from the start; the route is the
   shortest path to the goal, or None when the goal is not connected.
 
-The clearance is the inflated radius of Eq. (7) (robot radius + obstacle radius +
+The clearance is the inflated radius of Eq. (8) (robot radius + obstacle radius +
 d_safety) plus `ROUTE_MARGIN_M`. `route_or_tight` falls back to the robot's radius alone
 (plus `TIGHT_MARGIN_M`) when a passage admits the robot but not its safety margin and the
 way round is much longer (`TIGHT_DETOUR_RATIO`): the robot is then routed through it and

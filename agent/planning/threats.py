@@ -1,7 +1,7 @@
-"""Collision prediction with TCPA and DCPA under constant velocities (Eqs. 3-6).
+"""Collision prediction with TCPA and DCPA under constant velocities (Eqs. 3-7).
 
-`tcpa_dcpa` is the vectorised kernel; `rank_threats` applies the threat test of Eq. (5)
-and the ranking of Eq. (6) and returns indices; `assess_threats` wraps that into typed
+`tcpa_dcpa` is the vectorised kernel; `rank_threats` applies the threat test of Eq. (6)
+and the ranking of Eq. (7) and returns indices; `threat_records` turns those into typed
 `Threat` records. `legs_threats` / `leg_threats` are the check the IFP iteration runs on
 the straight legs of a plan; `nearby_others` applies the sensing radius and neighbour cap.
 
@@ -101,7 +101,7 @@ def _tcpa_dcpa(r: np.ndarray, v_rel: np.ndarray) -> tuple[np.ndarray, np.ndarray
 
 
 def ranked(index: np.ndarray, tcpa: np.ndarray, ids: np.ndarray) -> np.ndarray:
-    """`index` sorted by TCPA ascending, ties by id (Eq. 6, made order-independent).
+    """`index` sorted by TCPA ascending, ties by id (Eq. 7, made order-independent).
 
     Args:
         index: (n,) indices into the K others.
@@ -120,7 +120,7 @@ def rank_threats(
     d_thresh_m: float | np.ndarray,
     t_max_s: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Indices of the others that are threats (Eq. 5), ranked by TCPA (Eq. 6).
+    """Indices of the others that are threats (Eq. 6), ranked by TCPA (Eq. 7).
 
     A threat has DCPA <= D_thresh and 0 < TCPA < T_max; ties in TCPA are broken by id so
     the ranking does not depend on the order of `others`.
@@ -129,8 +129,8 @@ def rank_threats(
         position_m: (2,) robot position p_r [m].
         velocity_mps: (2,) robot velocity v_r [m/s].
         others: the K sensed others (validated on construction).
-        d_thresh_m: D_thresh of Eq. (5), one for all or (K,) one per other [m].
-        t_max_s: T_max of Eq. (5) [s].
+        d_thresh_m: D_thresh of Eq. (6), one for all or (K,) one per other [m].
+        t_max_s: T_max of Eq. (6) [s].
 
     Returns:
         index: (n,) indices into `others`, most imminent first.
@@ -160,32 +160,6 @@ def threat_records(
     return tuple(
         map(Threat, others.ids[index].tolist(), tcpa[index].tolist(), dcpa[index].tolist())
     )
-
-
-def assess_threats(
-    position_m: np.ndarray,
-    velocity_mps: np.ndarray,
-    others: Others,
-    d_thresh_m: float,
-    t_max_s: float,
-) -> tuple[Threat, ...]:
-    """The collision threats of Eq. (5), most imminent first (Eq. 6).
-
-    Args:
-        position_m: (2,) robot position p_r [m].
-        velocity_mps: (2,) robot velocity v_r [m/s].
-        others: the K sensed others.
-        d_thresh_m: D_thresh of Eq. (5) [m].
-        t_max_s: T_max of Eq. (5) [s].
-
-    Returns:
-        The threats sorted by TCPA ascending, ties by id.
-
-    Raises:
-        ValueError: on a non-finite input.
-    """
-    index, tcpa, dcpa = rank_threats(position_m, velocity_mps, others, d_thresh_m, t_max_s)
-    return threat_records(index, tcpa, dcpa, others)
 
 
 def legs_threats(

@@ -1,10 +1,10 @@
-"""Candidate via-points: tangents to inflated discs, filtered by the velocity cone (Eqs. 7-13).
+"""Candidate via-points: tangents to inflated discs, filtered by the velocity cone (Eqs. 8-14).
 
 For each other disc the robot at P draws the two tangents to the disc inflated to
-L = r_robot + r_obstacle + d_safety (Eq. 7); the tangent points S1 (RIGHT, alpha - theta)
-and S2 (LEFT, alpha + theta) are the raw candidates (Eqs. 8-10).
+L = r_robot + r_obstacle + d_safety (Eq. 8); the tangent points S1 (RIGHT, alpha - theta)
+and S2 (LEFT, alpha + theta) are the raw candidates (Eqs. 9-11).
 
-Velocity-cone feasibility (Eqs. 11-13), our interpretation of the paper: a tangent point
+Velocity-cone feasibility (Eqs. 12-14), our interpretation of the paper: a tangent point
 is attached to its obstacle, so in (x, y, t) it moves on the line s_i + lambda (v_o, 1).
 The robot can reach, at time t, exactly the points of the cone |(x, y) - P| = r t rooted
 at P whose aperture r is the robot's top speed. Substituting the line into the cone gives
@@ -13,9 +13,10 @@ at P whose aperture r is the robot's top speed. Substituting the line into the c
 
 and the smallest positive root lambda* is the earliest time at which the robot, driving
 straight at full speed, meets the moving tangent point; the via-point is s_i + lambda* v_o.
-Candidates without a positive real root are dropped (time = inf, feasible = False). A
-static obstacle gives lambda* = M / r; an obstacle exactly as fast as the cone (|v_o| = r)
-makes the quadratic linear, handled by the cancellation-free root formula (`cone_time`).
+Candidates without a positive real root are dropped (time = inf). A static obstacle gives
+lambda* = M / r; an obstacle exactly as fast as the cone (|v_o| = r) makes the quadratic
+linear, handled by the cancellation-free root formula q = -(b + sign(b) sqrt(disc)) / 2,
+roots q/a and c/q (c/q tends to the linear root -c/b as a -> 0).
 Planners may push the via-point a margin further out of the moving disc (`margin_m`, see
 `agent.planning.ifp`), and may cap lambda* (`max_time_s`): a candidate reached later is infeasible.
 The cap is ours, for eIFP-MPC (T_max, `agent.planning.mechanisms.Mechanisms.horizon_via_points`).
@@ -27,21 +28,22 @@ that track instead of round the disc.
 Inside an inflated disc (Q <= L) there is no tangent; `escape_point` gives the defined way
 out instead.
 
-`via_point_candidates` is vectorised over discs; `candidate_pair` is the same computation
-for one disc in plain floats, for the planners' per-threat inner loop.
+`candidate_pair` is the one implementation of Eqs. (9)-(14): the planners call it once per
+threat they resolve, in plain floats (numpy's per-call overhead on (1, 2) arrays would
+dominate). tests/unit/agent/planning/test_viapoints.py checks it against the paper's
+trigonometric form of the equations.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
 from agent.core.types import Side
 from agent.planning.threats import require_finite
 
-# Order of the candidate axis in every (K, 2, ...) array of this module.
+# Order of the two candidates of `candidate_pair`.
 SIDES: tuple[Side, Side] = (Side.RIGHT, Side.LEFT)
 
 # How far outside the inflated disc an escape point lies [m].
@@ -57,7 +59,7 @@ _COINCIDENT_M = 1.0e-9
 def inflated_radius(
     robot_radius_m: float, other_radius_m: np.ndarray | float, d_safety_m: float
 ) -> np.ndarray:
-    """L = r_robot + r_obstacle + d_safety (Eq. 7).
+    """L = r_robot + r_obstacle + d_safety (Eq. 8).
 
     Args:
         robot_radius_m: own radius [m].
@@ -68,158 +70,6 @@ def inflated_radius(
         (K,) inflated radii [m].
     """
     return np.asarray(other_radius_m, dtype=float) + (robot_radius_m + d_safety_m)
-
-
-def tangent_points(
-    position_m: np.ndarray, centre_m: np.ndarray, inflated_radius_m: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Tangent points from P to K inflated discs (Eqs. 8-10), RIGHT and LEFT.
-
-    With Q = |c - P|, M = sqrt(Q^2 - L^2), alpha the bearing of c and theta = asin(L/Q),
-    the tangent points are P + M (cos(alpha -+ theta), sin(alpha -+ theta)). Written with
-    the unit bearing u and its left normal n: P + M (M/Q u -+ L/Q n), no trigonometry.
-
-    Args:
-        position_m: (2,) robot position P [m].
-        centre_m: (K, 2) disc centres c [m].
-        inflated_radius_m: (K,) inflated radii L [m].
-
-    Returns:
-        points: (K, 2, 2) tangent points, axis 1 in `SIDES` order (RIGHT, LEFT) [m]; for
-            a disc that contains P (Q <= L) both entries are P itself.
-        outside: (K,) bool, True where Q > L and the tangent points exist.
-
-    Raises:
-        ValueError: on a non-finite input.
-    """
-    p = np.asarray(position_m, dtype=float)
-    c = np.asarray(centre_m, dtype=float).reshape(-1, 2)
-    radius = np.asarray(inflated_radius_m, dtype=float).reshape(-1)
-    require_finite("tangent_points", p, c, radius)
-    return _tangent_points(p, c - p, radius)
-
-
-def _tangent_points(
-    p: np.ndarray, rel: np.ndarray, radius: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """`tangent_points` on centres relative to P, (K, 2); no validation."""
-    q_sq = np.einsum("ij,ij->i", rel, rel)
-    l_sq = radius * radius
-    outside = q_sq > l_sq
-    # M/Q^2 and L/Q^2 scale the unnormalised bearing; zero inside (points collapse onto P).
-    m = np.sqrt(np.where(outside, q_sq - l_sq, 0.0))
-    inv_q_sq = np.divide(1.0, q_sq, out=np.zeros_like(q_sq), where=outside)
-    along = (m * m * inv_q_sq)[:, None] * rel
-    across = (m * radius * inv_q_sq)[:, None] * np.stack((-rel[:, 1], rel[:, 0]), axis=1)
-    points = np.empty((rel.shape[0], 2, 2))
-    points[:, 0] = p + along - across  # RIGHT: alpha - theta
-    points[:, 1] = p + along + across  # LEFT: alpha + theta
-    return points, outside
-
-
-def cone_time(offset_m: np.ndarray, velocity_mps: np.ndarray, cone_speed_mps: float) -> np.ndarray:
-    """Earliest positive lambda where a moving point meets the robot's cone (Eqs. 11-13).
-
-    The point starts at P + offset and moves with `velocity_mps`; the cone is
-    |(x, y) - P| = r t. Solves (|v|^2 - r^2) lambda^2 + 2 offset.v lambda + |offset|^2 = 0
-    with the cancellation-free form q = -(b + sign(b) sqrt(disc)) / 2, roots q/a and c/q:
-    for a -> 0 (|v| = r) the root c/q tends to the linear solution -c/b, and for a static
-    point (v = 0) it is |offset| / r.
-
-    Args:
-        offset_m: (n, 2) start of each point relative to the cone apex P [m].
-        velocity_mps: (n, 2) velocity of each point [m/s].
-        cone_speed_mps: cone aperture r, the robot's top speed [m/s] (> 0).
-
-    Returns:
-        (n,) lambda* [s]; inf where no positive real root exists.
-    """
-    a = np.einsum("ij,ij->i", velocity_mps, velocity_mps) - cone_speed_mps * cone_speed_mps
-    b = 2.0 * np.einsum("ij,ij->i", offset_m, velocity_mps)
-    c = np.einsum("ij,ij->i", offset_m, offset_m)
-    disc = b * b - 4.0 * a * c
-    real = disc >= 0.0
-    root = np.sqrt(np.where(real, disc, 0.0))
-    q = -0.5 * (b + np.where(b >= 0.0, root, -root))
-    inf = np.full_like(a, np.inf)
-    # A quotient too large for a float is a root beyond any horizon: inf, as "no root".
-    with np.errstate(over="ignore"):
-        lam1 = np.divide(q, a, out=inf.copy(), where=real & (np.abs(a) > _LINEAR_A_TOL))
-        lam2 = np.divide(c, q, out=inf.copy(), where=real & (q != 0.0))
-    lam1 = np.where(lam1 > 0.0, lam1, np.inf)
-    lam2 = np.where(lam2 > 0.0, lam2, np.inf)
-    return np.minimum(lam1, lam2)
-
-
-@dataclass(frozen=True)
-class ViaCandidates:
-    """The RIGHT and LEFT via-point candidates for K discs.
-
-    Args:
-        point_m: (K, 2, 2) via-points s_i + lambda* v_o, axis 1 in `SIDES` order [m];
-            the raw tangent point where infeasible, P where no tangent exists.
-        time_s: (K, 2) lambda*, the time to reach each via-point at top speed [s]; inf
-            where infeasible.
-        feasible: (K, 2) bool, a tangent exists and the cone has a positive root.
-        outside: (K,) bool, the robot is outside the inflated disc (Q > L).
-    """
-
-    point_m: np.ndarray
-    time_s: np.ndarray
-    feasible: np.ndarray
-    outside: np.ndarray
-
-
-def via_point_candidates(
-    position_m: np.ndarray,
-    centre_m: np.ndarray,
-    velocity_mps: np.ndarray,
-    inflated_radius_m: np.ndarray,
-    cone_speed_mps: float,
-    margin_m: float = 0.0,
-    max_time_s: float = math.inf,
-) -> ViaCandidates:
-    """Tangent candidates for K moving discs, filtered by the velocity cone (Eqs. 8-13).
-
-    The via-point is the tangent point where the cone meets it, s_i + lambda* v_o, which
-    lies on the moving disc's boundary at time lambda*. With `margin_m` > 0 it is then
-    pushed radially out of the disc (centre c + lambda* v_o) to distance L + margin: a
-    plan's next leg can then still be tangent to the same disc (the IFP iteration needs
-    a point strictly outside the disc to draw tangents from).
-
-    Args:
-        position_m: (2,) robot position P, the cone apex [m].
-        centre_m: (K, 2) disc centres at the cone's time origin [m].
-        velocity_mps: (K, 2) disc velocities v_o [m/s].
-        inflated_radius_m: (K,) inflated radii L (Eq. 7) [m] (> 0).
-        cone_speed_mps: cone aperture r, the robot's top speed [m/s] (> 0).
-        margin_m: radial push of feasible via-points out of the disc [m].
-        max_time_s: candidates with lambda* above this are infeasible [s] (> 0; inf: none).
-
-    Raises:
-        ValueError: on a non-finite input or a non-positive cone speed or cap.
-    """
-    p = np.asarray(position_m, dtype=float)
-    c = np.asarray(centre_m, dtype=float).reshape(-1, 2)
-    v = np.asarray(velocity_mps, dtype=float).reshape(-1, 2)
-    radius = np.asarray(inflated_radius_m, dtype=float).reshape(-1)
-    require_finite("via_point_candidates", p, c, v, radius, cone_speed_mps, margin_m)
-    if not cone_speed_mps > 0.0:
-        raise ValueError("via_point_candidates: cone speed must be positive")
-    if not max_time_s > 0.0:
-        raise ValueError("via_point_candidates: max_time_s must be positive")
-    points, outside = _tangent_points(p, c - p, radius)
-    k = c.shape[0]
-    time = cone_time((points - p).reshape(2 * k, 2), np.repeat(v, 2, axis=0), cone_speed_mps)
-    time = time.reshape(k, 2)
-    time[~outside] = np.inf
-    time[time > max_time_s] = np.inf
-    feasible = np.isfinite(time)
-    lam = np.where(feasible, time, 0.0)[:, :, None]
-    # c + lam v + (1 + margin / L) (s - c): on the moving boundary, pushed out by margin.
-    push = np.where(feasible, margin_m / np.maximum(radius, 1e-300)[:, None], 0.0)[:, :, None]
-    moved = points + lam * v[:, None, :] + push * (points - c[:, None, :])
-    return ViaCandidates(point_m=moved, time_s=time, feasible=feasible, outside=outside)
 
 
 def candidate_pair(
@@ -234,10 +84,13 @@ def candidate_pair(
     margin_m: float = 0.0,
     max_time_s: float = math.inf,
 ) -> tuple[tuple[float, float, float], tuple[float, float, float]] | None:
-    """`via_point_candidates` for one disc, in plain floats (the planners' inner loop).
+    """The RIGHT and LEFT via-points of one moving disc (Eqs. 9-14), in plain floats.
 
-    Same maths, same results as the vectorised form (tested), without numpy's per-call
-    overhead on (1, 2) arrays. Inputs are not validated.
+    With Q = |c - P| and M = sqrt(Q^2 - L^2), the tangent points are
+    P + M (cos(alpha -+ theta), sin(alpha -+ theta)) (Eqs. 10-11); written with the bearing
+    c - P and its left normal: P + (M/Q)^2 (c - P) -+ (M L / Q^2) n, no trigonometry. Each
+    then moves with the disc and is met at the smallest positive root lambda* of the cone
+    quadratic (Eq. 14, see the module docstring). Inputs are not validated.
 
     Args:
         px, py: cone apex P [m].
@@ -258,6 +111,7 @@ def candidate_pair(
     l_sq = radius_m * radius_m
     if not q_sq > l_sq:
         return None
+    # Eqs. (9)-(11): the tangent points relative to P, along the bearing and across it.
     m_sq = q_sq - l_sq
     along = m_sq / q_sq
     across = math.sqrt(m_sq) * radius_m / q_sq
@@ -269,6 +123,7 @@ def candidate_pair(
     out = []
     for sign in (-1.0, 1.0):  # SIDES order: RIGHT (alpha - theta), LEFT (alpha + theta)
         ox, oy = ax + sign * nx, ay + sign * ny
+        # Eq. (14): a lambda^2 + b lambda + c = 0, the moving tangent point on the cone.
         b = 2.0 * (ox * vx + oy * vy)
         c = ox * ox + oy * oy
         disc = b * b - 4.0 * a * c

@@ -174,7 +174,8 @@ def test_a_relay_certificate_speaks_only_for_its_robots(hosts: Hosts) -> None:
     robot0 = hosts.client(robot_cn(0), hosts.a)
     poses_at_0 = robot0.declare_subscriber(k.poses_all)
     rogue = hosts.client(router_cn("b"), hosts.a)
-    time.sleep(0.5)
+    allowed = rogue.declare_publisher(k.cmd(3))
+    until(lambda: allowed.matching_status.matching, "router-b's robot-3 key to match the world")
     for key in (k.cmd(0), k.cmd(1), k.cmd(3)):
         rogue.put(key, b"x")
     rogue.put(k.poses_slot(0), b"forged")

@@ -15,7 +15,10 @@ Two layers, each tested on its own:
   world's ``end`` event, robots.json and metrics.json.
 
 Every process has a deadline; the test process opens its own sessions only after every
-child was spawned (spawned with subprocess, never forked).
+child was spawned (spawned with subprocess, never forked). It waits on conditions (events,
+a reply, the robots' commands), each with a deadline; the sleeps left pace what the rogue
+sends. Assertions read the run's structured output: events.jsonl, robots.json (the robots'
+exit counters, as the launcher writes it) and metrics.json.
 """
 
 from __future__ import annotations
@@ -141,6 +144,18 @@ def rogue_session(endpoint: str, tls: TlsFiles | None = None, attempts_s: float 
     return open_session(settings, deadline=time.monotonic() + attempts_s)
 
 
+def until_forged_reply(session, key: str, payload: bytes) -> None:
+    """Ask `key` until `payload` is among the replies (every reply read), or fail."""
+    import zenoh
+
+    deadline = time.monotonic() + STARTUP_S
+    while True:
+        replies = session.get(key, timeout=0.5, consolidation=zenoh.ConsolidationMode.NONE)
+        if any(r.ok is not None and r.ok.payload.to_bytes() == payload for r in replies):
+            return
+        assert time.monotonic() < deadline, f"no forged reply on {key}"
+
+
 def wait_world_ready(run: Run) -> None:
     wait_for_event(run.out_dir, lambda e: e["kind"] == "world_ready", STARTUP_S, run.world)
 
@@ -252,12 +267,26 @@ def test_without_tls_every_forgery_fails_and_is_counted(runs) -> None:
                 world_rate_hz=50.0, time_scale=2.0, time_limit_s=40.0, cmd_timeout_s=0.5,
                 known_ids=tuple(ROBOTS)).encode()
         queryable = rogue.declare_queryable(keys.config_all, forge_reply)
-        time.sleep(0.5)  # the declaration reaches the router before any robot asks
+        # The declaration has reached the router once another client's query gets the
+        # forged reply: only then may the robots ask.
+        probe = rogue_session(run.endpoint, attempts_s=STARTUP_S)
+        try:
+            until_forged_reply(probe, keys.config(0), forged_configs[0])
+        finally:
+            probe.close()
+        answered.clear()
         run.start_robots()
         cmds = rogue.declare_subscriber(keys.cmd_all, zenoh.handlers.RingChannel(64))
         real, sample = first_pose(run, rogue)
         world_source = sample.source_info
-        time.sleep(0.5)  # the robots have commanded a few times
+        # Every robot has commanded: its commands are replayed in (e).
+        replays: list[tuple[str, bytes]] = []
+        deadline = time.monotonic() + RUN_S
+        while {key for key, _ in replays} != {keys.cmd(rid) for rid in ROBOTS}:
+            assert time.monotonic() < deadline, f"not every robot commanded: {replays}"
+            while (c := cmds.try_recv()) is not None:
+                replays.append((str(c.key_expr), c.payload.to_bytes()))
+            time.sleep(0.005)
 
         # (a) One command on robot 3's key with the largest seq.
         rogue.put(keys.cmd(3), CommandMsg(3, 2**63 - 1, real.t_s, 1.0, 1.0, 1.0,
@@ -278,16 +307,14 @@ def test_without_tls_every_forgery_fails_and_is_counted(runs) -> None:
             for slot in range(5):
                 rogue.put(keys.poses_slot(slot), msg.encode(), source_info=world_source)
                 rogue.put(keys.poses_slot(slot), msg.encode())
-            time.sleep(0.05)
+            time.sleep(0.05)  # pacing: the two forgeries about two world ticks apart
         # (c) The end of the run, from the rogue's own session.
         rogue.put(keys.control, ControlMsg("end", real.t_s, "forged").encode())
         # (e) A flood of well-formed messages on every key for 2 s: poses of the present
         # (from the rogue), replays of the robots' own commands and of robot-0 seq 0, start
         # and end announcements, configuration queries.
-        replays = []
         while (c := cmds.try_recv()) is not None:
             replays.append((str(c.key_expr), c.payload.to_bytes()))
-        assert replays, "no robot command seen"
         t0 = time.monotonic()
         sent = 0
         while time.monotonic() - t0 < 2.0:
@@ -320,8 +347,9 @@ def test_without_tls_every_forgery_fails_and_is_counted(runs) -> None:
     # refused it (a robot takes the first reply from the world and stops reading), and
     # every robot drove to the goal the world gave it (all arrived).
     assert answered and robots["refused_config"] >= 1, robots
-    logs = "".join(p.read_text() for p in run.out_dir.glob("robot_*.log"))
-    assert "beyond_limit" in logs or "ahead" in logs  # (b) with the world's source copied
+    # (b) with the world's source copied: refused by the robots' time check
+    # (tests/unit/eifp_wire/test_clock.py) and counted in refused_poses with the poses refused
+    # by source; the exit line has no per-reason split, so this run asserts the total.
     # In metrics.json.
     for key in ("seq_jumps", "refused_poses", "refused_control", "refused_config"):
         assert metrics["end"][key] >= 1, metrics["end"]

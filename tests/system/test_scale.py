@@ -7,12 +7,12 @@ Small N only: the figures are checked for presence and sanity, never against tim
 from __future__ import annotations
 
 import json
-import re
 from pathlib import Path
 
 import pytest
 
 from orchestrator.cli import main as cli_main
+from orchestrator.experiments.distributed import collect_robot_exits
 
 pytestmark = [pytest.mark.system, pytest.mark.timeout(180)]
 
@@ -33,7 +33,7 @@ def test_scale_run_with_robots_connecting_through_a_second_address(tmp_path: Pat
     run = out / "circles_4"
     for name in ("scale.csv", "scale.json", "scale.png"):
         assert (out / name).stat().st_size > 0, name
-    for name in ("metrics.json", "trajectory.png", "trajectory.csv", "world.log"):
+    for name in ("metrics.json", "trajectory.png", "trajectory.csv", "world.log", "robots.json"):
         assert (run / name).stat().st_size > 0, name
 
     assert row["success"] and row["contacts"] == 0 and row["arrived"] == 4
@@ -41,11 +41,10 @@ def test_scale_run_with_robots_connecting_through_a_second_address(tmp_path: Pat
     # Both addresses carried robots: the world's established sockets, by local address.
     assert row["connections"].get("127.0.0.1", 0) >= 2, row["connections"]
     assert row["connections"].get("127.0.0.2", 0) >= 2, row["connections"]
-    for rid in range(4):
-        log = (run / f"robot_{rid}.log").read_text()
-        host = "127.0.0.2" if rid % 2 else "127.0.0.1"
-        assert re.search(rf"connecting to tls/{re.escape(host)}:\d+", log), log
-        assert "exit: reason='end (all_arrived)' code=0" in log
+    assert json.loads((run / "run.json").read_text())["hosts"] == ["127.0.0.1", "127.0.0.2"]
+    exits = json.loads((run / "robots.json").read_text())["processes"]
+    assert sorted(p["robot"] for p in exits) == [0, 1, 2, 3], exits
+    assert all(p["reason"] == "end (all_arrived)" and p["code"] == 0 for p in exits), exits
     # Sane figures: present, positive, within physical bounds.
     assert 0.0 < row["alive_s"] < 60.0
     assert 0.0 < row["cpu_share_robots"] <= 1.0 and 0.0 < row["cpu_share_world"] <= 1.0
@@ -112,11 +111,13 @@ def test_fleet_robots_leave_with_the_fleet(tmp_path: Path, how: str) -> None:
         if proc.poll() is None:
             proc.kill()
             proc.wait()
-    log1 = (tmp_path / "robot_1.log").read_text()
-    assert "connecting to tcp/127.0.0.2:9" in log1
+    # No world, so no run files: which address each robot dialled is in its log only.
+    assert "connecting to tcp/127.0.0.2:9" in (tmp_path / "robot_1.log").read_text()
     if how == "sigterm":
-        assert "exit: reason='signal' code=0" in log1
         assert "connecting to tcp/127.0.0.1:9" in (tmp_path / "robot_0.log").read_text()
+        exits = collect_robot_exits(tmp_path)["processes"]  # robots.json's form
+        assert sorted((p["robot"], p["reason"], p["code"]) for p in exits) == [
+            (0, "signal", 0), (1, "signal", 0)], exits
 
 
 def test_bench_process_prints_a_robots_cpu_per_cycle_by_part(tmp_path: Path, capsys) -> None:
@@ -134,10 +135,11 @@ def test_bench_process_prints_a_robots_cpu_per_cycle_by_part(tmp_path: Path, cap
     assert abs(sum(parts) - row["cpu_ms_per_plan_total"]) < 1e-9
     assert sum(parts) < 100.0  # ms per 100 ms cycle: less than a core per robot
     assert (out / "scale.json").stat().st_size > 0
-    for rid in range(3):  # every robot braked every cycle and left on the world's end
-        log = (out / "circles_3" / f"robot_{rid}.log").read_text()
-        assert "exit: reason='end (time_limit)' code=0" in log, log
-        assert re.search(r" plans=[1-9]\d* ", log), log
+    # Every robot braked every cycle and left on the world's end (robots.json).
+    exits = json.loads((out / "circles_3" / "robots.json").read_text())["processes"]
+    assert sorted(p["robot"] for p in exits) == [0, 1, 2], exits
+    assert all(p["reason"] == "end (time_limit)" and p["code"] == 0 and p["plans"] > 0
+               for p in exits), exits
 
 
 def test_bench_floor_prints_the_cpu_of_a_client_that_only_does_a_robots_io(capsys) -> None:

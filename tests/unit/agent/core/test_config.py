@@ -139,7 +139,7 @@ def test_paper_config_sets_the_paper_profile_and_its_settings():
     assert not is_paper_config(PlannerConfig()) and not PlannerConfig().is_paper
     for name, value in PAPER_OVERRIDES.items():
         assert setting(cfg, name) == value, name
-    assert cfg.cost.side_hysteresis == 0.0  # plain argmin (Eq. 17)
+    assert cfg.cost.side_hysteresis == 0.0  # plain argmin (Eq. 18)
     assert cfg.dcpa_threshold_m(0.5) == 5 * 0.5 + cfg.safety.d_safety_m  # D_thresh of Eq. (6)
     # settings apply last; the profile is still frozen and hashable
     assert paper_config(**{"threats.t_max_s": 5.0}).threats.t_max_s == 5.0

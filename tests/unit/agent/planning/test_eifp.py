@@ -1,4 +1,4 @@
-"""eIFP: the cost of Eqs. (14)-(16), ghost-path discarding, hysteresis and tie-breaking."""
+"""eIFP: the cost of Eqs. (15)-(17), ghost-path discarding, hysteresis and tie-breaking."""
 
 import math
 
@@ -16,7 +16,6 @@ from agent.planning.eifp import (
     GhostPaths,
     choose_side,
     plan_eifp,
-    segment_distance,
     update_side_memory,
 )
 from agent.planning.ifp import ESCAPE_STANDING_MPS, ViaPlan
@@ -70,9 +69,9 @@ def test_cost_by_hand():
     o = others([[0, 5]], [[1, 0]], track_start=np.array([[-1.0, 5.0]]))
     paths = GhostPaths(o, 4.0, np.array([1.0]))
     cost, clear = paths.evaluate((2 + 3j,), 0j, 4 + 0j, 1.0, 1.0, 0.3, skip=0)
-    length = 2 * math.sqrt(13) / (4 + LENGTH_EPS_M)  # Eq. (15)
+    length = 2 * math.sqrt(13) / (4 + LENGTH_EPS_M)  # Eq. (16)
     distance = 1 / 2.0  # w_j / d_ij, d = 2
-    angle = 1 - 2 / math.sqrt(13)  # Eq. (16)
+    angle = 1 - 2 / math.sqrt(13)  # Eq. (17)
     assert cost[0] == pytest.approx(length + distance + 0.3 * angle, rel=1e-12)
     assert clear == [True]
 
@@ -104,25 +103,41 @@ def test_ghost_path_without_length_has_no_angle_term():
     assert cost[0] == pytest.approx(1 / 2.0)
 
 
-def test_ghost_distances_match_the_segment_reference():
+def point_segment_distance(point, start, end):
+    """|point - closest point of the segment start -> end|, one pair in plain floats; a
+    segment shorter than 1 nm is its start point."""
+    (px, py), (ax, ay), (bx, by) = point, start, end
+    sx, sy = bx - ax, by - ay
+    seg_sq = sx * sx + sy * sy
+    t = 0.0 if seg_sq <= 1e-18 else min(max(((px - ax) * sx + (py - ay) * sy) / seg_sq, 0.0), 1.0)
+    return math.hypot(px - ax - t * sx, py - ay - t * sy)
+
+
+def test_ghost_distances_match_the_point_to_segment_distance():
+    # Columns 0..K-1: predicted paths p_j -> p_j + 3 s v_j; K..2K-1: ghost paths s_j -> g_j.
     rng = np.random.default_rng(4)
     o = others(rng.uniform(-5, 5, (6, 2)), rng.uniform(-1, 1, (6, 2)), linearity=0.5)
     paths = GhostPaths(o, 3.0, np.zeros(6))
     pts = rng.uniform(-6, 6, (5, 2))
     got = paths.distances(as_complex(pts))
     goal = o.position_m + 3.0 * o.velocity_mps
-    np.testing.assert_allclose(got[:, :6], segment_distance(pts, o.position_m, goal), atol=1e-12)
-    np.testing.assert_allclose(got[:, 6:], segment_distance(pts, o.track_start_m, goal), atol=1e-12)
+    for i, j in np.ndindex(5, 6):
+        assert got[i, j] == pytest.approx(
+            point_segment_distance(pts[i], o.position_m[j], goal[j]), abs=1e-12)
+        assert got[i, 6 + j] == pytest.approx(
+            point_segment_distance(pts[i], o.track_start_m[j], goal[j]), abs=1e-12)
 
 
-def test_segment_distance_by_hand():
-    d = segment_distance(
-        np.array([[2.0, 3.0], [-1.0, 0.0], [5.0, 4.0]]),
-        np.array([[0.0, 0.0], [1.0, 1.0]]),
-        np.array([[4.0, 0.0], [1.0, 1.0]]),  # the second segment is a point
-    )
-    np.testing.assert_allclose(d[:, 0], [3.0, 1.0, math.hypot(1, 4)])
-    np.testing.assert_allclose(d[:, 1], [math.hypot(1, 2), math.hypot(2, 1), 5.0])
+def test_ghost_distances_by_hand():
+    # Other 1 moves along +x at 1 m/s: predicted path (0, 0) -> (4, 0) (4 s), ghost path
+    # from (-1, 0). Other 2 stands at (1, 1): both of its paths are that point.
+    o = others([[0.0, 0.0], [1.0, 1.0]], [[1.0, 0.0], [0.0, 0.0]],
+               track_start=np.array([[-1.0, 0.0], [1.0, 1.0]]))
+    d = GhostPaths(o, 4.0, np.zeros(2)).distances(np.array([2 + 3j, -1 + 0j, 5 + 4j, -3 + 1j]))
+    np.testing.assert_allclose(d[:, 0], [3.0, 1.0, math.hypot(1, 4), math.hypot(3, 1)])
+    np.testing.assert_allclose(d[:, 1], [math.hypot(1, 2), math.hypot(2, 1), 5.0, 4.0])
+    np.testing.assert_allclose(d[:, 2], [3.0, 0.0, math.hypot(1, 4), math.hypot(2, 1)])
+    np.testing.assert_allclose(d[:, 3], d[:, 1])
 
 
 # --- side choice ----------------------------------------------------------------------

@@ -101,7 +101,7 @@ def test_memory_keeps_a_role_while_approaching_and_drops_it_once_passed():
     assert update_role_memory(o, roles, np.array([4.0]), threat, {7: Role.GIVE_WAY}) == {
         7: Role.GIVE_WAY}
     assert update_role_memory(o, roles, np.array([-0.1]), threat, {7: Role.GIVE_WAY}) == {}
-    # Not remembered before it is a threat of Eq. (5); remembered from then on.
+    # Not remembered before it is a threat of Eq. (6); remembered from then on.
     assert update_role_memory(o, roles, np.array([4.0]), threat, {}) == {}
     assert update_role_memory(o, roles, np.array([4.0]), np.array([True]), {}) == {
         7: Role.GIVE_WAY}
@@ -111,7 +111,7 @@ def test_memory_keeps_a_role_while_approaching_and_drops_it_once_passed():
 def test_mirror_images_never_both_stand_on_or_both_resolve_by_cost(angle_deg):
     # Two robots converging on one point from mirrored directions: a chiral rule must give
     # them different roles (one gives way), or both give way (head-on); never the mirror
-    # pair of choices that the cost of Eq. (14) produces.
+    # pair of choices that the cost of Eq. (15) produces.
     a = math.radians(angle_deg) / 2
     h0, h1 = -a, a
     p0 = (-5 * math.cos(a), 5 * math.sin(a))

@@ -11,7 +11,7 @@ from agent.core.config import PlannerConfig, ReferenceConfig, RobotLimits
 from agent.core.types import EgoState, Observation, Others, PlanStatus, Side
 from agent.planning.ifp import ESCAPE_STANDING_MPS, ViaPlan, plan_ifp, select_earliest
 from agent.planning.mechanisms import VIA_MARGIN_M
-from agent.planning.viapoints import ESCAPE_MARGIN_M, via_point_candidates
+from agent.planning.viapoints import ESCAPE_MARGIN_M, candidate_pair
 
 R = 0.2  # robot and obstacle radius
 CFG = PlannerConfig()  # d_safety 0.3 -> L = 0.7 between two 0.2 m discs
@@ -72,10 +72,10 @@ def test_head_on_threat_gets_the_earliest_tangent_via_point():
     assert [t.other_id for t in plan.threats] == [7]
     assert plan.threats[0].tcpa_s == pytest.approx(3.0)
     # Symmetric head-on: both sides equally early -> RIGHT (y < 0).
-    cands = via_point_candidates([0, 0], [[6, 0]], [[-1, 0]], [L], 1.1, VIA_MARGIN_M)
-    assert cands.time_s[0, 0] == pytest.approx(cands.time_s[0, 1])
+    right, left = candidate_pair(0, 0, 6, 0, -1, 0, L, 1.1, VIA_MARGIN_M)
+    assert right[2] == pytest.approx(left[2])
     assert plan.side is Side.RIGHT and plan.resolved_id == 7
-    np.testing.assert_allclose(plan.via_point_m, cands.point_m[0, 0], atol=1e-12)
+    np.testing.assert_allclose(plan.via_point_m, right[:2], atol=1e-12)
     assert plan.via_point_m[1] < 0
     np.testing.assert_array_equal(plan.waypoints_m[[0, -1]], [[0, 0], [10, 0]])
     assert plan.resolved_sides == ((7, Side.RIGHT),)
@@ -86,11 +86,11 @@ def test_moving_threat_picks_the_smaller_lambda():
     # comes towards the robot's cone first wins.
     o = others([[5, -3]], [[0, 0.6]])
     plan = plan_ifp(observe(o, v=1.0), CFG)
-    cands = via_point_candidates([0, 0], [[5, -3]], [[0, 0.6]], [L], 1.1, VIA_MARGIN_M)
-    best = int(np.argmin(cands.time_s[0]))
-    assert cands.time_s[0, 0] != pytest.approx(cands.time_s[0, 1])
+    cands = candidate_pair(0, 0, 5, -3, 0, 0.6, L, 1.1, VIA_MARGIN_M)
+    best = int(np.argmin([t for _, _, t in cands]))
+    assert cands[0][2] != pytest.approx(cands[1][2])
     assert plan.status is PlanStatus.OK
-    np.testing.assert_allclose(plan.via_point_m, cands.point_m[0, best], atol=1e-12)
+    np.testing.assert_allclose(plan.via_point_m, cands[best][:2], atol=1e-12)
     assert plan.side is (Side.RIGHT, Side.LEFT)[best]
 
 
@@ -103,7 +103,7 @@ def test_select_earliest_rule():
 
 
 def test_stopped_robot_still_avoids_a_static_obstacle_on_its_way():
-    # v = 0: Eq. (5) sees no threat (v_rel = 0), but the direct leg is checked too.
+    # v = 0: Eq. (6) sees no threat (v_rel = 0), but the direct leg is checked too.
     plan = plan_ifp(observe(others([[5, 0.1]]), v=0.0), CFG)
     assert plan.threats == ()
     assert plan.status is PlanStatus.OK and plan.via_point_m is not None

@@ -1,7 +1,9 @@
 """LTV-MPC tracker (eIFP-MPC) on OSQP: tracking, bounds, soft half-planes, failures, warm start."""
 
+import json
 import math
 from dataclasses import dataclass
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -61,7 +63,7 @@ def assert_within_limits(cmd, last):
 
 
 def run(tracker, x0, ref_at, cycles, neighbours=None, clearance=None):
-    """Closed loop: solve, check limits, apply the command for DT on Eq. (1)."""
+    """Closed loop: solve, check limits, apply the command for DT on the unicycle (Eq. 1)."""
     x, last = np.array(x0, dtype=float), np.zeros(2)
     states, results = [x], []
     for i in range(cycles):
@@ -203,18 +205,40 @@ def test_neighbour_on_top_of_the_robot_gives_a_bounded_command():
     assert res.max_slack_m > 0.1  # the slack absorbs what cannot be satisfied
 
 
-def test_forced_solver_failure_brakes_and_is_counted(monkeypatch):
-    tracker = MpcTracker(LIM, CFG)
+class ScriptedOSQP(osqp.OSQP):
+    """`osqp.OSQP` that fails on demand, through the public API the tracker calls: the next
+    solves report the (status, iterations) in `script` without a solution, and `update`
+    raises while `refuse_update` is set. Otherwise it is OSQP."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.script: list[tuple[int, int]] = []
+        self.refuse_update = False
+
+    def update(self, **kwargs):
+        if self.refuse_update:
+            raise osqp.OSQPException(7)
+        return super().update(**kwargs)
+
+    def solve(self, raise_error=None):
+        if not self.script:
+            return super().solve(raise_error=raise_error)
+        status, iterations = self.script.pop(0)
+        return SimpleNamespace(info=SimpleNamespace(status_val=status, iter=iterations),
+                               x=None, y=None)
+
+
+def scripted_tracker() -> tuple[MpcTracker, ScriptedOSQP]:
+    solver = ScriptedOSQP()
+    return MpcTracker(LIM, CFG, solver_factory=lambda: solver), solver
+
+
+def test_forced_solver_failure_brakes_and_is_counted():
+    tracker, solver = scripted_tracker()
     x, last = np.array([0.0, 0.0, 0.0]), np.array([0.9, 1.2])
     ok = tracker.solve(x, last, line_ref(0.0))
     assert ok.status is PlanStatus.OK and tracker.failures == 0
-
-    def infeasible(raise_error=None):
-        info = SimpleNamespace(status_val=osqp.SolverStatus.OSQP_PRIMAL_INFEASIBLE, iter=9)
-        return SimpleNamespace(info=info, x=np.full(3, np.nan), y=np.full(3, np.nan))
-
-    monkeypatch.setattr(tracker, "_ext", None)  # through the public osqp API
-    monkeypatch.setattr(tracker._solver, "solve", infeasible)
+    solver.script = [(int(osqp.SolverStatus.OSQP_PRIMAL_INFEASIBLE), 9)]
     res = tracker.solve(x, last, line_ref(0.0))
     assert res.status is PlanStatus.SOLVER_FAILED
     assert tracker.failures == 1
@@ -224,44 +248,65 @@ def test_forced_solver_failure_brakes_and_is_counted(monkeypatch):
     assert res.omega_radps == pytest.approx(1.2 - LIM.alpha_max_radps2 * DT)
     assert_within_limits((res.v_mps, res.omega_radps), last)
     assert np.diff(res.predicted_states[:, 0]).min() >= 0.0  # braking forward, not reversing
-    monkeypatch.undo()
-    again = tracker.solve(x, last, line_ref(0.0))
+    again = tracker.solve(x, last, line_ref(0.0))  # OSQP solves again
     assert again.status is PlanStatus.OK and tracker.failures == 1
 
 
-def test_braking_command_from_standstill_stays_stopped(monkeypatch):
-    tracker = MpcTracker(LIM, CFG)
-    non_convex = int(osqp.SolverStatus.OSQP_NON_CVX)
-    monkeypatch.setattr(tracker, "_osqp", lambda *args: (non_convex, 1, None, None))
+def test_braking_command_from_standstill_stays_stopped():
+    tracker, solver = scripted_tracker()
+    solver.script = [(int(osqp.SolverStatus.OSQP_NON_CVX), 1)]
     res = tracker.solve(np.zeros(3), np.zeros(2), line_ref(0.0))
     assert (res.v_mps, res.omega_radps, res.status) == (0.0, 0.0, PlanStatus.SOLVER_FAILED)
     assert tracker.failures == 1
 
 
-def test_osqp_error_brakes(monkeypatch):
-    tracker = MpcTracker(LIM, CFG)
-
-    def refuse(*args):
-        raise osqp.OSQPException(7)
-
-    monkeypatch.setattr(tracker, "_osqp", refuse)
+def test_osqp_error_brakes():
+    tracker, solver = scripted_tracker()
+    solver.refuse_update = True
     res = tracker.solve(np.zeros(3), np.array([0.5, -0.3]), line_ref(0.0))
     assert res.status is PlanStatus.SOLVER_FAILED and tracker.failures == 1
     assert res.v_mps == pytest.approx(0.35) and res.omega_radps == 0.0
 
 
-def test_public_and_extension_osqp_calls_agree():
-    fast, public = MpcTracker(LIM, CFG), MpcTracker(LIM, CFG)
-    assert fast._ext is not None  # the installed osqp exposes its extension solver
-    public._ext = None
-    preds = np.broadcast_to([2.5, 0.1], (1, N + 1, 2))
-    x, last = np.array([0.0, 0.2, 0.1]), np.zeros(2)
-    for i in range(30):
-        a = fast.solve(x, last, line_ref(i * DT), preds, np.array([0.8]))
-        b = public.solve(x, last, line_ref(i * DT), preds, np.array([0.8]))
-        assert (a.v_mps, a.omega_radps, a.iterations) == (b.v_mps, b.omega_radps, b.iterations)
-        last = np.array([a.v_mps, a.omega_radps])
-        x = step(x, last, DT)
+def test_a_qp_whose_cost_overflows_brakes_without_calling_osqp():
+    # A finite state 1e307 m from the reference: the state weights (2 q_position q_terminal
+    # = 40) times the error overflow the QP's linear cost term (numpy warns); the cycle brakes.
+    tracker = MpcTracker(LIM, CFG)
+    with pytest.warns(RuntimeWarning, match="overflow"):
+        res = tracker.solve(np.array([1e307, 0.0, 0.0]), np.array([0.5, 0.0]), line_ref(0.0))
+    assert res.status is PlanStatus.SOLVER_FAILED and res.iterations == 0
+    assert tracker.failures == 1 and res.v_mps == pytest.approx(0.35)
+
+
+REFERENCE = json.loads((Path(__file__).parent / "data" / "mpc_reference.json").read_text())
+"""One fixed QP and its solution (written and cross-checked by data/make_mpc_reference.py)."""
+
+
+def _solve_the_reference_qp(tuning: MpcTuning) -> MpcResult:
+    assert REFERENCE["reference"].startswith("x = t, y = 0, heading 0, v 1 m/s")
+    times = DT * np.arange(N + 1)
+    preds = (np.array(REFERENCE["neighbour_start_m"])
+             + np.outer(times, REFERENCE["neighbour_velocity_mps"]))[None]
+    tracker = MpcTracker(LIM, CFG, tuning, REFERENCE["trust_weight"])
+    return tracker.solve(np.array(REFERENCE["state"]), np.array(REFERENCE["last_command"]),
+                         line_ref(0.0), preds, np.array([REFERENCE["clearance_m"]]))
+
+
+def test_the_tracker_reproduces_the_stored_reference_solution():
+    expected = np.array(REFERENCE["planned_inputs"])
+    tolerance = REFERENCE["tolerance"]
+    assert REFERENCE["cross_check"]["max_abs_difference"] < 1e-5
+    tight = _solve_the_reference_qp(MpcTuning(eps_abs=1e-9, eps_rel=1e-9, settle_chunk_iter=0,
+                                              max_iter=200_000))
+    assert tight.status is PlanStatus.OK
+    np.testing.assert_allclose(tight.planned_inputs, expected, rtol=0,
+                               atol=tolerance["tight"]["atol"])
+    default = _solve_the_reference_qp(MpcTuning())
+    assert default.status in (PlanStatus.OK, PlanStatus.SOLVER_INACCURATE)
+    np.testing.assert_allclose(default.planned_inputs, expected, rtol=0,
+                               atol=tolerance["default"]["atol"])
+    np.testing.assert_allclose([default.v_mps, default.omega_radps], expected[0], rtol=0,
+                               atol=tolerance["default"]["atol_first_command"])
 
 
 def test_iteration_cap_gives_an_inaccurate_but_bounded_command():

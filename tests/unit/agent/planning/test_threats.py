@@ -1,4 +1,4 @@
-"""TCPA/DCPA (Eqs. 3-5), the threat test and ranking (Eqs. 5-6), the leg check, neighbours."""
+"""TCPA/DCPA (Eqs. 3-5), the threat test and ranking (Eqs. 6-7), the leg check, neighbours."""
 
 import math
 
@@ -9,12 +9,12 @@ from hypothesis import strategies as st
 
 from agent.core.types import Others, Threat
 from agent.planning.threats import (
-    assess_threats,
     leg_threats,
     legs_threats,
     nearby_others,
     rank_threats,
     tcpa_dcpa,
+    threat_records,
 )
 
 
@@ -30,6 +30,13 @@ def others(pos, vel, ids=None, radius=0.2):
         track_start_m=pos,
         is_robot=np.ones(k, dtype=bool),
     )
+
+
+def ranked_threats(position_m, velocity_mps, o, d_thresh_m, t_max_s):
+    """The threats of Eq. (6) as typed records, most imminent first (Eq. 7), as the planner
+    builds them (`ifp`: `rank_threats`, then `threat_records`)."""
+    index, tcpa, dcpa = rank_threats(position_m, velocity_mps, o, d_thresh_m, t_max_s)
+    return threat_records(index, tcpa, dcpa, o)
 
 
 # --- Eqs. (3)-(5) ---------------------------------------------------------------------
@@ -58,7 +65,7 @@ def test_receding_obstacle_has_negative_tcpa_and_is_no_threat():
     assert tcpa[0] == pytest.approx(-10.0)
     assert dcpa[0] == pytest.approx(0.0, abs=1e-12)
     assert (
-        assess_threats(np.zeros(2), np.array([1.0, 0.0]), others([[10, 0]], [[2, 0]]), 1.3, 8.0)
+        ranked_threats(np.zeros(2), np.array([1.0, 0.0]), others([[10, 0]], [[2, 0]]), 1.3, 8.0)
         == ()
     )
 
@@ -69,7 +76,7 @@ def test_zero_relative_velocity_gives_tcpa_zero_and_current_distance():
     assert dcpa[0] == pytest.approx(5.0)
     # Even touching: TCPA = 0 is not inside 0 < TCPA < T_max.
     near = others([[1.1, 1]], [[0.5, 0.5]])
-    assert assess_threats(np.array([1.0, 1.0]), np.array([0.5, 0.5]), near, 1.3, 8.0) == ()
+    assert ranked_threats(np.array([1.0, 1.0]), np.array([0.5, 0.5]), near, 1.3, 8.0) == ()
 
 
 def test_coincident_positions_are_finite():
@@ -95,14 +102,14 @@ def test_non_finite_input_raises(bad):
     with pytest.raises(ValueError, match="non-finite"):
         tcpa_dcpa([0, 0], [1, 0], [[10, 0]], [[-1, bad]])
     with pytest.raises(ValueError, match="non-finite"):
-        assess_threats(
+        ranked_threats(
             np.array([bad, 0.0]), np.array([1.0, 0.0]), others([[5, 0]], [[0, 0]]), 1.3, 8.0
         )
     with pytest.raises(ValueError, match="non-finite"):
-        assess_threats(np.zeros(2), np.array([1.0, 0.0]), others([[5, 0]], [[0, 0]]), bad, 8.0)
+        ranked_threats(np.zeros(2), np.array([1.0, 0.0]), others([[5, 0]], [[0, 0]]), bad, 8.0)
 
 
-# --- Eqs. (5)-(6) ---------------------------------------------------------------------
+# --- Eqs. (6)-(7) ---------------------------------------------------------------------
 
 
 def test_threat_condition_and_ranking_by_tcpa():
@@ -111,7 +118,7 @@ def test_threat_condition_and_ranking_by_tcpa():
         [[-1, 0], [0, 0], [0, 0], [0, 0], [0, 0]],
         ids=[10, 11, 12, 13, 14],
     )
-    threats = assess_threats(np.zeros(2), np.array([1.0, 0.0]), o, d_thresh_m=1.3, t_max_s=8.0)
+    threats = ranked_threats(np.zeros(2), np.array([1.0, 0.0]), o, d_thresh_m=1.3, t_max_s=8.0)
     # 11: TCPA 4, DCPA 0.5 -> first; 10: TCPA 5, DCPA 0 -> second;
     # 12: DCPA 5 > 1.3; 13: TCPA 30 >= T_max; 14: behind, TCPA < 0.
     assert [t.other_id for t in threats] == [11, 10]
@@ -121,15 +128,15 @@ def test_threat_condition_and_ranking_by_tcpa():
 
 def test_threshold_edges_dcpa_inclusive_tcpa_exclusive():
     o = others([[5, 1.3], [8, 0]], [[0, 0], [0, 0]])
-    threats = assess_threats(np.zeros(2), np.array([1.0, 0.0]), o, d_thresh_m=1.3, t_max_s=8.0)
+    threats = ranked_threats(np.zeros(2), np.array([1.0, 0.0]), o, d_thresh_m=1.3, t_max_s=8.0)
     assert [t.other_id for t in threats] == [0]  # DCPA == D_thresh counts, TCPA == T_max not
 
 
 def test_equal_tcpa_ties_break_by_id_whatever_the_order():
     pos = [[5, 0.5], [5, -0.5], [5, 0.0]]
     vel = [[0, 0]] * 3
-    a = assess_threats(np.zeros(2), np.array([1.0, 0]), others(pos, vel, ids=[9, 4, 7]), 1.3, 8.0)
-    b = assess_threats(
+    a = ranked_threats(np.zeros(2), np.array([1.0, 0]), others(pos, vel, ids=[9, 4, 7]), 1.3, 8.0)
+    b = ranked_threats(
         np.zeros(2), np.array([1.0, 0]), others(pos[::-1], vel, ids=[7, 4, 9]), 1.3, 8.0
     )
     assert [t.other_id for t in a] == [4, 7, 9]
@@ -145,7 +152,7 @@ def test_rank_threats_returns_indices_and_all_values():
 
 
 def test_no_others_no_threats():
-    assert assess_threats(np.zeros(2), np.array([1.0, 0.0]), Others.empty(), 1.3, 8.0) == ()
+    assert ranked_threats(np.zeros(2), np.array([1.0, 0.0]), Others.empty(), 1.3, 8.0) == ()
 
 
 finite = st.floats(-50, 50, allow_nan=False)
@@ -180,11 +187,11 @@ grid = st.integers(-200, 200).map(lambda i: 0.25 * i)  # exact under shifts
 def test_property_translation_and_permutation_invariant(shift, rows, rnd):
     arr = np.array(rows)
     o = others(arr[:, :2], arr[:, 2:])
-    base = assess_threats(np.zeros(2), np.array([0.75, 0.25]), o, 2.0, 8.0)
+    base = ranked_threats(np.zeros(2), np.array([0.75, 0.25]), o, 2.0, 8.0)
     order = list(range(len(rows)))
     rnd.shuffle(order)
     moved = others(arr[order, :2] + np.array(shift), arr[order, 2:], ids=np.array(order))
-    other = assess_threats(np.array(shift), np.array([0.75, 0.25]), moved, 2.0, 8.0)
+    other = ranked_threats(np.array(shift), np.array([0.75, 0.25]), moved, 2.0, 8.0)
     assert base == other
 
 
