@@ -290,6 +290,10 @@ def test_config_round_trip_with_defaults() -> None:
     back = RunConfigMsg.decode(msg.encode())
     assert back == msg and back.planner == PlannerConfig()
     assert isinstance(back.robot.start[0], float)
+    # an ablation reaches a distributed robot as the orchestrator set it
+    ablated = dataclasses.replace(msg, planner=PlannerConfig(without="routing,liveness"))
+    back = RunConfigMsg.decode(ablated.encode())
+    assert back.planner.without_names == ("routing", "liveness")
 
 
 def test_config_wire_covers_every_dataclass_field() -> None:
@@ -340,6 +344,7 @@ def test_config_rejects_another_run_or_robot() -> None:
     (("planner", "mpc", "horizon_steps"), 0, "mpc: horizon_steps: must be > 0"),
     (("planner", "safety", "braking_margin_m"), -1.0, "braking_margin_m: must be >= 0"),
     (("planner", "profile"), "fast", "profile: expected one of default, paper"),
+    (("planner", "without"), "routing,bogus", "without: unknown mechanism 'bogus'"),
     (("robot", "limits", "accel_max_mps2"), 0.0, "accel_max_mps2: must be > 0"),
     (("robot", "limits", "v_min_mps"), 2.0, "v_min_mps: must be <= v_max_mps"),
 ])
