@@ -48,9 +48,13 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 from types import FrameType
+from typing import TYPE_CHECKING
 
 from agent.flags import Parser
 from agent.process import PARENT_PID_ENV, STOP_SIGNALS, die_with_launcher, die_with_parent
+
+if TYPE_CHECKING:  # the child imports agent.node itself, after the fork
+    from agent.node import CpuTokens
 
 log = logging.getLogger("fleet")
 
@@ -131,7 +135,7 @@ def warm_up_planners() -> None:
 
 
 def _child(argv: list[str], log_path: Path, parent_pid: int, nice: int = 0,
-           ready_fd: int | None = None, cpu_tokens: object | None = None) -> None:
+           ready_fd: int | None = None, cpu_tokens: CpuTokens | None = None) -> None:
     """In the forked child: become ``python -m agent`` with its own log; never returns.
 
     Once its liveliness token is declared the child writes its pid and a newline to
@@ -160,7 +164,7 @@ def _child(argv: list[str], log_path: Path, parent_pid: int, nice: int = 0,
         logging.root.handlers.clear()  # the robot sets up its own (agent.node.main)
         from agent.node import main as agent_main
 
-        code = agent_main(argv, on_ready=_ready, cpu_tokens=cpu_tokens)  # type: ignore[arg-type]
+        code = agent_main(argv, on_ready=_ready, cpu_tokens=cpu_tokens)
     except SystemExit as exc:  # argparse errors
         code = exc.code if isinstance(exc.code, int) else 2
     except BaseException:  # noqa: BLE001 - report, then leave with a failure status
@@ -241,7 +245,7 @@ class _StartSlots:
 
 
 def _fork(argv: list[str], log_path: Path, parent: int, nice: int, slots: _StartSlots,
-          cpu_tokens: object | None) -> int:
+          cpu_tokens: CpuTokens | None) -> int:
     """Fork one robot process; returns its pid, with the forwarded signals still blocked
     (the caller unblocks them once it knows the child, so that a signal reaches it too).
     In the child the signals wait until it has its own handlers (`_forward` never runs

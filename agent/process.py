@@ -20,11 +20,17 @@ import time
 import zlib
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from types import FrameType
-from typing import Any
+from typing import TYPE_CHECKING, Any, TypeAlias, overload
 
 import zenoh
 
+if TYPE_CHECKING:
+    from eifp_wire import TlsFiles
+
 log = logging.getLogger(__name__)
+
+SampleSubscriber: TypeAlias = zenoh.Subscriber[zenoh.Handler[zenoh.Sample]]
+"""A subscriber read by polling (`try_recv`): `declare_subscriber` without a callback."""
 
 CLOSE_TIMEOUT_S = 3.0
 """Wall time `close_session` waits for Zenoh to close before giving up on it."""
@@ -172,7 +178,8 @@ def use_one_zenoh_thread() -> None:
     os.environ.setdefault("ZENOH_RUNTIME", ONE_THREAD_RUNTIME)
 
 
-def enqueue_on_receive(put: Callable[[Any], Any]) -> Any:
+def enqueue_on_receive(put: Callable[[zenoh.Sample], object]
+                       ) -> Callable[[zenoh.Sample], object]:
     """A subscriber handler that calls `put(sample)` on the Zenoh thread that received it.
 
     `put` should be a C-level call that never blocks (``queue.SimpleQueue.put``): it then
@@ -235,6 +242,12 @@ def zenoh_config(settings: Mapping[str, Any]) -> zenoh.Config:
     return conf
 
 
+@overload
+def open_session(settings: Mapping[str, Any], *, deadline: float | None = None,
+                 stop: None = None) -> zenoh.Session: ...
+@overload
+def open_session(settings: Mapping[str, Any], *, deadline: float | None = None,
+                 stop: StopFlag) -> zenoh.Session | None: ...
 def open_session(settings: Mapping[str, Any], *, deadline: float | None = None,
                  stop: StopFlag | None = None) -> zenoh.Session | None:
     """Open a Zenoh session with `settings` (`eifp_wire.transport.session_settings`).
@@ -264,7 +277,7 @@ def open_session(settings: Mapping[str, Any], *, deadline: float | None = None,
     return None
 
 
-def check_tls_files(files: Any) -> str | None:
+def check_tls_files(files: TlsFiles) -> str | None:
     """Why the `eifp_wire.transport.TlsFiles` `files` cannot be used (one missing or
     unreadable), or None.
 

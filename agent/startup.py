@@ -213,14 +213,16 @@ def fetch_config(session: zenoh.Session, keys: RunKeys, robot_id: int, stop: Sto
             if not from_world(reply.replier_id, world_zid):
                 if counts is not None:
                     counts["refused_config"] = counts.get("refused_config", 0) + 1
+                source = "no named session" if reply.replier_id is None else reply.replier_id.zid
                 log.warning("robot %d: refused a configuration reply from %s (not the world)",
-                            robot_id, reply.replier_id)
-                problem = (f"every reply came from {reply.replier_id.zid}, not the world "
+                            robot_id, source)
+                problem = (f"every reply came from {source}, not the world "
                            f"({world_zid}); behind a relay router, give the world's id with "
                            "--world-zid")
                 continue
             if reply.ok is None:
-                problem = f"world replied an error: {reply.err.payload.to_string()}"
+                error = "" if reply.err is None else reply.err.payload.to_string()
+                problem = f"world replied an error: {error}"
                 continue
             try:
                 return RunConfigMsg.decode(reply.ok.payload.to_bytes(),

@@ -20,7 +20,7 @@ import math
 import types
 import typing
 from collections.abc import Collection, Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import msgpack
 import numpy as np
@@ -33,6 +33,12 @@ from eifp_wire.limits import (
     MAX_SEQ,
     ProtocolError,
 )
+
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
+
+_Config = TypeVar("_Config", bound="DataclassInstance")
+"""A configuration dataclass (`load_dataclass`)."""
 
 SCHEMA_VERSION = 4
 """Bumped on any incompatible change of a message schema."""
@@ -58,7 +64,7 @@ _UNPACK_CHECKED: dict[str, Any] = {**UNPACK_FLAT, "object_pairs_hook": _no_dupli
 """The same, every map checked for duplicate keys on the way."""
 
 
-def _unpack(data: object, *, flat: bool = False) -> Any:
+def _unpack(data: object, *, flat: bool = False) -> object:
     """Parse a payload; every map is checked for duplicate keys.
 
     `flat`: the message is one map whose values hold no map (a `PosesMsg`): its duplicate
@@ -104,7 +110,7 @@ def _as_map(obj: object, where: str, keys: Collection[str]) -> dict[str, Any]:
     return obj
 
 
-def open_envelope(data: object, msg_type: str, keys: Collection[str], *,
+def open_envelope(data: object, msg_type: str, keys: tuple[str, ...], *,
                   flat: bool = False) -> dict[str, Any]:
     """The map of a payload of type `msg_type` whose body has exactly `keys`.
 
@@ -202,7 +208,7 @@ def read_column(value: object, where: str, dtype: np.dtype, n: int | None,
 
 def frozen_array(arr: object, dtype: type, shape: tuple[int, ...], where: str) -> np.ndarray:
     """A read-only copy of `arr` as `dtype`, which must have `shape`."""
-    out = np.array(arr, dtype=dtype)
+    out: np.ndarray = np.array(arr, dtype=dtype)
     if out.shape != shape:
         raise ProtocolError(f"{where}: shape {out.shape}, expected {shape}")
     out.flags.writeable = False
@@ -247,8 +253,10 @@ def check_values(arr: np.ndarray, where: str, lo: float, hi: float,
 # --- Generic, strict (de)serialisation of the shared configuration dataclasses --------------
 
 
-def _dump_value(value: object, hint: Any, where: str) -> Any:
-    """A configuration value as plain msgpack-able data, following its type hint."""
+def _dump_value(value: Any, hint: object, where: str) -> object:
+    """A configuration value as plain msgpack-able data, following its type hint.
+
+    `value` is typed `Any`: its type is the one `hint` names, known only at run time."""
     if value is None:
         return None
     if dataclasses.is_dataclass(hint):
@@ -269,7 +277,7 @@ def _dump_value(value: object, hint: Any, where: str) -> Any:
     raise TypeError(f"{where}: unsupported configuration type {hint!r}")
 
 
-def dump_dataclass(obj: object, where: str) -> dict[str, Any]:
+def dump_dataclass(obj: DataclassInstance, where: str) -> dict[str, object]:
     """A configuration dataclass as a map of its fields, nested dataclasses as maps."""
     hints = typing.get_type_hints(type(obj))
     return {
@@ -278,9 +286,9 @@ def dump_dataclass(obj: object, where: str) -> dict[str, Any]:
     }
 
 
-def _load_value(value: object, hint: Any, where: str) -> Any:
+def _load_value(value: object, hint: object, where: str) -> object:
     """Rebuild a configuration value from msgpack data, checking it against its type hint."""
-    if dataclasses.is_dataclass(hint):
+    if isinstance(hint, type) and dataclasses.is_dataclass(hint):
         return load_dataclass(value, hint, where)
     origin = typing.get_origin(hint)
     if origin in (types.UnionType, typing.Union):
@@ -309,7 +317,7 @@ def _load_value(value: object, hint: Any, where: str) -> Any:
     raise ProtocolError(f"{where}: unsupported configuration type {hint!r}")
 
 
-def load_dataclass(data: object, cls: type, where: str) -> Any:
+def load_dataclass(data: object, cls: type[_Config], where: str) -> _Config:
     """Rebuild dataclass `cls` from `dump_dataclass`'s map: exactly its fields, each checked
     against its type hint, then the class's own checks (raised as `ProtocolError`)."""
     fields = dataclasses.fields(cls)

@@ -456,7 +456,9 @@ class ControlMsg:
         body = open_envelope(data, cls.TYPE, ("kind", "t", "reason"))
         if not isinstance(body["kind"], str):
             raise ProtocolError("control.kind: expected a string")
-        return cls(kind=body["kind"], t_s=body["t"], reason=body["reason"])
+        # __post_init__ refuses any other kind than "start" or "end"
+        kind = typing.cast(ControlKind, body["kind"])
+        return cls(kind=kind, t_s=body["t"], reason=body["reason"])
 
 
 def _static_map(rows: object, known: frozenset[int]

@@ -148,7 +148,7 @@ class PosesMsg:
     def __getattr__(self, name: str) -> np.ndarray:
         """The per-kind arrays of a decoded message, as views of its disc blocks, made on
         first use (a robot reads the blocks whole, `to_snapshot`)."""
-        both = self.__dict__.get("_discs")
+        both: tuple[np.ndarray, np.ndarray] | None = self.__dict__.get("_discs")
         if both is None or name not in _POSES_VIEWS:
             raise AttributeError(name)
         ids, values = both
@@ -168,7 +168,7 @@ class PosesMsg:
     def discs(self) -> tuple[np.ndarray, np.ndarray]:
         """Every disc, robots then obstacles: ids (k,) int64 and (k, 4) x, y, heading, radius
         (heading 0 for obstacles), as on the wire."""
-        both = self.__dict__.get("_discs")
+        both: tuple[np.ndarray, np.ndarray] | None = self.__dict__.get("_discs")
         if both is not None:  # decoded: the payload's own arrays
             return both
         n, m = self.robot_ids.shape[0], self.obstacle_ids.shape[0]

@@ -33,7 +33,7 @@ import math
 from collections import deque
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import foxglove
 import numpy as np
@@ -304,7 +304,10 @@ def _json_channel(topic: str, schema: dict[str, Any], ctx: Context) -> Channel:
                    message_encoding="json", context=ctx)
 
 
-def _with_sinks(channels: Sequence[Any]) -> list[Any]:
+_Chan = TypeVar("_Chan", Channel, SceneUpdateChannel)
+
+
+def _with_sinks(channels: Sequence[_Chan]) -> list[_Chan]:
     return [c for c in channels if c.has_sinks()]
 
 
@@ -339,7 +342,8 @@ class RunViz:
         self._obstacle_c0 = np.array([o.center for o in obstacles], dtype=float).reshape(-1, 2)
         self._obstacle_v = np.array([o.velocity for o in obstacles], dtype=float).reshape(-1, 2)
         self._obstacle_r = np.array([o.radius_m for o in obstacles], dtype=float)
-        self._trails = [deque(maxlen=TRAIL_POINTS) for _ in robots]
+        self._trails: list[deque[tuple[float, float]]] = [
+            deque(maxlen=TRAIL_POINTS) for _ in robots]
         self._next_trail_s = -math.inf
         self._ticks = 0
         self._last_t_s = 0.0
@@ -347,10 +351,12 @@ class RunViz:
         self._xy_now = np.zeros((0, 2))
         self._xy: dict[int, tuple[float, float]] | None = None
         self._scene = [SceneUpdateChannel(SCENE_TOPIC, context=c) for c in contexts]
-        self._robot: dict[int, tuple[list[Any], list[Channel], list[Channel]]] = {}
+        self._robot: dict[int, tuple[list[SceneUpdateChannel], list[Channel],
+                                     list[Channel]]] = {}
         self.counts = {"scenes": 0, "commands": 0, "plans": 0}
 
-    def _channels(self, rid: int) -> tuple[list[Any], list[Channel], list[Channel]]:
+    def _channels(self, rid: int
+                  ) -> tuple[list[SceneUpdateChannel], list[Channel], list[Channel]]:
         """(plan scene, plan raw, command) channels of one robot, made on first use."""
         chans = self._robot.get(rid)
         if chans is None:
@@ -436,17 +442,17 @@ class RunViz:
                                     f"{status} v={v_mps:.2f} w={omega_radps:.2f}")
             for c in live:
                 c.log(msg, log_time=log_time)
-        live = _with_sinks(raw)
-        if live:
+        live_raw = _with_sinks(raw)
+        if live_raw:
             payload = plan_json(t_s, rid, debug, v_mps, omega_radps, status)
-            for c in live:
-                c.log(payload, log_time=log_time)
+            for c_raw in live_raw:
+                c_raw.log(payload, log_time=log_time)
         self.counts["plans"] += 1
 
     def _threat_xy(self, other_id: int) -> tuple[float, float] | None:
         if other_id >= 0:
             if self._xy is None:  # built once per tick, when a plan needs it
-                self._xy = dict(zip(self._xy_ids, map(tuple, self._xy_now.tolist())))
+                self._xy = {i: (x, y) for i, (x, y) in zip(self._xy_ids, self._xy_now.tolist())}
             return self._xy.get(other_id)
         try:
             j = self._obstacle_ids.index(other_id)
@@ -485,7 +491,8 @@ class LiveView:
         self.host = host
         self.context = Context()
         ctx = self.context
-        self._channels: list[Any] = [SceneUpdateChannel(SCENE_TOPIC, context=ctx)]
+        self._channels: list[SceneUpdateChannel | Channel] = [
+            SceneUpdateChannel(SCENE_TOPIC, context=ctx)]
         for rid in robot_ids:
             self._channels += [SceneUpdateChannel(plan_topic(rid), context=ctx),
                                _json_channel(plan_raw_topic(rid), PLAN_SCHEMA, ctx),

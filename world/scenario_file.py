@@ -63,9 +63,9 @@ import math
 import os
 import reprlib
 import typing
-from collections.abc import Mapping
+from collections.abc import Hashable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeGuard, overload
 
 import numpy as np
 
@@ -119,10 +119,10 @@ _OBSTACLE_REQUIRED = ("center", "radius")
 
 
 @functools.cache
-def _key_map(cls: type) -> dict[str, tuple[str, Any]]:
+def _key_map(cls: type) -> dict[str, tuple[str, object]]:
     """file key -> (field name, resolved type) for a config dataclass."""
     hints = typing.get_type_hints(cls)
-    out: dict[str, tuple[str, Any]] = {}
+    out: dict[str, tuple[str, object]] = {}
     for f in dataclasses.fields(cls):
         key = file_key(f.name)
         if key in out:  # two fields differing only by unit: the format would be ambiguous
@@ -170,7 +170,7 @@ class _Ctx:
         return ScenarioError(f"{self.source}: {where}: {message}")
 
 
-def _is_number(value: object) -> bool:
+def _is_number(value: object) -> TypeGuard[int | float]:
     return isinstance(value, int | float) and not isinstance(value, bool)
 
 
@@ -178,7 +178,7 @@ def _number(ctx: _Ctx, path: str, value: object, *, lower: str = "none") -> floa
     """A finite float; `lower` is "positive", "nonneg" or "none"."""
     if not _is_number(value):
         raise ctx.error(path, f"expected a number, {_got(value)}")
-    out = float(value)  # type: ignore[arg-type]
+    out = float(value)
     if not math.isfinite(out):
         raise ctx.error(path, f"expected a finite number, {_got(value)}")
     if lower == "positive" and out <= 0.0:
@@ -199,6 +199,12 @@ def _integer(ctx: _Ctx, path: str, value: object, *, minimum: int | None = None,
     return int(value)
 
 
+@overload
+def _vector(ctx: _Ctx, path: str, value: object, names: tuple[str, str]
+            ) -> tuple[float, float]: ...
+@overload
+def _vector(ctx: _Ctx, path: str, value: object, names: tuple[str, str, str]
+            ) -> tuple[float, float, float]: ...
 def _vector(ctx: _Ctx, path: str, value: object, names: tuple[str, ...]) -> tuple[float, ...]:
     shape = "[" + ", ".join(names) + "]"
     if not isinstance(value, list | tuple) or len(value) != len(names):
@@ -259,7 +265,8 @@ def _without(ctx: _Ctx, value: object) -> str:
     return ",".join(names)
 
 
-def _field_value(ctx: _Ctx, path: str, field_name: str, typ: Any, value: object) -> Any:
+def _field_value(ctx: _Ctx, path: str, field_name: str, typ: object, value: object
+                 ) -> bool | int | float | None:
     """One config field from the file, checked against its type and range."""
     args = typing.get_args(typ)
     if type(None) in args:  # float | None
@@ -348,7 +355,9 @@ def scenario_from_dict(data: object, source: str = "<scenario>") -> Scenario:
             continue
         path = _join("defaults", group)
         sub = getattr(base, group)
-        data = _mapping(ctx, path, defaults[group], tuple(_key_map(type(sub))))
+        # mypy takes a class for unhashable (python/mypy#11470)
+        keys = _key_map(type(sub))  # type: ignore[arg-type]
+        data = _mapping(ctx, path, defaults[group], tuple(keys))
         planner_kwargs[group] = dataclasses.replace(
             sub, **_config_kwargs(ctx, path, data, type(sub)))
     planner_config = dataclasses.replace(base, **planner_kwargs)
@@ -511,7 +520,8 @@ def _at_most(ctx: _Ctx, path: str, value: float, bound: float, unit: str) -> Non
 def _gaps(a: np.ndarray, ra: np.ndarray, b: np.ndarray, rb: np.ndarray) -> np.ndarray:
     """(len(a), len(b)) gaps between discs a_i and b_j [m]."""
     d = np.hypot(a[:, None, 0] - b[None, :, 0], a[:, None, 1] - b[None, :, 1])
-    return d - ra[:, None] - rb[None, :]
+    gaps: np.ndarray = d - ra[:, None] - rb[None, :]
+    return gaps
 
 
 def _raise_first_overlap(ctx: _Ctx, gaps: np.ndarray, mask: np.ndarray, key: str,
@@ -525,7 +535,8 @@ def _raise_first_overlap(ctx: _Ctx, gaps: np.ndarray, mask: np.ndarray, key: str
 
 def _check_config(ctx: _Ctx, path: str, config: object) -> None:
     """Re-check a config dataclass's fields (for scenarios built in code)."""
-    for key, (name, typ) in _key_map(type(config)).items():
+    # mypy takes a class for unhashable (python/mypy#11470)
+    for key, (name, typ) in _key_map(type(config)).items():  # type: ignore[arg-type]
         value = getattr(config, name)
         if dataclasses.is_dataclass(value):
             _check_config(ctx, _join(path, key), value)
@@ -587,7 +598,8 @@ def scenario_to_dict(scenario: Scenario) -> dict[str, Any]:
 
 def _config_to_dict(config: object) -> dict[str, Any]:
     out: dict[str, Any] = {}
-    for key, (name, _typ) in _key_map(type(config)).items():
+    # mypy takes a class for unhashable (python/mypy#11470)
+    for key, (name, _typ) in _key_map(type(config)).items():  # type: ignore[arg-type]
         value = getattr(config, name)
         if dataclasses.is_dataclass(value):
             out[key] = _config_to_dict(value)
@@ -608,18 +620,20 @@ def _yaml_loader() -> type:
     import yaml
 
     class Loader(yaml.SafeLoader):
-        def compose_node(self, parent: Any, index: Any) -> Any:
+        def compose_node(self, parent: yaml.Node | None, index: int) -> yaml.Node | None:
             # An alias re-uses a node: a few hundred bytes of nested aliases expand to
             # billions of values. No scenario needs one; refuse it where it appears.
             if self.check_event(yaml.events.AliasEvent):
-                event = self.peek_event()
+                # types-PyYAML leaves Parser.peek_event unannotated
+                event = self.peek_event()  # type: ignore[no-untyped-call]
                 raise yaml.composer.ComposerError(
                     None, None, "YAML aliases (*name) are not allowed in a scenario file",
                     event.start_mark)
             return super().compose_node(parent, index)
 
-        def construct_mapping(self, node: Any, deep: bool = False) -> dict[Any, Any]:
-            seen: set[Any] = set()
+        def construct_mapping(self, node: yaml.MappingNode, deep: bool = False
+                              ) -> dict[Hashable, Any]:
+            seen: set[Hashable] = set()
             for key_node, _value_node in node.value:
                 key = self.construct_object(key_node, deep=deep)
                 if key in seen:

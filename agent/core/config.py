@@ -16,6 +16,10 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
 
 PLANNER_NAMES: tuple[str, ...] = ("eifp-mpc", "eifp", "ifp", "orca")
 
@@ -60,9 +64,9 @@ def field_range_error(name: str, value: object) -> str | None:
     return None
 
 
-def _check_ranges(config: object) -> None:
+def _check_ranges(config: DataclassInstance) -> None:
     """Raise `ValueError` naming the first numeric field of `config` out of its range."""
-    for f in dataclasses.fields(config):  # type: ignore[arg-type]
+    for f in dataclasses.fields(config):
         problem = field_range_error(f.name, getattr(config, f.name))
         if problem is not None:
             raise ValueError(f"{f.name}: {problem}")
@@ -263,7 +267,7 @@ class PlannerConfig:
         Raises:
             ValueError: an unknown name, or a value out of range.
         """
-        top: dict[str, object] = {}
+        top: dict[str, Any] = {}  # each value has its field's type: __post_init__ checks
         groups: dict[str, dict[str, object]] = {}
         for name, value in settings.items():
             group, _, key = name.rpartition(".")
@@ -273,18 +277,18 @@ class PlannerConfig:
                 top[key] = value
         for group, values in groups.items():
             sub = getattr(self, group, None)
-            if not dataclasses.is_dataclass(sub):
+            if not dataclasses.is_dataclass(sub) or isinstance(sub, type):
                 raise ValueError(f"{group}: not a sub-config of PlannerConfig")
             known = {f.name for f in dataclasses.fields(sub)}
             unknown = sorted(set(values) - known)
             if unknown:
                 raise ValueError(f"{group}.{unknown[0]}: not a setting of {group}")
-            top[group] = dataclasses.replace(sub, **values)  # type: ignore[type-var]
+            top[group] = dataclasses.replace(sub, **values)
         known_top = {f.name for f in dataclasses.fields(self)}
         unknown = sorted(set(top) - known_top)
         if unknown:
             raise ValueError(f"{unknown[0]}: not a field of PlannerConfig")
-        return dataclasses.replace(self, **top)  # type: ignore[arg-type]
+        return dataclasses.replace(self, **top)
 
 
 SUB_CONFIGS: tuple[str, ...] = ("safety", "threats", "cost", "reference", "mpc", "orca")

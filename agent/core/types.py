@@ -225,6 +225,9 @@ class Others:
 
     def subset(self, index: np.ndarray) -> Others:
         """The others selected by an index or boolean mask, in that order."""
+        # __post_init__ and `trusted` fill the optional columns (NaN where unknown)
+        assert self.heading_rad is not None and self.recent_speed_mps is not None
+        assert self.recent_interval_s is not None and self.recent_turn_rate_radps is not None
         return Others.trusted(
             ids=self.ids[index],
             position_m=self.position_m[index],
@@ -393,7 +396,7 @@ class PlanResult:
     solver_iterations: int = 0
     debug: PlanDebug | None = None
 
-    def decision(self) -> tuple:
+    def decision(self) -> tuple[object, ...]:
         """Everything but the timings, for determinism checks."""
         via = None if self.via_point_m is None else tuple(np.round(self.via_point_m, 12))
         return (

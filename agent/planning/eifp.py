@@ -131,7 +131,8 @@ class GhostPaths:
         Eq. 15 and the discarding test); a segment shorter than 1 nm is its start point."""
         rel = points[:, None] - self.seg_start
         along = np.minimum(np.maximum((rel * self.seg_inv).real, 0.0), 1.0)
-        return np.abs(rel - along * self.seg)
+        dist: np.ndarray = np.abs(rel - along * self.seg)
+        return dist
 
     def evaluate(
         self,
@@ -158,12 +159,14 @@ class GhostPaths:
             clear: n bools, at least the clearance from every ghost path but `skip`'s.
         """
         n = len(points)
+        inverse: list[float]
+        clear: list[bool]
         if self.k:
             dist = self.distances(np.array(points))
             near = np.maximum(dist[:, : self.k], MIN_PATH_DISTANCE_M)
             inverse = (self.weight / near).sum(axis=1).tolist()  # sum_j w_j / d_ij
             dist[:, self.k + skip] = np.inf
-            clear = (dist[:, self.k :] >= self.clearance_m).all(axis=1).tolist()
+            clear = np.all(dist[:, self.k :] >= self.clearance_m, axis=1).tolist()
         else:
             inverse, clear = [0.0] * n, [True] * n
         a, b = leg_start, leg_end

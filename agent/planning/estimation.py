@@ -26,6 +26,7 @@ All neighbours are handled at once with arrays of shape (H samples, n discs).
 from __future__ import annotations
 
 import math
+from typing import final
 
 import numpy as np
 
@@ -41,6 +42,7 @@ averages out the pose noise of about 7 samples 0.1 s apart; much longer windows 
 over the others' own turns and lag their avoidance manoeuvres."""
 
 
+@final  # `reset` re-runs __init__
 class NeighborTracker:
     """Short pose history of every other disc and the estimates built from it.
 
@@ -87,7 +89,7 @@ class NeighborTracker:
 
     def reset(self) -> None:
         """Forget all history."""
-        self.__init__(self.own_id, self.window_s, self.max_samples)  # type: ignore[misc]
+        self.__init__(self.own_id, self.window_s, self.max_samples)
 
     def _grow(self, new_ids: list[int]) -> None:
         for rid in new_ids:

@@ -550,7 +550,7 @@ def iterate_legs(world: _World, legs: _Legs, assessment: Assessment, clearance: 
                                      assessment.speed_mps, position, velocity, clearance,
                                      t_max_s, legs.excluded[first:])
         found = None
-        for row in hit.any(axis=1).nonzero()[0].tolist():
+        for row in np.flatnonzero(hit.any(axis=1)).tolist():
             leg = first + row
             for k in ranked(hit[row].nonzero()[0], leg_tcpa[row], others.ids).tolist():
                 split = world.resolve(wps[leg], arrival[leg], wps[leg + 1], k)

@@ -34,6 +34,7 @@ from __future__ import annotations
 import enum
 import math
 from dataclasses import dataclass
+from typing import final
 
 import numpy as np
 
@@ -133,6 +134,7 @@ def lower_id_moving_near(robot_id: int, position_m: np.ndarray, others: Others,
                  & (speed >= moving_mps)).any())
 
 
+@final  # `reset` re-runs __init__
 class Liveness:
     """The strategy state of one robot: monitor, yield timer, and which rule comes next.
 
@@ -150,7 +152,7 @@ class Liveness:
 
     def reset(self) -> None:
         """Forget everything (a new run)."""
-        self.__init__(self.config)  # type: ignore[misc]
+        self.__init__(self.config)
 
     def decide(self, now_s: float, robot_id: int, position_m: np.ndarray, left_m: float,
                others: Others) -> Strategy:

@@ -159,7 +159,8 @@ class MpcResult:
         return rollout(self.initial_state, self.planned_inputs, self.dt_s)
 
 
-def _csc(rows: np.ndarray, cols: np.ndarray, vals: np.ndarray, shape: tuple[int, int]):
+def _csc(rows: np.ndarray, cols: np.ndarray, vals: np.ndarray, shape: tuple[int, int]
+         ) -> tuple[sp.csc_matrix, np.ndarray]:
     """CSC matrix of COO triplets (no duplicates) and where each triplet lands in `.data`."""
     order = np.lexsort((rows, cols))  # column-major, rows sorted within a column
     r, c = rows[order], cols[order]
@@ -173,7 +174,8 @@ def _csc(rows: np.ndarray, cols: np.ndarray, vals: np.ndarray, shape: tuple[int,
     return matrix, position
 
 
-def _ruiz(P: sp.csc_matrix, A: sp.csc_matrix, iterations: int = 10):
+def _ruiz(P: sp.csc_matrix, A: sp.csc_matrix, iterations: int = 10
+          ) -> tuple[np.ndarray, np.ndarray, float]:
     """Ruiz equilibration of the KKT matrix [[P, A'], [A, 0]], as OSQP's `scaling` does.
 
     The cost scaling c uses P only (OSQP also uses q, which here changes every cycle).
@@ -546,7 +548,7 @@ class MpcTracker:
         if not math.isfinite(float(q.sum()) + float(lo.sum())):
             return self._fail(x0, last, 0)
         e_row, n_xu = self._e_row, self._nx + self._nu
-        if self._y_prev is None:
+        if self._y_prev is None or self._s_prev is None:  # both or neither
             x_ws, y_ws = self._x_zero, self._y_zero
         else:
             # Shifted solution: z = 0 is the nominal; slacks and duals move one step.
@@ -647,7 +649,7 @@ class MpcTracker:
         (stable: ties keep input order), in their input order, so that a neighbour keeps its
         rows (and its warm-start duals) while the selection and the input order hold.
         """
-        n_used = min(preds.shape[0], self._n_cons)
+        n_used: int = min(preds.shape[0], self._n_cons)
         a, lo = self._a_data, self._l
         if n_used:
             d = xb[1:, 0:2] - preds[:, 1:, :]  # (K, N, 2) from each predicted centre to pb_k

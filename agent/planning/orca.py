@@ -91,7 +91,8 @@ class OrcaController:
         if dist < 1e-9:
             return np.zeros(2)
         speed = min(self.limits.v_max_mps, np.sqrt(2.0 * self.limits.accel_max_mps2 * dist))
-        return to_goal * (speed / dist)
+        velocity: np.ndarray = to_goal * (speed / dist)
+        return velocity
 
     def command(
         self,

@@ -34,11 +34,11 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import replace
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
-from agent.core.config import PLANNER_NAMES, PlannerConfig
+from agent.core.config import PLANNER_NAMES, PlannerConfig, RobotLimits
 from agent.core.types import Observation, PlanDebug, PlanResult, PlanStatus, Side, StageTimes
 from agent.planning.estimation import ESTIMATION_WINDOW_S
 from agent.planning.guidance import RouteGuide
@@ -52,6 +52,10 @@ from agent.planning.safety import (
     unseen_speed_up_mps,
     unseen_turn_closing_mps,
 )
+
+if TYPE_CHECKING:  # imported on first use (osqp, scipy, pyrvo load slowly)
+    from agent.planning.mpc import MpcTracker
+    from agent.planning.orca import OrcaController
 
 Timer = Callable[[], float]
 
@@ -185,7 +189,7 @@ class ViaPointPlanner:
         self.mech = mechanisms if mechanisms is not None else mechanisms_of(name, config)
         self._selector = EifpSelector(config, self.mech) if name != "ifp" else None
         self._plan_ifp = plan_ifp
-        self._trackers: dict[object, object] = {}
+        self._trackers: dict[RobotLimits, MpcTracker] = {}
         self.guide: RouteGuide | None = None
         if self.mech.routing or self.mech.liveness is not None:
             self.guide = RouteGuide(
@@ -200,9 +204,9 @@ class ViaPointPlanner:
         if self.guide is not None:
             self.guide.reset()
         for tracker in self._trackers.values():
-            tracker.reset()  # type: ignore[attr-defined]
+            tracker.reset()
 
-    def _mpc(self, observation: Observation):
+    def _mpc(self, observation: Observation) -> MpcTracker:
         from agent.planning.mpc import DEFAULT_TUNING, PAPER_TUNING, MpcTracker
 
         key = observation.limits
@@ -320,6 +324,9 @@ class ViaPointPlanner:
         the others' turns count too (`unseen_turn_closing_mps`, the larger of the two per
         other); the first pass's bound is then at least the largest turn term."""
         ego, limits, others = observation.ego, observation.limits, observation.others
+        # `Others` fills its optional columns on construction (NaN where unknown)
+        assert others.heading_rad is not None and others.recent_turn_rate_radps is not None
+        assert others.recent_interval_s is not None
         reaction_s = observation.pose_age_s + self.control_period_s
         # how much an other robot's velocity estimate may trail its velocity now
         lag_s = 0.5 * ESTIMATION_WINDOW_S + observation.pose_age_s
@@ -401,7 +408,7 @@ class OrcaPlanner:
         self.config = config
         self.control_period_s = control_period_s
         self._timer = timer
-        self._controllers: dict[object, object] = {}
+        self._controllers: dict[RobotLimits, OrcaController] = {}
 
     def reset(self) -> None:
         """ORCA keeps no memory between cycles."""

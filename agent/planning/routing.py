@@ -194,7 +194,8 @@ def segment_disc_distance(a_m: np.ndarray, b_m: np.ndarray, center_m: np.ndarray
     rx, ry = center_m[None, :, 0] - ax, center_m[None, :, 1] - ay
     t = np.clip(np.divide(rx * sx + ry * sy, seg_sq, out=np.zeros_like(rx),
                           where=seg_sq > 0.0), 0.0, 1.0)
-    return np.hypot(rx - t * sx, ry - t * sy)
+    dist: np.ndarray = np.hypot(rx - t * sx, ry - t * sy)
+    return dist
 
 
 def segment_clears(a_m: np.ndarray, b_m: np.ndarray, center_m: np.ndarray,
@@ -212,14 +213,16 @@ def segment_clears(a_m: np.ndarray, b_m: np.ndarray, center_m: np.ndarray,
     if center_m.shape[0] == 0:
         return np.ones(a_m.shape[0], dtype=bool)
     d = segment_disc_distance(a_m, b_m, center_m)
-    return (d >= keep_m - LOOKAHEAD_TOLERANCE_M).all(axis=1)
+    clears: np.ndarray = np.all(d >= keep_m - LOOKAHEAD_TOLERANCE_M, axis=1)
+    return clears
 
 
 def _endpoint_keep(point_m: np.ndarray, center_m: np.ndarray, keep_m: np.ndarray) -> np.ndarray:
     """The distance a segment from `point_m` must keep from each disc: the clearance, or
     less when the point itself is closer (a start inside a margin is not cut off)."""
     here = np.hypot(*(center_m - point_m).T)
-    return np.minimum(keep_m, np.maximum(here - LOOKAHEAD_TOLERANCE_M, 0.0))
+    keep: np.ndarray = np.minimum(keep_m, np.maximum(here - LOOKAHEAD_TOLERANCE_M, 0.0))
+    return keep
 
 
 def _ring_nodes(static: StaticMap, keep_m: np.ndarray) -> np.ndarray:
@@ -232,7 +235,8 @@ def _ring_nodes(static: StaticMap, keep_m: np.ndarray) -> np.ndarray:
            + ring[:, None, None] * np.stack((np.cos(angle), np.sin(angle)), axis=1)[None])
     pts = pts.reshape(-1, 2)
     d = np.hypot(*(pts[:, None, :] - static.center_m[None, :, :]).transpose(2, 0, 1))
-    return pts[(d >= keep_m[None, :] - LOOKAHEAD_TOLERANCE_M).all(axis=1)]
+    outside: np.ndarray = pts[(d >= keep_m[None, :] - LOOKAHEAD_TOLERANCE_M).all(axis=1)]
+    return outside
 
 
 @dataclass(frozen=True)
@@ -305,7 +309,9 @@ def plan_route(start_m: np.ndarray, goal_m: np.ndarray, static: StaticMap,
     w = np.hypot(*(nodes[i] - nodes[j]).T)
     matrix = csr_matrix((np.concatenate((w, w)), (np.concatenate((i, j)),
                                                   np.concatenate((j, i)))), shape=(n, n))
-    dist, pred = dijkstra(matrix, directed=True, indices=0, return_predecessors=True)
+    # scipy-stubs type `indices` as an array or a sequence; scipy also takes one index
+    dist, pred = dijkstra(matrix, directed=True, indices=0,  # type: ignore[call-overload]
+                          return_predecessors=True)
     if not math.isfinite(float(dist[1])):
         return None
     path = [1]
@@ -408,8 +414,10 @@ class RouteFollower:
         wps = self.route.waypoints_m
         blocking = self.static if also is None else self.static.with_discs(
             also.center_m, also.radius_m)
+        aim: np.ndarray
         if self._next >= wps.shape[0] - 1 and len(blocking) == 0:
-            return wps[-1]
+            aim = wps[-1]
+            return aim
         keep = blocking.radius_m + self.route.clearance_m
         here = np.asarray(position_m, dtype=float)
         ahead = wps[self._next:]
@@ -426,7 +434,8 @@ class RouteFollower:
         if not seen.any():
             return None
         self._next += int(np.flatnonzero(seen)[-1])
-        return wps[self._next]
+        aim = wps[self._next]
+        return aim
 
     def progress_left_m(self, position_m: np.ndarray) -> float:
         """Route length still to go: to the next waypoint, then along the route [m]."""

@@ -158,7 +158,8 @@ class NaturalCubicSpline:
                  for i in range(1, n)]
         first = 0 if start_tangent is not None else 1
         if rows:
-            diag, rhs = [], []
+            diag: list[float] = []
+            rhs: list[complex] = []
             for sub, d_i, _sup, r_i in rows:  # forward sweep
                 if diag:
                     f = sub / diag[-1]
@@ -563,7 +564,8 @@ def polyline_point_ahead(waypoints_m: np.ndarray, distance_m: float) -> np.ndarr
     """
     wp = np.asarray(waypoints_m, dtype=float)
     if wp.shape[0] == 1:
-        return wp[0].copy()
+        first: np.ndarray = wp[0].copy()
+        return first
     s = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(wp, axis=0).T))))
     d = min(max(float(distance_m), 0.0), float(s[-1]))
     return np.array([np.interp(d, s, wp[:, 0]), np.interp(d, s, wp[:, 1])])

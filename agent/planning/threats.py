@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import numpy.typing as npt
 
 from agent.core.types import Others, Threat
 
@@ -32,7 +33,7 @@ _EMPTY_INDEX = np.zeros(0, dtype=np.intp)
 _EMPTY_FLOAT = np.zeros(0)
 
 
-def require_finite(name: str, *values: object) -> None:
+def require_finite(name: str, *values: npt.ArrayLike) -> None:
     """Raise `ValueError` naming `name` if any value holds a NaN or an infinity.
 
     Args:

@@ -64,7 +64,8 @@ def step(state: np.ndarray, control: np.ndarray, dt_s: float) -> np.ndarray:
         np.broadcast_arrays(v * np.cos(theta) * dt_s, v * np.sin(theta) * dt_s, omega * dt_s),
         axis=-1,
     )
-    return state + delta
+    stepped: np.ndarray = state + delta
+    return stepped
 
 
 def rollout(state: np.ndarray, controls: np.ndarray, dt_s: float) -> np.ndarray:
@@ -221,15 +222,19 @@ def lookahead_point(
         raise ValueError("reference: empty")
     nearest = int(np.argmin(np.sum((pts - (x_m, y_m)) ** 2, axis=1)))
     ahead = pts[nearest:]
+    aim: np.ndarray
     if ahead.shape[0] == 1:
-        return ahead[0].copy()
+        aim = ahead[0].copy()
+        return aim
     seg = np.hypot(*np.diff(ahead, axis=0).T)
     arc = np.concatenate(([0.0], np.cumsum(seg)))
     if lookahead_m >= arc[-1]:
-        return ahead[-1].copy()
+        aim = ahead[-1].copy()
+        return aim
     i = int(np.searchsorted(arc, lookahead_m, side="right")) - 1
     frac = (lookahead_m - arc[i]) / seg[i] if seg[i] > 0.0 else 0.0
-    return ahead[i] + frac * (ahead[i + 1] - ahead[i])
+    aim = ahead[i] + frac * (ahead[i + 1] - ahead[i])
+    return aim
 
 
 def heading_law(

@@ -37,8 +37,9 @@ class ProgressLine:
         self._bar: Progress | None = None
         self._task: TaskID | None = None
 
-    def __call__(self, progress: Any) -> None:
-        """Accepts `LockstepProgress` or `DistributedProgress` (same field names)."""
+    def __call__(self, progress: object) -> None:
+        """Accepts `LockstepProgress` or `DistributedProgress` (same field names, read with
+        `getattr`)."""
         if self.quiet:
             return
         arrived = getattr(progress, "arrived", ())

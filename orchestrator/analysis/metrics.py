@@ -60,7 +60,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import asdict, dataclass, field
-from typing import Any
+from typing import Any, TypedDict
 
 import numpy as np
 
@@ -274,7 +274,8 @@ class RunMetrics:
 
     def to_json_dict(self) -> dict[str, Any]:
         """Plain JSON types; NaN and infinities become None."""
-        return _jsonable(asdict(self))
+        plain: dict[str, Any] = _jsonable(asdict(self))
+        return plain
 
 
 # --------------------------------------------------------------------------------------
@@ -463,7 +464,16 @@ def compute_metrics(traj: Trajectory, commands: Commands, spec: RunSpec, *,
                         control_period_s=control_period_s, world_dt_s=world_dt_s)
 
 
-def _plan_ms(plan_ms: np.ndarray) -> dict[str, float | None]:
+class _PlanMs(TypedDict):
+    """The planning-time fields of `RobotMetrics` and `RunMetrics` [ms]."""
+
+    plan_ms_mean: float | None
+    plan_ms_p50: float | None
+    plan_ms_p99: float | None
+    plan_ms_max: float | None
+
+
+def _plan_ms(plan_ms: np.ndarray) -> _PlanMs:
     """Mean, p50, p99 and largest planning time [ms] (None without plans)."""
     return {"plan_ms_mean": float(plan_ms.mean()) if plan_ms.size else None,
             "plan_ms_p50": _pct(plan_ms, 50), "plan_ms_p99": _pct(plan_ms, 99),
@@ -578,7 +588,17 @@ def _run_metrics(per_robot: list[RobotMetrics], traj: Trajectory, commands: Comm
     )
 
 
-def _arrival_means(per_robot: list[RobotMetrics]) -> dict[str, float | None]:
+class _ArrivalMeans(TypedDict):
+    """The arrival fields of `RunMetrics`."""
+
+    path_length_mean_m: float | None
+    path_ratio_mean: float | None
+    time_to_goal_mean_s: float | None
+    time_ratio_mean: float | None
+    makespan_s: float | None
+
+
+def _arrival_means(per_robot: list[RobotMetrics]) -> _ArrivalMeans:
     """Means over the robots that arrived, and the makespan if every robot did."""
     arrived = [r for r in per_robot if r.arrived]
     return {
@@ -591,7 +611,17 @@ def _arrival_means(per_robot: list[RobotMetrics]) -> dict[str, float | None]:
     }
 
 
-def _turning(per_robot: list[RobotMetrics], *, has_side: bool) -> dict[str, Any]:
+class _Turning(TypedDict):
+    """The oscillation and side-flip fields of `RunMetrics`."""
+
+    oscillations_per_robot: float
+    oscillations_total: int
+    oscillations_max: int
+    reversal_causes_per_robot: dict[str, float]
+    side_flips_per_robot: float | None
+
+
+def _turning(per_robot: list[RobotMetrics], *, has_side: bool) -> _Turning:
     """Oscillations (per robot, total, largest), their causes per robot and the side flips
     per robot (None without the side columns)."""
     n = len(per_robot)

@@ -9,6 +9,7 @@ import io
 import sys
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from matplotlib.axes import Axes
@@ -130,11 +131,14 @@ def _contact_spot(data: RunData, t_s: float, id_a: int, id_b: int) -> np.ndarray
     col = {r.id: i for i, r in enumerate(s.robots)}
 
     def centre(i: int) -> np.ndarray | None:
+        xy: np.ndarray
         if i in col:
-            return traj.pose[k, col[i], :2]
+            xy = traj.pose[k, col[i], :2]
+            return xy
         for o in s.obstacles:
             if o.id == i:
-                return np.asarray(o.center) + np.asarray(o.velocity) * traj.t_s[k]
+                xy = np.asarray(o.center) + np.asarray(o.velocity) * traj.t_s[k]
+                return xy
         return None
 
     a, b = centre(id_a), centre(id_b)
@@ -186,8 +190,8 @@ def animate(data: RunData, path: Path, *, fps: int = 10, max_frames: int = 200,
     ax.set_aspect("equal", adjustable="box")
     ax.set_xlim(mid[0] - half, mid[0] + half)
     ax.set_ylim(mid[1] - half, mid[1] + half)
-    discs = [Circle(traj.pose[0, k, :2], r.radius_m, fc=c, ec="black", lw=0.5, alpha=0.85,
-                    zorder=3) for k, (r, c) in enumerate(zip(s.robots, colours))]
+    discs = [Circle(tuple(traj.pose[0, k, :2].tolist()), r.radius_m, fc=c, ec="black", lw=0.5,
+                    alpha=0.85, zorder=3) for k, (r, c) in enumerate(zip(s.robots, colours))]
     for d in discs:
         ax.add_patch(d)
     trails = [ax.plot([], [], c=c, lw=1.0, zorder=2)[0] for c in colours]
@@ -218,7 +222,7 @@ def animate(data: RunData, path: Path, *, fps: int = 10, max_frames: int = 200,
         writer.send(None)  # start the generator
     for i in frames.tolist():
         for k, (d, line) in enumerate(zip(discs, trails)):
-            d.set_center(traj.pose[i, k, :2])
+            d.set_center(tuple(traj.pose[i, k, :2].tolist()))
             seg = traj.pose[max(0, i - tail):i + 1, k, :2]
             line.set_data(seg[:, 0], seg[:, 1])
         clock.set_text(f"t = {traj.t_s[i]:.1f} s")
@@ -382,7 +386,7 @@ def plot_wall_latency(stamps: np.ndarray, path: Path) -> Path | None:
     return path
 
 
-def plot_benchmark(rows: Sequence[Mapping], path: Path, *, title: str = "") -> Path:
+def plot_benchmark(rows: Sequence[Mapping[str, Any]], path: Path, *, title: str = "") -> Path:
     """The benchmark at a glance: per case, planners side by side, three panels.
 
     Success rate (%); oscillations per robot (bar: median over the robots, tick: the

@@ -118,7 +118,7 @@ def read_commands(path: Path) -> Commands:
 
 def read_events(path: Path) -> list[dict[str, Any]]:
     """`events.jsonl`; lines that are not JSON objects (a killed run's last) are skipped."""
-    events = []
+    events: list[dict[str, Any]] = []
     if not path.exists():
         return events
     with open(path, encoding="utf-8") as f:

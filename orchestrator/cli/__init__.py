@@ -12,9 +12,8 @@ import logging
 import sys
 import threading
 import traceback
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from types import ModuleType
-from typing import Any
 
 from agent.files import UnsafePathError
 from agent.flags import Parser
@@ -89,7 +88,7 @@ def one_line(text: str) -> str:
     return text if len(text) <= MAX_ERROR_CHARS else text[:MAX_ERROR_CHARS - 3] + "..."
 
 
-def guarded(func: Any, args: argparse.Namespace) -> int:
+def guarded(func: Callable[[argparse.Namespace], int], args: argparse.Namespace) -> int:
     """Run a subcommand and map its failure to an exit status (a traceback only for bugs)."""
     try:
         return int(func(args))

@@ -9,6 +9,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 from agent.core.config import PLANNER_NAMES
 from agent.flags import non_negative_int, positive, positive_int, robot_counts
@@ -32,7 +33,7 @@ def _planners(text: str) -> list[str]:
     return names
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     parser = sub.add_parser(
         "bench", help="planning time per cycle by stage, per planner and crowd size; "
                       "--process: a robot process's own CPU per cycle",
@@ -70,7 +71,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     parser.set_defaults(func=run)
 
 
-def _json_safe(row: dict) -> dict:
+def _json_safe(row: dict[str, Any]) -> dict[str, Any]:
     return {k: (None if isinstance(v, float) and not math.isfinite(v) else v)
             for k, v in row.items()}
 

@@ -26,7 +26,7 @@ if TYPE_CHECKING:
     from orchestrator.experiments.benchmark import Case
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     from orchestrator.experiments.benchmark import (
         DEFAULT_PLANNERS,
         EVALUATION_SEEDS,

@@ -8,7 +8,7 @@ from agent.core.config import PLANNER_NAMES
 from agent.process import ExitCode
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("list", help="setups, families and planners")
     p.set_defaults(func=run)
 

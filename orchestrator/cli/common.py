@@ -5,10 +5,13 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 from agent.core.scenario import Scenario
 from agent.flags import add_link_fault_flags
+
+if TYPE_CHECKING:
+    from world.sim.faults import FaultPlan
 
 MODES = ("distributed", "lockstep")
 DEFAULT_RUNS_DIR = Path("runs")
@@ -79,7 +82,8 @@ def add_fault_args(p: argparse.ArgumentParser) -> None:
                    help="SIGKILL robot I at T and start it again with the same id")
 
 
-def fault_plan(args: argparse.Namespace, scenario: Scenario, *, links: bool = True) -> Any:
+def fault_plan(args: argparse.Namespace, scenario: Scenario, *, links: bool = True
+               ) -> FaultPlan | None:
     """The `FaultPlan` of the fault flags, checked against `scenario` (robot ids, lockstep
     rates), or None when no fault flag is given. `links=False` leaves the link flags and
     the seed out: `stress` sets those per level and run, the robot faults apply to all."""

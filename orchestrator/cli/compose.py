@@ -21,7 +21,7 @@ from orchestrator.experiments.compose import (
 # command line
 # --------------------------------------------------------------------------------------
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     parser = sub.add_parser(
         "compose", help="steps of the docker-compose demo",
         description="Steps of the docker-compose demo (compose.yaml): the run's certificates, "

@@ -8,6 +8,7 @@ import math
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 from agent.flags import positive_int
 from agent.process import ExitCode
@@ -36,7 +37,7 @@ from orchestrator.experiments.paper import (
 )
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "paper", help="the paper's Table I: A-G x seeds for IFP, eIFP, eIFP-MPC, paper profile",
         description="Run setups A-G for IFP, eIFP and eIFP-MPC exactly as the paper writes "
@@ -74,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.monotonic()
     done = [0]
 
-    def on_done(row: dict) -> None:
+    def on_done(row: dict[str, Any]) -> None:
         done[0] += 1
         print(f"  [{done[0]}/{len(jobs)}] {row['dir']}: success {row.get('success')} "
               f"({row['wall_s']:.1f} s)" + (f" ERROR {row['error']}" if row.get("error") else ""),

@@ -19,7 +19,7 @@ if TYPE_CHECKING:
     from orchestrator.analysis.report import RunRecord
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("report", help="mean ± std over seeds per setup and planner, plots")
     p.add_argument("dirs", nargs="+", help="run or sweep directories")
     p.add_argument("--paper", action="store_true", help="print the paper's Table I beside ours")

@@ -8,7 +8,7 @@ import math
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from agent.core.config import PLANNER_NAMES, PROFILES
 from agent.core.scenario import Scenario
@@ -30,6 +30,11 @@ from orchestrator.cli.common import (
     tls_ca,
 )
 
+if TYPE_CHECKING:
+    from orchestrator.analysis.metrics import RunMetrics
+    from world.mcap_log import LiveView
+    from world.sim.faults import FaultPlan
+
 RUN_ENDINGS = frozenset({ExitCode.OK, ExitCode.CONTACT, ExitCode.INCOMPLETE, ExitCode.ROBOT_LOST,
                          ExitCode.INTERRUPTED})
 """World exit statuses of a run that ended normally (anything else: the world was lost)."""
@@ -43,7 +48,7 @@ outlast any start-up deadline on a small host, while the fork launcher starts th
 a time from a parent that imported once."""
 
 
-def choose_launcher(requested: str, robots: int, faults: Any) -> str:
+def choose_launcher(requested: str, robots: int, faults: FaultPlan | None) -> str:
     """The robot launcher of a distributed run (see `FORK_ABOVE_ROBOTS`).
 
     Raises:
@@ -56,7 +61,7 @@ def choose_launcher(requested: str, robots: int, faults: Any) -> str:
     return "fork" if robots > FORK_ABOVE_ROBOTS and faults is None else "spawn"
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("run", help="run one scenario")
     p.add_argument("--profile", choices=PROFILES, default=None,
                    help="planner configuration: default or paper (the paper\'s method as "
@@ -160,6 +165,7 @@ def run(args: argparse.Namespace) -> int:
     wall0 = time.monotonic()
     interrupted = False
     world_status: int | None = None
+    metrics: RunMetrics | None
     try:
         if args.mode == "lockstep":
             from orchestrator.experiments.lockstep import run_lockstep
@@ -223,7 +229,7 @@ def claim_run_dir(out_dir: Path, started: dict[str, Any]) -> None:
         raise BadInput(f"--out: {out_dir} is taken by another run") from None
 
 
-def _partial_metrics(out_dir: Path) -> Any:
+def _partial_metrics(out_dir: Path) -> RunMetrics | None:
     """The metrics of what an interrupted run recorded (written, marked partial), or None."""
     from orchestrator.analysis.rundir import RunDirError, metrics_from_run_dir, write_metrics
 
@@ -235,7 +241,7 @@ def _partial_metrics(out_dir: Path) -> Any:
     return metrics
 
 
-def _start_live(args: argparse.Namespace, scenario: Scenario) -> Any:
+def _start_live(args: argparse.Namespace, scenario: Scenario) -> LiveView | None:
     """The live Foxglove server of ``--live`` (printing its address), or None."""
     if not args.live:
         return None
@@ -251,9 +257,9 @@ def _start_live(args: argparse.Namespace, scenario: Scenario) -> Any:
 
 
 def _run_distributed(scenario: Scenario, out_dir: Path, args: argparse.Namespace,
-                     progress: ProgressLine, faults: Any = None,
-                     live: Any = None, launcher: str = "spawn",
-                     ca_dir: Path | None = None) -> tuple[Any, int]:
+                     progress: ProgressLine, faults: FaultPlan | None = None,
+                     live: LiveView | None = None, launcher: str = "spawn",
+                     ca_dir: Path | None = None) -> tuple[RunMetrics | None, int]:
     """Run the real processes; (metrics or None, the world's exit status)."""
     from orchestrator.experiments.distributed import run_scenario_distributed
 

@@ -31,7 +31,7 @@ def _hosts(text: str) -> list[str]:
     return hosts
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     parser = sub.add_parser(
         "scale", help="real-time runs of N robot processes: timing, CPU, memory per robot",
         description="Real-time distributed runs of N robot processes: timing, CPU, memory, "

@@ -7,6 +7,7 @@ import itertools
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 from agent.core.config import PLANNER_NAMES, PROFILES
 from agent.flags import link_faults
@@ -24,7 +25,7 @@ from orchestrator.cli.common import (
 )
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("stress", help="fault levels x planners x seeds: table and envelope")
     p.add_argument("--profile", choices=PROFILES, default=None,
                    help="planner configuration: default or paper (the paper\'s method as "
@@ -93,7 +94,7 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.monotonic()
     done = [0]
 
-    def on_done(row: dict) -> None:
+    def on_done(row: dict[str, Any]) -> None:
         done[0] += 1
         print(f"  [{done[0]}/{len(jobs)}] {row['dir']}: contacts {row.get('contacts')} "
               f"success {row.get('success')} ({row['wall_s']:.1f} s)"

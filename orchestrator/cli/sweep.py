@@ -29,7 +29,7 @@ SWEEP_RUN_TIMEOUT_S = 4 * 3600.0
 """Wall time after which one run of a sweep is abandoned."""
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("sweep", help="many runs: setups x planners x seeds")
     p.add_argument("--profile", choices=PROFILES, default=None,
                    help="planner configuration: default or paper (the paper\'s method as "

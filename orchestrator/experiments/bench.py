@@ -43,18 +43,15 @@ import time
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from agent.core.scenario import Scenario
 from agent.core.types import PlanStatus, PoseSnapshot, StageTimes
 from agent.planning.mpc import DEFAULT_TUNING
-from orchestrator.experiments.families import (
-    MIN_START_SPACING_M,
-    circle,
-    jitter_starts,
-    with_planner,
-)
+from orchestrator.experiments.families import circle, jitter_starts, with_planner
+from orchestrator.experiments.scenario_blocks import MIN_START_SPACING_M
 
 WORLD_RATE_HZ = 50.0
 CONTROL_RATE_HZ = 10.0
@@ -85,10 +82,10 @@ class BenchSamples:
         default_factory=lambda: {s: [] for s in STAGES})
     in_range: list[int] = field(default_factory=list)
     considered: list[int] = field(default_factory=list)
-    statuses: Counter = field(default_factory=Counter)
+    statuses: Counter[str] = field(default_factory=Counter)
     solver_iterations: list[int] = field(default_factory=list)
     """OSQP iterations per counted cycle (eIFP-MPC; 0 where OSQP was not called)."""
-    excluded: Counter = field(default_factory=Counter)
+    excluded: Counter[str] = field(default_factory=Counter)
     warmup: int = 0
     episodes: int = 0
     passed_centre: int = 0
@@ -149,7 +146,8 @@ def _in_range(snapshot: PoseSnapshot, sensing_radius_m: float) -> np.ndarray:
     gap = xy[None, :, :] - xy[rows, None, :]  # (n, n_all, 2), centre to centre
     dist = np.hypot(gap[..., 0], gap[..., 1])
     dist[np.arange(rows.size), rows] = np.inf  # not oneself
-    return np.count_nonzero(dist <= sensing_radius_m, axis=1)
+    counts: np.ndarray = np.count_nonzero(dist <= sensing_radius_m, axis=1)
+    return counts
 
 
 def _percentiles(values: Sequence[float]) -> tuple[float, float, float]:
@@ -231,10 +229,10 @@ def run_bench(planner: str, n: int, cycles: int, seed: int = 0) -> BenchSamples:
 
 
 def summarize(planner: str, n: int, samples: BenchSamples, *, seed: int, wall_s: float,
-              scenario: Scenario) -> dict:
+              scenario: Scenario) -> dict[str, Any]:
     """One row of figures (the JSON object of the row)."""
     cfg = scenario.planner_config
-    row: dict = {"planner": planner, "robots": n, "cycles": len(samples)}
+    row: dict[str, Any] = {"planner": planner, "robots": n, "cycles": len(samples)}
     for name, values in (("plan", samples.plan_ms), ("cpu", samples.cpu_ms),
                          *((s, samples.stage_ms[s]) for s in STAGES)):
         p50, p99, top = _percentiles(values)
@@ -267,7 +265,7 @@ def summarize(planner: str, n: int, samples: BenchSamples, *, seed: int, wall_s:
     return row
 
 
-def _iteration_figures(iterations: Sequence[int], cap: int) -> dict:
+def _iteration_figures(iterations: Sequence[int], cap: int) -> dict[str, Any]:
     """OSQP iterations of the cycles that called it: p50, p99, max and the share at the cap.
 
     The MPC stage's time tail is its iteration tail (about 6 us an iteration here), so
@@ -282,11 +280,11 @@ def _iteration_figures(iterations: Sequence[int], cap: int) -> dict:
             "solver_at_cap_frac": float(np.mean(called >= cap)), "solver_max_iter": cap}
 
 
-def _ms(row: dict, name: str) -> str:
+def _ms(row: dict[str, Any], name: str) -> str:
     return "/".join(f"{row[f'{name}_ms_{q}']:.3f}" for q in ("p50", "p99", "max"))
 
 
-def format_rows(rows: Sequence[dict]) -> str:
+def format_rows(rows: Sequence[dict[str, Any]]) -> str:
     """The table: one line per (planner, N); times in ms as p50/p99/max."""
     from orchestrator.analysis.report import format_table
 

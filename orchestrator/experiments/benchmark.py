@@ -30,7 +30,7 @@ import traceback
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, SupportsFloat, TypeGuard
 
 import numpy as np
 
@@ -38,6 +38,9 @@ from agent.core.scenario import Scenario
 from orchestrator.analysis.rundir import end_event, run_ending, safe_name, write_json
 from orchestrator.experiments.families import SETUPS, resolve
 from orchestrator.experiments.scenario_blocks import ideal_time_s
+
+if TYPE_CHECKING:
+    from orchestrator.analysis.metrics import RunMetrics
 
 TUNING_SEEDS: tuple[int, ...] = tuple(range(100, 106))
 """Seeds to tune planners on (`--seeds tuning`, 100-105); never reported by default."""
@@ -268,6 +271,7 @@ def run_job(job: Job) -> dict[str, Any]:
             "started": dt.datetime.now().isoformat(timespec="seconds"),
         })
         status = None
+        metrics: RunMetrics | None
         if job.mode == "lockstep":
             from orchestrator.experiments.lockstep import run_lockstep
 
@@ -302,9 +306,10 @@ def run_jobs(jobs: Sequence[Job], *, workers: int = 1,
     records: list[dict[str, Any] | None] = [None] * len(jobs)
     if workers <= 1:
         for done, k in enumerate(order, 1):
-            records[k] = run_job(jobs[k])
+            record = run_job(jobs[k])
+            records[k] = record
             if on_done is not None:
-                on_done(done, records[k])
+                on_done(done, record)
     else:
         import concurrent.futures
         import multiprocessing
@@ -316,9 +321,10 @@ def run_jobs(jobs: Sequence[Job], *, workers: int = 1,
             futures = {pool.submit(run_job, jobs[k]): k for k in order}
             for done, fut in enumerate(concurrent.futures.as_completed(futures), 1):
                 k = futures[fut]
-                records[k] = fut.result()
+                record = fut.result()
+                records[k] = record
                 if on_done is not None:
-                    on_done(done, records[k])
+                    on_done(done, record)
     return [r for r in records if r is not None]
 
 
@@ -444,7 +450,7 @@ def target_misses(row: dict[str, Any], reference: dict[str, Any] | None = None,
     return misses
 
 
-def _is_number(value: Any) -> bool:
+def _is_number(value: object) -> TypeGuard[int | float]:
     return (isinstance(value, int | float) and not isinstance(value, bool)
             and math.isfinite(value))
 
@@ -465,7 +471,7 @@ def _per_robot(records: Iterable[dict[str, Any]], key: str,
     return np.array(out, dtype=float)
 
 
-def _stat(values: np.ndarray, fn: Callable[[np.ndarray], Any]) -> float | None:
+def _stat(values: np.ndarray, fn: Callable[[np.ndarray], SupportsFloat]) -> float | None:
     return float(fn(values)) if values.size else None
 
 

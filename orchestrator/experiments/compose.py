@@ -24,11 +24,12 @@ import time
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from agent.core.scenario import Scenario
 from agent.process import (
     ExitCode,
+    SampleSubscriber,
     SessionError,
     StopFlag,
     close_session,
@@ -183,7 +184,7 @@ class RunWatch:
     all_alive_once: bool = False
 
 
-def _drain(watch: RunWatch, robot_sub: zenoh.Subscriber, world_sub: zenoh.Subscriber,
+def _drain(watch: RunWatch, robot_sub: SampleSubscriber, world_sub: SampleSubscriber,
            keys: RunKeys) -> None:
     """Apply the liveliness changes waiting in the two channels; log what changed."""
     import zenoh
@@ -297,7 +298,7 @@ def write_report(options: SetupOptions, scenario: Scenario, time_scale: float,
     }
     write_json(run_dir / "run.json", started_info)
     events = read_events(run_dir / "events.jsonl")
-    end = next((e for e in reversed(events) if e.get("kind") == "end"), {})
+    end: dict[str, Any] = next((e for e in reversed(events) if e.get("kind") == "end"), {})
     try:
         metrics = metrics_from_run_dir(run_dir)
     except (RunDirError, OSError, ValueError) as exc:

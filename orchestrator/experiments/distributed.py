@@ -58,6 +58,7 @@ from world.scenario_file import load_scenario
 from world.sim.faults import FaultPlan, ProcessFault
 
 if TYPE_CHECKING:
+    from orchestrator.experiments.live import LiveBridge
     from world.mcap_log import LiveView
 
 WORLD_TERM_GRACE_S = 10.0
@@ -132,10 +133,10 @@ def prepare_tls(out_dir: Path, run_id: str, robot_ids: Sequence[int],
     return tls_dir
 
 
-def transport_info(endpoints: Sequence[str], tls_dir: Path | None) -> dict:
+def transport_info(endpoints: Sequence[str], tls_dir: Path | None) -> dict[str, Any]:
     """What run.json records of the transport: the endpoints a tool joins as a Zenoh client,
     whether TLS is on, and (with TLS) the CA and the read-only observer's certificate."""
-    info: dict = {"endpoints": list(dict.fromkeys(endpoints)), "tls": tls_dir is not None}
+    info: dict[str, Any] = {"endpoints": list(dict.fromkeys(endpoints)), "tls": tls_dir is not None}
     if tls_dir is not None:
         d = Path(tls_dir).resolve()
         info.update(ca=str(d / "ca.pem"), observer_cert=str(d / "observer.pem"),
@@ -197,8 +198,8 @@ class ProcessFaultScheduler:
         log_path: ``faults.jsonl``.
     """
 
-    def __init__(self, faults: Sequence[ProcessFault], robots: dict[int, subprocess.Popen],
-                 respawn: Callable[[int, int], subprocess.Popen], log_path: Path) -> None:
+    def __init__(self, faults: Sequence[ProcessFault], robots: dict[int, subprocess.Popen[bytes]],
+                 respawn: Callable[[int, int], subprocess.Popen[bytes]], log_path: Path) -> None:
         self.todo = sorted(faults, key=lambda f: f.at_s)
         self.resume: list[tuple[float, int]] = []  # (sim time, robot) of pending SIGCONTs
         self.robots = robots
@@ -248,7 +249,7 @@ class ProcessFaultScheduler:
         self.stopped.clear()
 
 
-def collect_robot_exits(out_dir: Path) -> dict:
+def collect_robot_exits(out_dir: Path) -> dict[str, Any]:
     """Every robot process's exit line, parsed (written as robots.json by the launcher)."""
     processes = []
     for log in sorted(Path(out_dir).glob("robot_*.log")):
@@ -281,7 +282,7 @@ def fleet_command(run_id: str, robot_ids: Sequence[int], endpoint: str, log_dir:
     ]
 
 
-def spawn_logged(args: list[str], log_path: Path) -> subprocess.Popen:
+def spawn_logged(args: list[str], log_path: Path) -> subprocess.Popen[bytes]:
     """Start `args` in its own process group, stdout and stderr into `log_path`."""
     log: IO[bytes] = open_new(log_path, "wb")
     try:
@@ -296,14 +297,14 @@ def spawn_logged(args: list[str], log_path: Path) -> subprocess.Popen:
         log.close()  # the child holds its own descriptor
 
 
-def _signal_group(proc: subprocess.Popen, signum: int) -> None:
+def _signal_group(proc: subprocess.Popen[bytes], signum: int) -> None:
     if proc.poll() is not None:
         return
     with contextlib.suppress(ProcessLookupError, PermissionError):
         os.killpg(proc.pid, signum)
 
 
-def stop_processes(procs: Sequence[subprocess.Popen], wait_first_s: float,
+def stop_processes(procs: Sequence[subprocess.Popen[bytes]], wait_first_s: float,
                    term_grace_s: float) -> None:
     """Let `procs` exit within wait_first_s, then SIGTERM, then SIGKILL; reap all of them."""
     deadline = time.monotonic() + wait_first_s
@@ -409,7 +410,7 @@ def run_distributed(
             children.robots.append(spawn_logged(
                 launch.fleet_command(robot_nice=robot_nice, cpu_tokens=cpu_tokens),
                 launch.out_dir / "fleet.log"))
-            current: dict[int, subprocess.Popen] = {}
+            current: dict[int, subprocess.Popen[bytes]] = {}
         else:
             current = {rid: children.spawn_robot(rid) for rid in launch.robot_ids}
         children.scheduler = ProcessFaultScheduler(faults.process if faults else (), current,
@@ -492,7 +493,7 @@ class _Launch:
                              cpu_tokens=cpu_tokens, robot_args=self.robot_args,
                              tls_dir=self.tls_dir)
 
-    def live_bridge(self, live: LiveView) -> Any:
+    def live_bridge(self, live: LiveView) -> LiveBridge:
         """A started passive client republishing the run to `live`; read-only: the
         observer's certificate (the access control lets it subscribe)."""
         from orchestrator.experiments.live import LiveBridge
@@ -508,12 +509,12 @@ class _Children:
     """The processes of one distributed run, and what tears them down."""
 
     launch: _Launch
-    world: subprocess.Popen | None = None
-    robots: list[subprocess.Popen] = field(default_factory=list)
+    world: subprocess.Popen[bytes] | None = None
+    robots: list[subprocess.Popen[bytes]] = field(default_factory=list)
     scheduler: ProcessFaultScheduler | None = None
-    bridge: Any = None
+    bridge: LiveBridge | None = None
 
-    def spawn_robot(self, rid: int, restart: int = 0) -> subprocess.Popen:
+    def spawn_robot(self, rid: int, restart: int = 0) -> subprocess.Popen[bytes]:
         """Start robot `rid`'s process (its `restart`-th replacement if > 0)."""
         name = f"robot_{rid}.log" if not restart else f"robot_{rid}.restart{restart}.log"
         proc = spawn_logged(self.launch.robot_command(rid), self.launch.out_dir / name)
@@ -573,9 +574,8 @@ def _torn_down_on_exit(teardown: Callable[[], None]) -> Iterator[None]:
     cut it short and leave orphans. The previous handlers are back afterwards.
     """
     in_main = threading.current_thread() is threading.main_thread()
-    previous: dict[int, Any] = {}
-    if in_main:
-        previous = {s: signal.signal(s, raise_interrupt) for s in (signal.SIGTERM, signal.SIGHUP)}
+    previous = ({s: signal.signal(s, raise_interrupt) for s in (signal.SIGTERM, signal.SIGHUP)}
+                if in_main else {})
     try:
         yield
     finally:
@@ -590,7 +590,7 @@ def _torn_down_on_exit(teardown: Callable[[], None]) -> Iterator[None]:
                 signal.signal(signum, handler if handler is not None else signal.SIG_DFL)
 
 
-def _record_transport(out_dir: Path, info: dict) -> None:
+def _record_transport(out_dir: Path, info: dict[str, Any]) -> None:
     """Add ``zenoh`` (`transport_info`) to the run directory's run.json (made if absent)."""
     from orchestrator.analysis.rundir import read_json, write_json
 

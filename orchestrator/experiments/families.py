@@ -317,7 +317,7 @@ def swap_pairs(n: int, rng: np.random.Generator | None = None) -> Scenario:
     require(n >= 2 and n % 2 == 0, f"swap_pairs: --agents must be a positive even number, "
             f"got {n}")
     half = SWAP_RUN_M / 2.0
-    robots = []
+    robots: list[RobotSpec] = []
     for y in lane_offsets(n // 2, SWAP_PAIR_SPACING_M):
         robots.append(robot_spec(len(robots), (-half, y), (half, y)))
         robots.append(robot_spec(len(robots), (half, y), (-half, y)))

@@ -24,7 +24,13 @@ import time
 import zenoh
 
 from agent.core.scenario import Scenario
-from agent.process import SessionError, StopFlag, close_session, open_session
+from agent.process import (
+    SampleSubscriber,
+    SessionError,
+    StopFlag,
+    close_session,
+    open_session,
+)
 from eifp_wire import (
     CommandMsg,
     PlanDebugMsg,
@@ -110,7 +116,7 @@ class LiveBridge:
         finally:
             close_session(session)
 
-    def _drain_poses(self, sub: zenoh.Subscriber) -> bool:
+    def _drain_poses(self, sub: SampleSubscriber) -> bool:
         busy = False
         while (sample := sub.try_recv()) is not None:
             busy = True
@@ -125,7 +131,7 @@ class LiveBridge:
                 self.live.time(msg.t_s)
         return busy
 
-    def _drain_commands(self, sub: zenoh.Subscriber) -> bool:
+    def _drain_commands(self, sub: SampleSubscriber) -> bool:
         busy = False
         while (sample := sub.try_recv()) is not None:
             busy = True
@@ -142,7 +148,7 @@ class LiveBridge:
                              msg.side, msg.resolved_id)
         return busy
 
-    def _drain_plans(self, sub: zenoh.Subscriber) -> bool:
+    def _drain_plans(self, sub: SampleSubscriber) -> bool:
         busy = False
         while (sample := sub.try_recv()) is not None:
             busy = True

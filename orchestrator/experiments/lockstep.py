@@ -12,6 +12,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+
 from agent.core.scenario import Scenario
 from orchestrator.analysis.metrics import RunMetrics
 from orchestrator.analysis.rundir import metrics_from_run_dir, write_metrics
@@ -71,7 +73,8 @@ class PacedSink:
         self.time_scale = float(time_scale)
         self._wall0: float | None = None
 
-    def record_tick(self, t_s: float, robot_ids: Any, pose: Any, applied: Any) -> None:
+    def record_tick(self, t_s: float, robot_ids: np.ndarray, pose: np.ndarray,
+                    applied: np.ndarray) -> None:
         now = time.monotonic()
         if self._wall0 is None:
             self._wall0 = now - t_s / self.time_scale

@@ -15,6 +15,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 
 @dataclass(frozen=True)
@@ -42,7 +43,7 @@ class DistributedProgress:
     contacts: int
     lost: frozenset[int]
     robots_running: int
-    events: tuple[dict, ...] = field(repr=False, default=())
+    events: tuple[dict[str, Any], ...] = field(repr=False, default=())
 
 
 class EventTail:
@@ -51,9 +52,9 @@ class EventTail:
     def __init__(self, path: Path) -> None:
         self.path = path
         self.offset = 0
-        self.events: list[dict] = []
+        self.events: list[dict[str, Any]] = []
 
-    def poll(self) -> list[dict]:
+    def poll(self) -> list[dict[str, Any]]:
         try:
             with open(self.path, "rb") as f:
                 f.seek(self.offset)
@@ -91,8 +92,8 @@ def last_trajectory_time(path: Path) -> float:
     return 0.0
 
 
-def distributed_progress(events: list[dict], out_dir: Path, t0: float, n_robots: int,
-                         robots: Sequence[subprocess.Popen]) -> DistributedProgress:
+def distributed_progress(events: list[dict[str, Any]], out_dir: Path, t0: float, n_robots: int,
+                         robots: Sequence[subprocess.Popen[bytes]]) -> DistributedProgress:
     """What `events` (a run's events.jsonl so far) and its trajectory.csv say of a run
     launched at monotonic `t0`, with `robots` its robot processes."""
     arrived: set[int] = set()

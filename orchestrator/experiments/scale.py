@@ -230,7 +230,7 @@ def _cpu_at(series: Sequence[tuple[float, float]], t: float) -> float:
 # One run per N
 # --------------------------------------------------------------------------------------
 
-def _events(out_dir: Path) -> list[dict]:
+def _events(out_dir: Path) -> list[dict[str, Any]]:
     from orchestrator.analysis.rundir import read_events
 
     path = out_dir / "events.jsonl"
@@ -255,17 +255,17 @@ def cpu_per_plan_ms(exits: dict[str, Any]) -> dict[str, float | None]:
     return out
 
 
-def scale_row(metrics: dict[str, Any], events: Sequence[dict], sampler: ResourceSampler, *,
-              n: int, family: str, planner: str, spawn_wall: float, spawn_mono: float,
-              wall_s: float, time_scale: float, world_status: int,
-              launcher: str = "spawn", exits: dict[str, Any] | None = None
+def scale_row(metrics: dict[str, Any], events: Sequence[dict[str, Any]],
+              sampler: ResourceSampler, *, n: int, family: str, planner: str,
+              spawn_wall: float, spawn_mono: float, wall_s: float, time_scale: float,
+              world_status: int, launcher: str = "spawn", exits: dict[str, Any] | None = None
               ) -> dict[str, Any]:
     """One table row from a finished run (see the module docstring for each column).
 
     `exits`: the run's robots.json (`orchestrator.experiments.distributed.collect_robot_exits`).
     """
     lost = {int(e["robot"]) for e in events if e.get("kind") == "robot_lost" and "robot" in e}
-    end = next((e for e in reversed(events) if e.get("kind") == "end"), {})
+    end: dict[str, Any] = next((e for e in reversed(events) if e.get("kind") == "end"), {})
     sim_time_s = float(metrics.get("sim_time_s") or 0.0)
     return {
         "agents": n,
@@ -300,7 +300,7 @@ def _metric_columns(metrics: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-def _alive_s(events: Sequence[dict], n: int, spawn_wall: float) -> float | None:
+def _alive_s(events: Sequence[dict[str, Any]], n: int, spawn_wall: float) -> float | None:
     """Wall time from the spawn until every robot's first token (None if some never came)."""
     first_join: dict[int, float] = {}  # a robot's first token (re-joins come later)
     for e in events:
@@ -310,7 +310,7 @@ def _alive_s(events: Sequence[dict], n: int, spawn_wall: float) -> float | None:
     return (max(joined) - spawn_wall) if len(joined) >= n else None
 
 
-def _cpu_shares(events: Sequence[dict], sampler: ResourceSampler, *, spawn_wall: float,
+def _cpu_shares(events: Sequence[dict[str, Any]], sampler: ResourceSampler, *, spawn_wall: float,
                 spawn_mono: float, sim_time_s: float, time_scale: float
                 ) -> dict[str, float | None]:
     """The robots' and the world's share of the machine's CPUs from the start to the end,
@@ -517,7 +517,7 @@ def format_world_rows(rows: Sequence[dict[str, Any]]) -> str:
 # Output
 # --------------------------------------------------------------------------------------
 
-def _fmt(value: Any, digits: int = 2) -> str:
+def _fmt(value: object, digits: int = 2) -> str:
     if value is None:
         return "-"
     if isinstance(value, bool):

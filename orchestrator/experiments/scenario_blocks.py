@@ -13,7 +13,7 @@ families (`benchmark_time_limit_s`) 3x + 30 s.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 
 import numpy as np
 
@@ -43,10 +43,11 @@ COORD_DECIMALS = 4
 HEADING_DECIMALS = 6
 
 
-def robot_spec(robot_id: int, start_xy: Sequence[float], goal_xy: Sequence[float], *,
+def robot_spec(robot_id: int, start_xy: Iterable[float], goal_xy: Iterable[float], *,
                exact: bool = False, radius_m: float = ROBOT_RADIUS_M,
                v_max_mps: float = V_MAX_MPS) -> RobotSpec:
-    """A robot at the setups' scale, heading straight at its goal.
+    """A robot at the setups' scale, heading straight at its goal (`start_xy`, `goal_xy`:
+    x, y [m]).
 
     Coordinates are rounded to 0.1 mm and headings to 1 urad (short, readable files)
     unless `exact`. The `+ 0.0` turns -0.0 into 0.0.

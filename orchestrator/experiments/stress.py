@@ -187,19 +187,19 @@ def run_jobs(jobs: Sequence[StressJob], n_workers: int,
     return [r for r in rows if r is not None]
 
 
-def _min(values: Sequence[Any]) -> float | None:
+def _min(values: Sequence[object]) -> float | None:
     vals = [v for v in values if isinstance(v, int | float) and math.isfinite(v)]
     return min(vals) if vals else None
 
 
-def _mean(values: Sequence[Any]) -> float | None:
+def _mean(values: Sequence[object]) -> float | None:
     vals = [v for v in values if isinstance(v, int | float) and math.isfinite(v)]
     return sum(vals) / len(vals) if vals else None
 
 
 def aggregate(rows: Sequence[dict[str, Any]], keys: Sequence[str]) -> list[dict[str, Any]]:
     """One row per (setup, planner, level): success rate, contacts, min gap, time ratio."""
-    groups: dict[tuple, list[dict[str, Any]]] = {}
+    groups: dict[tuple[object, ...], list[dict[str, Any]]] = {}
     for r in rows:
         groups.setdefault((r["setup"], r["planner"], *(r[k] for k in keys)), []).append(r)
     return [{"setup": key[0], "planner": key[1], **dict(zip(keys, key[2:])),

@@ -142,7 +142,7 @@ def _router(endpoint: str, n: int, seconds: float) -> int:
         pubs = [session.declare_publisher(keys.poses_slot(k),
                                           congestion_control=zenoh.CongestionControl.DROP,
                                           express=True) for k in range(POSE_SLOTS)]
-        ready: queue.SimpleQueue = queue.SimpleQueue()
+        ready: queue.SimpleQueue[zenoh.Sample] = queue.SimpleQueue()
         sink = session.declare_subscriber(keys.cmd_all, lambda sample: None)
         alive = session.liveliness().declare_subscriber(keys.alive_robot_all, ready.put,
                                                         history=True)
@@ -191,7 +191,7 @@ def _client(endpoint: str, index: int) -> int:
                                         express=True)
         # As a robot: Zenoh's thread puts each pose sample on a queue the main thread
         # blocks on, at most a nap at a time.
-        poses: queue.SimpleQueue = queue.SimpleQueue()
+        poses: queue.SimpleQueue[zenoh.Sample] = queue.SimpleQueue()
         pose_sub = session.declare_subscriber(keys.poses_slot(index % POSE_SLOTS),
                                               enqueue_on_receive(poses.put))
         end = session.declare_subscriber(keys.control)

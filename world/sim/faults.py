@@ -18,8 +18,8 @@ from __future__ import annotations
 
 import math
 from collections.abc import Collection, Mapping
-from dataclasses import dataclass, field
-from typing import Literal
+from dataclasses import dataclass, field, replace
+from typing import Any, Literal
 
 from world.sim.link import LinkFaults
 
@@ -107,7 +107,7 @@ class FaultPlan:
                 raise FaultSpecError(f"{f.describe()}: no robot {f.robot_id} "
                                      f"(ids {sorted(known)})")
 
-    def to_json(self) -> dict:
+    def to_json(self) -> dict[str, Any]:
         """Plain data for run.json."""
         return {
             "links": self.links.as_dict(),
@@ -183,18 +183,18 @@ def build_plan(*, latency_ms: float = 0.0, jitter_ms: float = 0.0, drop: float =
                            reorder=reorder)
     except ValueError as exc:
         raise FaultSpecError(f"link faults: {exc}") from None
-    timing: dict[int, dict[str, float | None]] = {}
+    timing: dict[int, RobotTiming] = {}
     for text in slow:
         rid, ms = parse_slow_robot(text)
-        timing.setdefault(rid, {})["plan_delay_ms"] = ms
+        timing[rid] = replace(timing.get(rid, RobotTiming()), plan_delay_ms=ms)
     for text in rates:
         rid, hz, phase = parse_robot_rate(text)
-        timing.setdefault(rid, {}).update(control_rate_hz=hz, phase_s=phase)
+        timing[rid] = replace(timing.get(rid, RobotTiming()), control_rate_hz=hz, phase_s=phase)
     process = tuple(
         [parse_process_fault("kill", t) for t in kill]
         + [parse_process_fault("stop", t) for t in stop]
         + [parse_process_fault("restart", t) for t in restart])
     return FaultPlan(links=links, seed=int(seed),
-                     timing={rid: RobotTiming(**kw) for rid, kw in timing.items()},
+                     timing=timing,
                      process=tuple(sorted(process, key=lambda f: f.at_s)),
                      compensate_latency=compensate_latency)

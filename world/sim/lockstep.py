@@ -34,6 +34,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from agent.core.scenario import RobotSpec, Scenario
+from agent.core.types import PlanResult, PoseSnapshot
 from agent.planning.controller import RobotController
 from agent.planning.routing import StaticMap
 from world.sim.dynamics import WorldSim
@@ -53,7 +54,8 @@ PROGRESS_EVERY_S = 1.0
 class RunSink(Protocol):
     """Where the loop records a run (`world.recorder.RunRecorder` writes the run directory)."""
 
-    def record_tick(self, t_s: float, robot_ids: Any, pose: Any, applied: Any) -> None: ...
+    def record_tick(self, t_s: float, robot_ids: np.ndarray, pose: np.ndarray,
+                    applied: np.ndarray) -> None: ...
 
     def record_command(self, t_s: float, robot_id: int, seq: int, pose_stamp_s: float,
                        v_mps: float, omega_radps: float, plan_ms: float, status: str, *,
@@ -104,8 +106,8 @@ class _Robot:
 
     spec: RobotSpec
     ctrl: RobotController
-    pose_link: FaultyLink
-    cmd_link: FaultyLink
+    pose_link: FaultyLink[PoseSnapshot]
+    cmd_link: FaultyLink[tuple[int, float, PlanResult]]  # (seq, pose stamp [s], plan)
     ticks_per_cycle: int
     phase_ticks: int
     pose_slot: int | None

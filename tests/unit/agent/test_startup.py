@@ -109,6 +109,18 @@ def test_a_configuration_reply_not_from_the_world_is_refused() -> None:
     assert got.robot.goal == (5.0, 0.0) and counts == {"refused_config": 1}
 
 
+def test_a_configuration_reply_from_no_named_session_is_refused() -> None:
+    # Zenoh's `Reply.replier_id` may be None; with the world's id known such a reply is
+    # not the world's: refused and counted, and the world's own reply is still taken.
+    good = _config(RobotSpec(id=3, start=(0.0, 0.0, 0.0), goal=(5.0, 0.0)))
+    session = SimpleNamespace(get=lambda key, timeout, **kw: [_reply(good.encode(), None),
+                                                              _reply(good.encode(), "aa")])
+    counts: dict[str, int] = {}
+    got = fetch_config(session, RunKeys("r1"), 3, StopFlag(),
+                       time.monotonic() + 1.0, "aa", counts)
+    assert got == good and counts == {"refused_config": 1}
+
+
 def test_a_configuration_out_of_range_is_refused_and_named_at_start_up() -> None:
     # The world's reply carries threats.t_max_s = -1 (typed right, out of range): the
     # robot must not build a controller from it, and leaves at its start-up deadline naming
