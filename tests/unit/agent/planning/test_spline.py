@@ -1,6 +1,8 @@
 """The reference: natural cubic spline by chord length, timed by the speed profile."""
 
+import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -368,3 +370,22 @@ def test_unwrap_is_numpys_bit_for_bit(steps: list[float], start: float) -> None:
 
     heading = np.cumsum([start, *steps])
     assert _unwrap(heading).tobytes() == np.unwrap(heading).tobytes()
+
+
+# --- stored samples (data/spline_reference.json) ------------------------------------------
+
+SAMPLES = json.loads((Path(__file__).parent / "data" / "spline_reference.json").read_text())
+"""`build_reference` on fixed inputs, every path (written by data/make_spline_reference.py)."""
+
+
+@pytest.mark.parametrize("name", sorted(SAMPLES["cases"]))
+def test_build_reference_reproduces_the_stored_samples(name: str) -> None:
+    case = SAMPLES["cases"][name]
+    inputs, expected = dict(case["inputs"]), case["expected"]
+    ref = build_reference(np.array(inputs.pop("waypoints_m")), v_max_mps=SAMPLES["v_max_mps"],
+                          accel_mps2=SAMPLES["accel_mps2"], dt_s=SAMPLES["dt_s"], **inputs)
+    atol = SAMPLES["tolerance"]["atol"]
+    for field in ("t_s", "x_m", "y_m", "heading_rad", "v_mps", "omega_radps", "s_m"):
+        np.testing.assert_allclose(getattr(ref, field), expected[field], rtol=0, atol=atol,
+                                   err_msg=f"{name}: {field}")
+    assert ref.length_m == pytest.approx(expected["length_m"], rel=0, abs=atol)
