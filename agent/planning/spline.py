@@ -450,30 +450,49 @@ def build_reference(
     wp = dedup_waypoints(wp, min_spacing_m)
     t = np.arange(horizon_steps + 1) * dt_s
     if wp.shape[0] == 1:
-        zeros = np.zeros_like(t)
-        return Reference(
-            t_s=t,
-            x_m=np.full_like(t, wp[0, 0]),
-            y_m=np.full_like(t, wp[0, 1]),
-            heading_rad=np.full_like(t, heading_rad),
-            v_mps=zeros,
-            omega_radps=zeros.copy(),
-            s_m=zeros.copy(),
-            length_m=0.0,
-        )
+        return _held_reference(t, wp, heading_rad)
     if lines_arcs and wp.shape[0] >= 3:
         return _line_arc_reference(
             LineArcPath([complex(x, y) for x, y in wp.tolist()], heading_rad, corner_radius_m,
                         start_radius_m),
             t, heading_rad, v_max_mps, accel_mps2, v_start_mps)
-    tangent = None
-    if clamp_heading and wp.shape[0] >= 3:
-        tangent = complex(math.cos(heading_rad), math.sin(heading_rad))
-        chord = complex(wp[1, 0] - wp[0, 0], wp[1, 1] - wp[0, 1])
-        if (chord * tangent.conjugate()).real <= CLAMP_MAX_COS * abs(chord):
-            tangent = None  # a sharp turn: the robot must turn now, not swing out first
+    tangent = _start_tangent(wp, heading_rad) if clamp_heading and wp.shape[0] >= 3 else None
     spline = NaturalCubicSpline([complex(x, y) for x, y in wp.tolist()], tangent)
-    if wp.shape[0] == 2:
+    return _spline_reference(spline, wp.shape[0] == 2, t, heading_rad, v_max_mps, accel_mps2,
+                             v_start_mps)
+
+
+def _held_reference(t: np.ndarray, wp: np.ndarray, heading_rad: float) -> Reference:
+    """`build_reference` of a robot at its goal (`wp`: (1, 2)): it holds still there."""
+    zeros = np.zeros_like(t)
+    return Reference(
+        t_s=t,
+        x_m=np.full_like(t, wp[0, 0]),
+        y_m=np.full_like(t, wp[0, 1]),
+        heading_rad=np.full_like(t, heading_rad),
+        v_mps=zeros,
+        omega_radps=zeros.copy(),
+        s_m=zeros.copy(),
+        length_m=0.0,
+    )
+
+
+def _start_tangent(wp: np.ndarray, heading_rad: float) -> complex | None:
+    """The clamped spline's start tangent: the heading, if the first via-point of `wp`
+    ((M, 2), M >= 3) lies within `CLAMP_MAX_OFF_HEADING_RAD` of it, else None (natural)."""
+    tangent = complex(math.cos(heading_rad), math.sin(heading_rad))
+    chord = complex(wp[1, 0] - wp[0, 0], wp[1, 1] - wp[0, 1])
+    if (chord * tangent.conjugate()).real <= CLAMP_MAX_COS * abs(chord):
+        return None  # a sharp turn: the robot must turn now, not swing out first
+    return tangent
+
+
+def _spline_reference(spline: NaturalCubicSpline, straight: bool, t: np.ndarray,
+                      heading_rad: float, v_max_mps: float, accel_mps2: float,
+                      v_start_mps: float | None) -> Reference:
+    """`build_reference` on a cubic spline (`straight`: through two points, a line): the
+    speed profile, the tangent's heading and the turn rate of the curvature."""
+    if straight:
         u_table = s_table = spline.knots  # a straight line: chord length is arc length
     else:
         u_table, s_table = spline.arc_table()
