@@ -252,9 +252,7 @@ def encode_command(robot_id: int, seq: int, pose_stamp_s: float, v_mps: float,
             and (resolved_id is None
                  or type(resolved_id) is int and MIN_OBSTACLE_ID <= resolved_id <= MAX_ROBOT_ID)
             and (hold_s is None or type(hold_s) is float and 0.0 < hold_s <= MAX_HOLD_S)
-            and type(wall) is list and len(wall) == len(WallStamps.FIELDS)
-            and all(type(x) is int and 0 <= x <= MAX_SEQ for x in wall)
-            and wall[0] <= MAX_CLOCK_ID and wall[1] <= MAX_CLOCK_ID):
+            and _packable_wall(wall)):
         return msgpack.packb({
             "schema": SCHEMA_VERSION, "type": CommandMsg.TYPE, "robot": robot_id, "seq": seq,
             "pose_stamp": pose_stamp_s, "v": v_mps, "omega": omega_radps, "plan_ms": plan_ms,
@@ -264,6 +262,14 @@ def encode_command(robot_id: int, seq: int, pose_stamp_s: float, v_mps: float,
                       omega_radps=omega_radps, plan_ms=plan_ms, status=status, side=side,
                       resolved_id=resolved_id, hold_s=hold_s,
                       wall=WallStamps.from_list(wall)).encode()
+
+
+def _packable_wall(wall: list[int]) -> bool:
+    """Whether `encode_command` may pack `wall` as it is: a list of `len(WallStamps.FIELDS)`
+    ints, each stamp within `MAX_SEQ` and the two clock ids within `MAX_CLOCK_ID`."""
+    return (type(wall) is list and len(wall) == len(WallStamps.FIELDS)
+            and all(type(x) is int and 0 <= x <= MAX_SEQ for x in wall)
+            and wall[0] <= MAX_CLOCK_ID and wall[1] <= MAX_CLOCK_ID)
 
 
 _MAX_FLOAT = sys.float_info.max
