@@ -181,7 +181,7 @@ class ReferenceConfig:
 @dataclass(frozen=True)
 class MpcConfig:
     """eIFP-MPC's tracker (Eqs. 20-22); read by eifp-mpc only. Its weights and solver
-    settings are constants of `agent.planning.mpc`.
+    settings are constants of `agent.planning.mpc_qp`.
 
     Args:
         horizon_steps: N, the number of control steps.
@@ -321,7 +321,7 @@ PAPER_OVERRIDES: dict[str, object] = {
 }
 """What `paper_config` sets: the ``paper`` profile (every addition of this project off:
 `agent.planning.mechanisms.PAPER_MECHANISMS`, the paper's MPC weights and no braking guard,
-`agent.planning.mpc.PAPER_TUNING`), plain argmin (Eq. 18), and neither a sensing range nor
+`agent.planning.mpc_qp.PAPER_TUNING`), plain argmin (Eq. 18), and neither a sensing range nor
 a neighbour cap, which the paper does not have."""
 
 

@@ -64,6 +64,9 @@ to dt (the rate bounds use it).
 
 The weights and solver settings are `MpcTuning` constants (`DEFAULT_TUNING`; the paper
 profile's `PAPER_TUNING`), the horizon and the half-planes' margin `MpcConfig` settings.
+`agent.planning.mpc_qp` holds them and assembles the QP (`build_qp`: P, A, the constant
+parts of q, l and u, the indices of the changing entries, the shifts and the scaling);
+this module runs it each cycle.
 
 OSQP runs in chunks of `MpcTuning.settle_chunk_iter` iterations (rounded up to a multiple
 of the rho adaptation interval), each going on from OSQP's own iterates, so a chunked solve
@@ -93,9 +96,9 @@ import scipy.sparse as sp
 
 from agent.core.config import MpcConfig, RobotLimits
 from agent.core.types import PlanStatus
+from agent.planning.mpc_qp import DEFAULT_TUNING, OSQP_INF, MpcTuning, build_qp
 from agent.planning.unicycle import clamp_command, rollout, rollout_with_trig
 
-_INF = 1.0e30  # OSQP_INFTY: bounds beyond it are infinite
 _RHO_INTERVAL = 25  # OSQP iterations between rho adaptations
 _SOLVED = int(osqp.SolverStatus.OSQP_SOLVED)
 _USABLE = frozenset(
@@ -159,110 +162,6 @@ class MpcResult:
         return rollout(self.initial_state, self.planned_inputs, self.dt_s)
 
 
-def _csc(rows: np.ndarray, cols: np.ndarray, vals: np.ndarray, shape: tuple[int, int]
-         ) -> tuple[sp.csc_matrix, np.ndarray]:
-    """CSC matrix of COO triplets (no duplicates) and where each triplet lands in `.data`."""
-    order = np.lexsort((rows, cols))  # column-major, rows sorted within a column
-    r, c = rows[order], cols[order]
-    if np.any((np.diff(c) == 0) & (np.diff(r) == 0)):
-        raise ValueError("duplicate entries")
-    indptr = np.zeros(shape[1] + 1, dtype=np.int64)
-    np.cumsum(np.bincount(c, minlength=shape[1]), out=indptr[1:])
-    position = np.empty_like(order)
-    position[order] = np.arange(order.shape[0])
-    matrix = sp.csc_matrix((vals[order].astype(float), r, indptr), shape=shape)
-    return matrix, position
-
-
-def _ruiz(P: sp.csc_matrix, A: sp.csc_matrix, iterations: int = 10
-          ) -> tuple[np.ndarray, np.ndarray, float]:
-    """Ruiz equilibration of the KKT matrix [[P, A'], [A, 0]], as OSQP's `scaling` does.
-
-    The cost scaling c uses P only (OSQP also uses q, which here changes every cycle).
-
-    Args:
-        P: (n, n) upper triangle of the cost matrix; A: (m, n) constraint matrix.
-
-    Returns:
-        d: (n,) variable scaling, e: (m,) row scaling, c: cost scaling.
-    """
-    p_full = (P + sp.triu(P, 1).T).tocsc()
-    a = A.tocsc()
-    d = np.ones(P.shape[0])
-    e = np.ones(A.shape[0])
-    for _ in range(iterations):
-        col = np.maximum(
-            abs(p_full).max(axis=0).toarray().ravel(), abs(a).max(axis=0).toarray().ravel()
-        )
-        row = abs(a).max(axis=1).toarray().ravel()
-        d_step = 1.0 / np.sqrt(np.clip(col, 1e-4, 1e4))
-        e_step = 1.0 / np.sqrt(np.clip(row, 1e-4, 1e4))
-        d *= d_step
-        e *= e_step
-        p_full = sp.diags(d_step) @ p_full @ sp.diags(d_step)
-        a = sp.diags(e_step) @ a @ sp.diags(d_step)
-    c = 1.0 / float(np.clip(np.mean(abs(p_full).max(axis=0).toarray()), 1e-4, 1e4))
-    return d, e, c
-
-
-@dataclass(frozen=True)
-class MpcTuning:
-    """The tracker's weights and solver settings (constants, not user settings).
-
-    Args:
-        q_position: weight on squared position error per step [1/m^2]; with `r_v` it
-            makes a 0.3 m lag cost about as much as a 1 m/s speed error.
-        q_heading: weight on squared heading error per step [1/rad^2].
-        q_terminal: multiplier on the last step's state weight (a terminal cost that
-            stands in for the rest of the path beyond the horizon).
-        r_v: weight on (v - v_ref)^2.
-        r_omega: weight on (omega - omega_ref)^2.
-        r_dv: weight on squared change of v between steps (smooth commands).
-        r_domega: weight on squared change of omega between steps.
-        max_constraints: neighbours turned into half-planes (nearest predicted gap first);
-            the via-points and the braking guard handle the rest.
-        slack_weight: linear and quadratic weight on half-plane slack. The linear part
-            makes the penalty exact (no slack while it can be avoided) as long as a step's
-            half-plane multipliers sum to less than it; a larger weight dominates the
-            residual norms OSQP's rho adaptation balances and lengthens the iteration tail.
-        max_iter: OSQP iteration cap per solve, counted in whole chunks.
-        settle_chunk_iter: OSQP runs in chunks of this many iterations (rounded up to a
-            multiple of 25, the rho adaptation interval; 0: one run to `max_iter`); after
-            a chunk short of the tolerances, the solve stops once the first command (the
-            only one applied) moved by less than the settle tolerances over it. The slow
-            QPs of a crowd spend their last iterations on the far end of the horizon.
-        settle_v_tol_mps: see `settle_chunk_iter` [m/s].
-        settle_omega_tol_radps: see `settle_chunk_iter` [rad/s].
-        eps_abs: OSQP absolute tolerance.
-        eps_rel: OSQP relative tolerance.
-    """
-
-    q_position: float = 10.0
-    q_heading: float = 0.5
-    q_terminal: float = 2.0
-    r_v: float = 1.0
-    r_omega: float = 0.2
-    r_dv: float = 2.0
-    r_domega: float = 0.5
-    max_constraints: int = 4
-    slack_weight: float = 1.0e3
-    max_iter: int = 1000
-    settle_chunk_iter: int = 100
-    settle_v_tol_mps: float = 0.01
-    settle_omega_tol_radps: float = 0.01
-    eps_abs: float = 1.0e-3
-    eps_rel: float = 1.0e-3
-
-
-DEFAULT_TUNING = MpcTuning()
-"""eIFP-MPC's tracker in the default profile."""
-
-PAPER_TUNING = MpcTuning(q_terminal=1.0, r_dv=0.0, r_domega=0.0)
-"""The paper's J (Eq. 21): one state weight Q for every step (no terminal multiplier) and an
-input weight R, no input-rate terms. The inputs' rate bounds stay: they are the robot's
-actuation limits, which the world enforces too."""
-
-
 class MpcTracker:
     """LTV-MPC reference tracker with soft neighbour half-planes (see the module docstring).
 
@@ -298,153 +197,33 @@ class MpcTracker:
         self._u_max = np.array([limits.v_max_mps, limits.omega_max_radps])
         self._du_max = np.array([limits.accel_max_mps2 * dt, limits.alpha_max_radps2 * dt])
 
-        nx, nu, ns = 3 * n_steps, 2 * n_steps, (n_steps if n_cons else 0)
-        n_hp = n_steps * n_cons
-        self._nx, self._nu, self._ns = nx, nu, ns
-        n_var = nx + nu + ns
-        ix = np.arange(nx).reshape(n_steps, 3)  # ix[k - 1] -> dx_k
-        iu = nx + np.arange(nu).reshape(n_steps, 2)  # iu[k] -> du_k
-        i_s = nx + nu + np.arange(ns)  # i_s[k - 1] -> s_k
-
-        # --- P (upper triangle), constant --------------------------------------------
-        q_diag = np.tile([tuning.q_position, tuning.q_position, tuning.q_heading], (n_steps, 1))
-        q_diag[-1] *= tuning.q_terminal
-        r_w = np.array([tuning.r_v, tuning.r_omega])
-        rd_w = np.array([tuning.r_dv, tuning.r_domega])
-        # D'R_dD of the difference operator: 2 r_d on the diagonal (r_d at k = N-1), -r_d off.
-        u_diag = np.tile(r_w, (n_steps, 1)) + np.tile(rd_w, (n_steps, 1)) * 2.0
-        u_diag[-1] -= rd_w
-        u_diag += trust_weight  # ||du||^2: damps the one-linearisation-per-cycle iteration
-        p_rows = np.concatenate([ix.ravel(), iu.ravel(), i_s.ravel(), iu[:-1].ravel()])
-        p_cols = np.concatenate([ix.ravel(), iu.ravel(), i_s.ravel(), iu[1:].ravel()])
-        p_vals = 2.0 * np.concatenate(
-            [
-                q_diag.ravel(),
-                u_diag.ravel(),
-                np.full(ns, tuning.slack_weight),
-                -np.tile(rd_w, n_steps - 1),
-            ]
-        )
-        P, _ = _csc(p_rows, p_cols, p_vals, (n_var, n_var))
-        self._q_state = 2.0 * q_diag  # (N, 3)
-        self._r_w, self._rd_w = 2.0 * r_w, 2.0 * rd_w
-
-        # --- A: row blocks ordered by k; remember every changing entry --------------------
-        rows: list[np.ndarray] = []
-        cols: list[np.ndarray] = []
-        vals: list[np.ndarray] = []
-        n_entries = 0
-
-        def add(r: np.ndarray, c: np.ndarray, v: float | np.ndarray) -> np.ndarray:
-            nonlocal n_entries
-            r, c = np.broadcast_arrays(np.asarray(r, dtype=np.int64), np.asarray(c, dtype=np.int64))
-            rows.append(r.ravel())
-            cols.append(c.ravel())
-            vals.append(np.broadcast_to(np.asarray(v, dtype=float), r.shape).ravel())
-            ids = n_entries + np.arange(r.size).reshape(r.shape)
-            n_entries += r.size
-            return ids
-
-        k_all = np.arange(n_steps)
-        # Placeholder values of typical magnitude: the equilibration below is computed on them.
-        v0, th0 = 0.5 * (limits.v_max_mps + limits.v_min_mps), 0.25 * np.pi
-        r_dyn = 3 * k_all[:, None] + np.arange(3)  # (N, 3) row of dx_{k+1}, component i
-        add(r_dyn, ix, -1.0)
-        add(r_dyn[1:], ix[:-1], 1.0)  # A_k diagonal, k >= 1
-        self._a02 = add(r_dyn[1:, 0], ix[:-1, 2], -v0 * np.sin(th0) * dt)
-        self._a12 = add(r_dyn[1:, 1], ix[:-1, 2], v0 * np.cos(th0) * dt)
-        self._b00 = add(r_dyn[:, 0], iu[:, 0], np.cos(th0) * dt)
-        self._b10 = add(r_dyn[:, 1], iu[:, 0], np.sin(th0) * dt)
-        add(r_dyn[:, 2], iu[:, 1], dt)
-        row0 = 3 * n_steps
-        r_box = row0 + 2 * k_all[:, None] + np.arange(2)
-        add(r_box, iu, 1.0)
-        row0 += 2 * n_steps
-        r_rate = row0 + 2 * k_all[:, None] + np.arange(2)
-        add(r_rate, iu, 1.0)
-        add(r_rate[1:], iu[:-1], -1.0)
-        row0 += 2 * n_steps
-        r_hp = row0 + n_cons * k_all[:, None] + np.arange(n_cons)  # (N, M)
-        self._hx = add(r_hp, np.broadcast_to(ix[:, 0:1], r_hp.shape), np.sqrt(0.5))
-        self._hy = add(r_hp, np.broadcast_to(ix[:, 1:2], r_hp.shape), np.sqrt(0.5))
-        if n_cons:  # without neighbour slots there are no half-planes and no slack
-            add(r_hp, np.broadcast_to(i_s[:, None], r_hp.shape), 1.0)
-        row0 += n_hp
-        r_slack = row0 + np.arange(ns)
-        add(r_slack, i_s, 1.0)
-        n_rows = row0 + ns
-        A, position = _csc(
-            np.concatenate(rows), np.concatenate(cols), np.concatenate(vals), (n_rows, n_var)
-        )
-        self._a02, self._a12 = position[self._a02], position[self._a12]
-        self._b00, self._b10 = position[self._b00], position[self._b10]
-        # (M, N): row j holds neighbour slot j's entries over the horizon.
-        self._hx, self._hy = position[self._hx].T.copy(), position[self._hy].T.copy()
-        self._hp_rows = r_hp.T.copy()
-        self._hp_active = n_cons  # slots whose rows may hold a constraint (all, at setup)
-        self._a_data = A.data.copy()
-
-        # --- vectors: constant parts written once ----------------------------------------
-        self._q = np.zeros(n_var)
-        self._q[nx + nu :] = tuning.slack_weight
-        self._l = np.zeros(n_rows)
-        self._u = np.zeros(n_rows)
-        # Views written in place each cycle.
+        qp = build_qp(limits, config, tuning, trust_weight)
+        self._qp = qp
+        nx, nu = qp.n_x, qp.n_u
+        # Written in place each cycle: A's data, q, l, u, and views of their blocks.
+        self._a_data = qp.A.data.copy()
+        self._q, self._l, self._u = qp.q.copy(), qp.l.copy(), qp.u.copy()
         self._q_x = self._q[:nx].reshape(n_steps, 3)
         self._q_u = self._q[nx : nx + nu].reshape(n_steps, 2)
-        self._l_box = self._l[r_box[0, 0] : r_box[-1, -1] + 1].reshape(n_steps, 2)
-        self._u_box = self._u[r_box[0, 0] : r_box[-1, -1] + 1].reshape(n_steps, 2)
-        self._l_rate = self._l[r_rate[0, 0] : r_rate[-1, -1] + 1].reshape(n_steps, 2)
-        self._u_rate = self._u[r_rate[0, 0] : r_rate[-1, -1] + 1].reshape(n_steps, 2)
-        self._l[r_hp.ravel()] = -_INF
-        self._u[r_hp.ravel()] = _INF
-        self._l[7 * n_steps + n_hp :] = 0.0
-        self._u[7 * n_steps + n_hp :] = _INF
+        self._l_box = self._l[qp.box_rows].reshape(n_steps, 2)
+        self._u_box = self._u[qp.box_rows].reshape(n_steps, 2)
+        self._l_rate = self._l[qp.rate_rows].reshape(n_steps, 2)
+        self._u_rate = self._u[qp.rate_rows].reshape(n_steps, 2)
+        self._hp_active = n_cons  # slots whose rows may hold a constraint (all, at setup)
+        self._x_zero = np.zeros(self._q.shape[0])
+        self._y_zero = np.zeros(self._l.shape[0])
 
-        # Dual warm start: row block of step k takes the duals of step k + 1 (last repeated).
-        shift = np.minimum(k_all + 1, n_steps - 1)
-        self._row_shift = np.concatenate(
-            [
-                r_dyn[shift].ravel(),
-                r_box[shift].ravel(),
-                r_rate[shift].ravel(),
-                r_hp[shift].ravel(),
-                r_slack[shift].ravel() if ns else r_slack,
-            ]
-        )
-        self._slack_shift = (i_s[shift] - (nx + nu)).ravel() if ns else i_s
-        self._x_zero = np.zeros(n_var)
-        self._y_zero = np.zeros(n_rows)
-
-        # Fixed diagonal equilibration (Ruiz), computed once on the placeholder values.
-        # OSQP's own scaling would redo Ruiz at every matrix update (~4x the cost of the
-        # refactorisation), so it is off: OSQP sees P~ = c D P D, q~ = c D q, A~ = E A D,
-        # l~ = E l, u~ = E u, and z = D z~, y = E y~ / c.
-        d_var, e_row, c_cost = _ruiz(P, A)
-        self._d_var, self._e_row = d_var, e_row
-        entry_row = A.indices
-        entry_col = np.repeat(np.arange(n_var), np.diff(A.indptr))
-        self._a_scale = e_row[entry_row] * d_var[entry_col]
-        self._y_ws_scale = e_row[self._row_shift] / e_row  # scaled duals, shifted
-        self._slack_ws_scale = 1.0 / d_var[nx + nu :]
-        self._q_scale = c_cost * d_var
-        p_scaled = P.copy()
-        p_scaled.data *= (
-            c_cost * d_var[p_scaled.indices] * d_var[np.repeat(np.arange(n_var), np.diff(P.indptr))]
-        )
         # Chunks are whole multiples of the rho adaptation interval, so that a chunked
         # solve is the same ADMM run as one call (the adaptation counts from each call).
         chunk = -(-tuning.settle_chunk_iter // _RHO_INTERVAL) * _RHO_INTERVAL
         self._chunk_iter = min(chunk, tuning.max_iter) if chunk > 0 else tuning.max_iter
-        i_first = np.array([iu[0, 0], iu[0, 1]])
-        self._i_first, self._d_first = i_first, d_var[i_first]
         self._solver = solver_factory()
         self._solver.setup(
-            p_scaled,
-            self._q * self._q_scale,
-            sp.csc_matrix((A.data * self._a_scale, A.indices, A.indptr), shape=A.shape),
-            self._l * e_row,
-            self._u * e_row,
+            qp.p_scaled,
+            self._q * qp.q_scale,
+            sp.csc_matrix((qp.A.data * qp.a_scale, qp.A.indices, qp.A.indptr), shape=qp.A.shape),
+            self._l * qp.e_row,
+            self._u * qp.e_row,
             verbose=False,
             warm_starting=True,
             polishing=False,
@@ -503,61 +282,21 @@ class MpcTracker:
         )
         u_min, u_max = self._u_min, self._u_max
         np.minimum(np.maximum(last, u_min, out=last), u_max, out=last)
-
-        # Nominal inputs: the previous solution shifted by one step, else the reference's.
-        ub = np.empty((n_steps, 2))
-        if self._u_prev is None:
-            ub[:, 0] = ref[3, :n_steps]
-            ub[:, 1] = ref[4, :n_steps]
-        else:
-            ub[:-1] = self._u_prev[1:]
-            ub[-1] = self._u_prev[-1]
-        np.minimum(np.maximum(ub, u_min, out=ub), u_max, out=ub)
+        ub = self._nominal_inputs(ref)
         xb, cos_b, sin_b = rollout_with_trig(x0, ub, dt)
-
-        # A: B_k and the v-dependent column of A_k (unicycle.jacobians, entry by entry).
-        a = self._a_data
-        cos_dt = cos_b * dt
-        sin_dt = sin_b * dt
-        a[self._b00] = cos_dt
-        a[self._b10] = sin_dt
-        a[self._a02] = -ub[1:, 0] * sin_dt[1:]
-        a[self._a12] = ub[1:, 0] * cos_dt[1:]
-
-        # q: state error (heading wrapped), input error and input change against u_{-1}.
-        err = xb[1:] - ref[0:3, 1:].T
-        err[:, 2] = np.mod(err[:, 2] + np.pi, 2.0 * np.pi) - np.pi
-        np.multiply(self._q_state, err, out=self._q_x)
-        g = np.empty((n_steps, 2))  # D ub - e_0 u_{-1}
-        np.subtract(ub[0], last, out=g[0])
-        np.subtract(ub[1:], ub[:-1], out=g[1:])
-        dtg = g.copy()  # D' g
-        dtg[:-1] -= g[1:]
-        dtg *= self._rd_w
-        np.multiply(self._r_w, ub - ref[3:5, :n_steps].T, out=self._q_u)
-        self._q_u += dtg
-        # l, u: input bounds and rates, relative to the nominal.
-        np.subtract(u_min, ub, out=self._l_box)
-        np.subtract(u_max, ub, out=self._u_box)
-        np.subtract(-self._du_max, g, out=self._l_rate)
-        np.subtract(self._du_max, g, out=self._u_rate)
+        self._linearise(ub, xb, cos_b, sin_b, last, ref)
         n_used = self._set_half_planes(xb, preds, clear)
 
         # Inputs are finite, so only an overflow can make q or l non-finite (a is bounded).
         q, lo, hi = self._q, self._l, self._u
         if not math.isfinite(float(q.sum()) + float(lo.sum())):
             return self._fail(x0, last, 0)
-        e_row, n_xu = self._e_row, self._nx + self._nu
-        if self._y_prev is None or self._s_prev is None:  # both or neither
-            x_ws, y_ws = self._x_zero, self._y_zero
-        else:
-            # Shifted solution: z = 0 is the nominal; slacks and duals move one step.
-            x_ws = self._x_zero.copy()
-            x_ws[n_xu:] = self._s_prev[self._slack_shift] * self._slack_ws_scale
-            y_ws = self._y_prev[self._row_shift] * self._y_ws_scale
+        qp = self._qp
+        e_row, n_xu = qp.e_row, qp.n_x + qp.n_u
+        x_ws, y_ws = self._warm_start()
         try:
             status_val, iterations, z_scaled, y_scaled = self._osqp(
-                q * self._q_scale, lo * e_row, hi * e_row, a * self._a_scale, x_ws, y_ws
+                q * qp.q_scale, lo * e_row, hi * e_row, self._a_data * qp.a_scale, x_ws, y_ws
             )
         except (osqp.OSQPException, ValueError):
             return self._fail(x0, last, 0)
@@ -572,9 +311,9 @@ class MpcTracker:
             status = PlanStatus.SOLVER_INACCURATE
         else:
             return self._fail(x0, last, iterations)
-        z = z_scaled * self._d_var
+        z = z_scaled * qp.d_var
 
-        u_opt = ub + z[self._nx : self._nx + self._nu].reshape(n_steps, 2)
+        u_opt = ub + z[qp.n_x : n_xu].reshape(n_steps, 2)
         np.minimum(np.maximum(u_opt, u_min, out=u_opt), u_max, out=u_opt)
         v, omega = clamp_command(u_opt[0, 0], u_opt[0, 1], self.limits, last[0], last[1], dt)
         u_opt[0] = v, omega
@@ -595,6 +334,68 @@ class MpcTracker:
             dt_s=dt,
             max_slack_m=max_slack,
         )
+
+    def _nominal_inputs(self, ref: np.ndarray) -> np.ndarray:
+        """(N, 2) the nominal inputs ub_k, within the bounds: the previous solution shifted by
+        one step (the last repeated), else the reference's (`ref`: (5, N + 1) from `_check`)."""
+        n_steps = self._n_steps
+        ub = np.empty((n_steps, 2))
+        if self._u_prev is None:
+            ub[:, 0] = ref[3, :n_steps]
+            ub[:, 1] = ref[4, :n_steps]
+        else:
+            ub[:-1] = self._u_prev[1:]
+            ub[-1] = self._u_prev[-1]
+        np.minimum(np.maximum(ub, self._u_min, out=ub), self._u_max, out=ub)
+        return ub
+
+    def _linearise(self, ub: np.ndarray, xb: np.ndarray, cos_b: np.ndarray, sin_b: np.ndarray,
+                   last: np.ndarray, ref: np.ndarray) -> None:
+        """Write this cycle's A_k, B_k entries, q and the input rows of l and u, in place.
+
+        Args:
+            ub: (N, 2) nominal inputs; xb: (N + 1, 3) their rollout from x_0.
+            cos_b, sin_b: (N,) cosine and sine of the nominal headings 0..N-1.
+            last: (2,) u_{-1}, the last applied command.
+            ref: (5, N + 1) x, y, heading, v, omega of the reference (`_check`).
+        """
+        n_steps, dt, qp = self._n_steps, self.config.dt_s, self._qp
+        # A: B_k and the v-dependent column of A_k (unicycle.jacobians, entry by entry).
+        a, at = self._a_data, qp.entries
+        cos_dt = cos_b * dt
+        sin_dt = sin_b * dt
+        a[at.b00] = cos_dt
+        a[at.b10] = sin_dt
+        a[at.a02] = -ub[1:, 0] * sin_dt[1:]
+        a[at.a12] = ub[1:, 0] * cos_dt[1:]
+
+        # q: state error (heading wrapped), input error and input change against u_{-1}.
+        err = xb[1:] - ref[0:3, 1:].T
+        err[:, 2] = np.mod(err[:, 2] + np.pi, 2.0 * np.pi) - np.pi
+        np.multiply(qp.q_state, err, out=self._q_x)
+        g = np.empty((n_steps, 2))  # D ub - e_0 u_{-1}
+        np.subtract(ub[0], last, out=g[0])
+        np.subtract(ub[1:], ub[:-1], out=g[1:])
+        dtg = g.copy()  # D' g
+        dtg[:-1] -= g[1:]
+        dtg *= qp.rd_w
+        np.multiply(qp.r_w, ub - ref[3:5, :n_steps].T, out=self._q_u)
+        self._q_u += dtg
+        # l, u: input bounds and rates, relative to the nominal.
+        np.subtract(self._u_min, ub, out=self._l_box)
+        np.subtract(self._u_max, ub, out=self._u_box)
+        np.subtract(-self._du_max, g, out=self._l_rate)
+        np.subtract(self._du_max, g, out=self._u_rate)
+
+    def _warm_start(self) -> tuple[np.ndarray, np.ndarray]:
+        """Scaled primal and dual warm start: zero when cold, else the shifted solution."""
+        if self._y_prev is None or self._s_prev is None:  # both or neither
+            return self._x_zero, self._y_zero
+        # Shifted solution: z = 0 is the nominal; slacks and duals move one step.
+        qp = self._qp
+        x_ws = self._x_zero.copy()
+        x_ws[qp.n_x + qp.n_u :] = self._s_prev[qp.slack_shift] * qp.slack_ws_scale
+        return x_ws, self._y_prev[qp.row_shift] * qp.y_ws_scale
 
     def _osqp(
         self,
@@ -629,7 +430,7 @@ class MpcTracker:
                 return status_val, total, z, y
             if status_val not in _USABLE:
                 return status_val, total, z, y
-            first = z[self._i_first] * self._d_first
+            first = z[self._qp.i_first] * self._qp.d_first
             if not np.isfinite(first).all():
                 return status_val, total, z, y
             if first_before is not None and (
@@ -650,7 +451,7 @@ class MpcTracker:
         rows (and its warm-start duals) while the selection and the input order hold.
         """
         n_used: int = min(preds.shape[0], self._n_cons)
-        a, lo = self._a_data, self._l
+        a, lo, qp = self._a_data, self._l, self._qp
         if n_used:
             d = xb[1:, 0:2] - preds[:, 1:, :]  # (K, N, 2) from each predicted centre to pb_k
             dist = np.sqrt(np.einsum("knc,knc->kn", d, d))  # (K, N)
@@ -664,17 +465,17 @@ class MpcTracker:
                 back = -np.stack((np.cos(xb[1:, 2]), np.sin(xb[1:, 2])), axis=-1)
                 d = np.where(tiny[..., None], back[None], d)
                 dist = np.where(tiny, 1.0, dist)
-                lo[self._hp_rows[:n_used]] = clear[:, None] - np.where(tiny, 0.0, dist)
+                lo[qp.hp_rows[:n_used]] = clear[:, None] - np.where(tiny, 0.0, dist)
             else:
                 # n . (o - pb) + c = c - |pb - o|, with n = (pb - o) / |pb - o|
-                lo[self._hp_rows[:n_used]] = clear[:, None] - dist
-            a[self._hx[:n_used]] = d[..., 0] / dist
-            a[self._hy[:n_used]] = d[..., 1] / dist
+                lo[qp.hp_rows[:n_used]] = clear[:, None] - dist
+            a[qp.entries.hx[:n_used]] = d[..., 0] / dist
+            a[qp.entries.hy[:n_used]] = d[..., 1] / dist
         if n_used < self._hp_active:
             # Rows of neighbours gone since last cycle: zero coefficients, no bound.
-            a[self._hx[n_used : self._hp_active]] = 0.0
-            a[self._hy[n_used : self._hp_active]] = 0.0
-            lo[self._hp_rows[n_used : self._hp_active]] = -_INF
+            a[qp.entries.hx[n_used : self._hp_active]] = 0.0
+            a[qp.entries.hy[n_used : self._hp_active]] = 0.0
+            lo[qp.hp_rows[n_used : self._hp_active]] = -OSQP_INF
         self._hp_active = n_used
         return n_used
 

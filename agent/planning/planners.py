@@ -207,7 +207,8 @@ class ViaPointPlanner:
             tracker.reset()
 
     def _mpc(self, observation: Observation) -> MpcTracker:
-        from agent.planning.mpc import DEFAULT_TUNING, PAPER_TUNING, MpcTracker
+        from agent.planning.mpc import MpcTracker
+        from agent.planning.mpc_qp import DEFAULT_TUNING, PAPER_TUNING
 
         key = observation.limits
         tracker = self._trackers.get(key)

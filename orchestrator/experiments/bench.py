@@ -49,7 +49,7 @@ import numpy as np
 
 from agent.core.scenario import Scenario
 from agent.core.types import PlanStatus, PoseSnapshot, StageTimes
-from agent.planning.mpc import DEFAULT_TUNING
+from agent.planning.mpc_qp import DEFAULT_TUNING
 from orchestrator.experiments.families import circle, jitter_starts, with_planner
 from orchestrator.experiments.scenario_blocks import MIN_START_SPACING_M
 

@@ -14,7 +14,8 @@ from hypothesis import strategies as st
 
 from agent.core.config import MpcConfig, RobotLimits
 from agent.core.types import PlanStatus
-from agent.planning.mpc import MpcResult, MpcTracker, MpcTuning
+from agent.planning.mpc import MpcResult, MpcTracker
+from agent.planning.mpc_qp import MpcTuning
 from agent.planning.unicycle import step, wrap_angle
 
 LIM = RobotLimits()

@@ -161,7 +161,7 @@ def test_lines_arcs_reference_is_the_default_and_reaches_the_reference(monkeypat
 
 def test_the_paper_profile_runs_the_papers_tracker_without_the_guard():
     from agent.core.config import paper_config
-    from agent.planning.mpc import DEFAULT_TUNING, PAPER_TUNING
+    from agent.planning.mpc_qp import DEFAULT_TUNING, PAPER_TUNING
 
     obs = observation(0.0, 0.0, 0.0, 1.0, [[6.0, 0.2]], [[-1.0, 0.0]])
     default, paper = make_planner("eifp-mpc", PlannerConfig()), make_planner(

@@ -33,7 +33,8 @@ import numpy as np
 import scipy.optimize
 
 from agent.core.config import MpcConfig, RobotLimits
-from agent.planning.mpc import DEFAULT_TUNING, MpcTracker
+from agent.planning.mpc import MpcTracker
+from agent.planning.mpc_qp import DEFAULT_TUNING
 
 OUT = Path(__file__).with_name("mpc_reference.json")
 CROSS_CHECK_TOL = 1e-5
