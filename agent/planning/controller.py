@@ -24,6 +24,7 @@ from agent.core.scenario import RobotSpec
 from agent.core.types import EgoState, Observation, Others, PlanResult, PlanStatus, PoseSnapshot
 from agent.planning.estimation import ESTIMATION_WINDOW_S, NeighborTracker
 from agent.planning.mechanisms import Mechanisms
+from agent.planning.mpc_qp import MpcTuning
 from agent.planning.planners import CONTROL_PERIOD_S, at_goal, make_planner
 from agent.planning.routing import StaticMap
 
@@ -53,6 +54,8 @@ class RobotController:
             (`agent.planning.routing`); None: no map.
         mechanisms: the via-point planner's mechanisms instead of those the planner's name
             and `config` give (`agent.planning.planners.make_planner`).
+        tuning: eIFP-MPC's tracker weights and OSQP settings instead of those of `config`'s
+            profile (`agent.planning.planners.make_planner`).
 
     Attributes:
         command_hold_s: how long the world may apply one of this robot's commands before
@@ -63,7 +66,8 @@ class RobotController:
                  *, compensate_latency: bool = True,
                  control_period_s: float = CONTROL_PERIOD_S,
                  static_map: StaticMap | None = None,
-                 mechanisms: Mechanisms | None = None) -> None:
+                 mechanisms: Mechanisms | None = None,
+                 tuning: MpcTuning | None = None) -> None:
         if not (np.isfinite(control_period_s) and control_period_s > 0.0):
             raise ValueError(f"control_period_s must be positive, got {control_period_s!r}")
         self.spec = spec
@@ -73,7 +77,8 @@ class RobotController:
         self.control_period_s = float(control_period_s)
         self.command_hold_s = COMMAND_HOLD_PERIODS * self.control_period_s
         self.planner = make_planner(spec.planner, config, control_period_s=self.control_period_s,
-                                    static_map=static_map, mechanisms=mechanisms)
+                                    static_map=static_map, mechanisms=mechanisms,
+                                    tuning=tuning)
         self.tracker = NeighborTracker(spec.id, ESTIMATION_WINDOW_S)
         self.snapshot: PoseSnapshot | None = None
         self.command = (0.0, 0.0)

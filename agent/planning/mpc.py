@@ -62,8 +62,8 @@ is off: it would redo Ruiz at every matrix update, which cost about four times t
 refactorisation itself. The command period is taken equal
 to dt (the rate bounds use it).
 
-The weights and solver settings are `MpcTuning` constants (`DEFAULT_TUNING`; the paper
-profile's `PAPER_TUNING`), the horizon and the half-planes' margin `MpcConfig` settings.
+The weights and solver settings are an `MpcTuning`, the tracker's input (`DEFAULT_TUNING`;
+the paper profile's `PAPER_TUNING`), the horizon and the half-planes' margin `MpcConfig` settings.
 `agent.planning.mpc_qp` holds them and assembles the QP (`build_qp`: P, A, the constant
 parts of q, l and u, the indices of the changing entries, the shifts and the scaling);
 this module runs it each cycle.

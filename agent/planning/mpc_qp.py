@@ -2,11 +2,15 @@
 and its sparse structure, assembled once.
 
 `MpcTuning` holds the weights and OSQP settings (`DEFAULT_TUNING`; the paper profile's
-`PAPER_TUNING`). `build_qp` assembles, for a horizon, the robot's limits and a tuning, the
-constant cost matrix P, the constraint matrix A at placeholder values, the constant parts
-of q, l and u, where each entry that changes every cycle lands, the warm-start shifts and
-the fixed Ruiz scaling (`QpLayout`). The formulation (variables z, the cost J, the row
-blocks of A) and the names used here are in `agent.planning.mpc`'s docstring.
+`PAPER_TUNING`; `profile_tuning` picks one of the two for a configuration's profile). The
+planner takes its tuning as an input (`agent.planning.planners.make_planner`), so a
+tracker with other weights is built, never patched in.
+
+`build_qp` assembles, for a horizon, the robot's limits and a tuning, the constant cost
+matrix P, the constraint matrix A at placeholder values, the constant parts of q, l and u,
+where each entry that changes every cycle lands, the warm-start shifts and the fixed Ruiz
+scaling (`QpLayout`). The formulation (variables z, the cost J, the row blocks of A) and
+the names used here are in `agent.planning.mpc`'s docstring.
 """
 
 from __future__ import annotations
@@ -16,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from agent.core.config import MpcConfig, RobotLimits
+from agent.core.config import MpcConfig, PlannerConfig, RobotLimits
 
 OSQP_INF = 1.0e30  # OSQP_INFTY: bounds beyond it are infinite
 
@@ -77,6 +81,12 @@ PAPER_TUNING = MpcTuning(q_terminal=1.0, r_dv=0.0, r_domega=0.0)
 """The paper's J (Eq. 21): one state weight Q for every step (no terminal multiplier) and an
 input weight R, no input-rate terms. The inputs' rate bounds stay: they are the robot's
 actuation limits, which the world enforces too."""
+
+
+def profile_tuning(config: PlannerConfig) -> MpcTuning:
+    """The tuning of `config`'s profile: `PAPER_TUNING` in ``paper``, else `DEFAULT_TUNING`
+    (the planners' default when they are given none)."""
+    return PAPER_TUNING if config.is_paper else DEFAULT_TUNING
 
 
 @dataclass(frozen=True)

@@ -21,7 +21,10 @@ the goal: half, so that the world, which judges arrival on ground truth at the f
 tolerance, agrees even when the robot's own pose estimate is slightly off.
 
 Which of this project's additions a planner runs follows from its name and the
-configuration's profile (`agent.planning.mechanisms.mechanisms`). Planners keep only the memory
+configuration's profile (`agent.planning.mechanisms.mechanisms`), and eIFP-MPC's tracker
+weights and solver settings from the profile too (`agent.planning.mpc_qp.profile_tuning`);
+both are inputs of `make_planner` (`mechanisms`, `tuning`), which the profile only
+defaults: an ablation or a test builds a planner with other ones. Planners keep only the memory
 the method needs (side per threat and the threats resolved last cycle for eIFP, the MPC's
 warm start); for the same sequence of inputs they return the same decisions. Stage timings are
 wall time from an injected `timer` (default `time.perf_counter`); they are the only
@@ -45,6 +48,7 @@ from agent.planning.guidance import RouteGuide
 from agent.planning.liveness import Strategy
 from agent.planning.mechanisms import Mechanisms
 from agent.planning.mechanisms import mechanisms as mechanisms_of
+from agent.planning.mpc_qp import MpcTuning, profile_tuning
 from agent.planning.routing import StaticMap
 from agent.planning.safety import (
     braking_speed_limit,
@@ -170,13 +174,16 @@ class ViaPointPlanner:
         timer: wall clock for stage timings only.
         static_map: the scenario's static obstacles (`make_planner`).
         mechanisms: the mechanisms to run instead of `name`'s under `config`.
+        tuning: eIFP-MPC's tracker weights and OSQP settings instead of those of
+            `config`'s profile (`profile_tuning`); ifp and eifp run no tracker.
     """
 
     def __init__(self, name: str, config: PlannerConfig, *,
                  control_period_s: float = CONTROL_PERIOD_S,
                  timer: Timer = time.perf_counter,
                  static_map: StaticMap | None = None,
-                 mechanisms: Mechanisms | None = None) -> None:
+                 mechanisms: Mechanisms | None = None,
+                 tuning: MpcTuning | None = None) -> None:
         from agent.planning.eifp import EifpSelector
         from agent.planning.ifp import plan_ifp
 
@@ -187,6 +194,7 @@ class ViaPointPlanner:
         self.control_period_s = control_period_s
         self._timer = timer
         self.mech = mechanisms if mechanisms is not None else mechanisms_of(name, config)
+        self.tuning = tuning if tuning is not None else profile_tuning(config)
         self._selector = EifpSelector(config, self.mech) if name != "ifp" else None
         self._plan_ifp = plan_ifp
         self._trackers: dict[RobotLimits, MpcTracker] = {}
@@ -208,13 +216,11 @@ class ViaPointPlanner:
 
     def _mpc(self, observation: Observation) -> MpcTracker:
         from agent.planning.mpc import MpcTracker
-        from agent.planning.mpc_qp import DEFAULT_TUNING, PAPER_TUNING
 
         key = observation.limits
         tracker = self._trackers.get(key)
         if tracker is None:
-            tuning = PAPER_TUNING if self.config.is_paper else DEFAULT_TUNING
-            tracker = MpcTracker(observation.limits, self.config.mpc, tuning)
+            tracker = MpcTracker(observation.limits, self.config.mpc, self.tuning)
             self._trackers[key] = tracker
         return tracker
 
@@ -448,7 +454,8 @@ def make_planner(name: str, config: PlannerConfig, *,
                  control_period_s: float = CONTROL_PERIOD_S,
                  timer: Timer = time.perf_counter,
                  static_map: StaticMap | None = None,
-                 mechanisms: Mechanisms | None = None) -> Planner:
+                 mechanisms: Mechanisms | None = None,
+                 tuning: MpcTuning | None = None) -> Planner:
     """The planner called `name` (one of `PLANNER_NAMES`).
 
     Args:
@@ -456,10 +463,13 @@ def make_planner(name: str, config: PlannerConfig, *,
             round them (`agent.planning.routing`). ORCA, IFP and eIFP ignore it.
         mechanisms: the via-point planners' mechanisms, instead of those `name` and
             `config` give (`agent.planning.mechanisms.mechanisms`); ORCA ignores it.
+        tuning: eIFP-MPC's tracker weights and OSQP settings, instead of those of
+            `config`'s profile (`agent.planning.mpc_qp.profile_tuning`); the other
+            planners ignore it.
     """
     if name == "orca":
         return OrcaPlanner(config, control_period_s=control_period_s, timer=timer)
     if name in PLANNER_NAMES:
         return ViaPointPlanner(name, config, control_period_s=control_period_s, timer=timer,
-                               static_map=static_map, mechanisms=mechanisms)
+                               static_map=static_map, mechanisms=mechanisms, tuning=tuning)
     raise ValueError(f"unknown planner {name!r}; expected one of {', '.join(PLANNER_NAMES)}")

@@ -166,9 +166,25 @@ def test_the_paper_profile_runs_the_papers_tracker_without_the_guard():
     obs = observation(0.0, 0.0, 0.0, 1.0, [[6.0, 0.2]], [[-1.0, 0.0]])
     default, paper = make_planner("eifp-mpc", PlannerConfig()), make_planner(
         "eifp-mpc", paper_config())
-    assert default._mpc(obs).tuning == DEFAULT_TUNING and default.mech.braking_guard
-    assert paper._mpc(obs).tuning == PAPER_TUNING and not paper.mech.braking_guard
+    assert default.tuning == DEFAULT_TUNING and default.mech.braking_guard
+    assert paper.tuning == PAPER_TUNING and not paper.mech.braking_guard
+    assert default._mpc(obs).tuning == DEFAULT_TUNING and paper._mpc(obs).tuning == PAPER_TUNING
     assert (PAPER_TUNING.q_terminal, PAPER_TUNING.r_dv, PAPER_TUNING.r_domega) == (1.0, 0.0, 0.0)
+
+
+@pytest.mark.parametrize("config", [PlannerConfig(), PlannerConfig(profile="paper")])
+def test_a_tuning_given_to_the_planner_is_the_one_its_tracker_runs(config):
+    # The profile only picks the default: a tuning passed in wins under either profile, and
+    # reaches the tracker a lockstep or robot-process controller builds.
+    from agent.planning.mpc_qp import MpcTuning
+
+    tuning = MpcTuning(max_constraints=1, q_heading=2.0)
+    obs = observation(0.0, 0.0, 0.0, 1.0, [[6.0, 0.2]], [[-1.0, 0.0]])
+    planner = make_planner("eifp-mpc", config, tuning=tuning)
+    assert planner.tuning is tuning and planner._mpc(obs).tuning is tuning
+    spec = RobotSpec(0, (0.0, 0.0, 0.0), (10.0, 0.0), planner="eifp-mpc")
+    controller = RobotController(spec, config, 0.25, tuning=tuning)
+    assert controller.planner.tuning is tuning
 
 
 @pytest.mark.parametrize("planner", ["eifp-mpc", "eifp", "ifp"])
