@@ -76,9 +76,11 @@ class RobotController:
         self.compensate_latency = compensate_latency
         self.control_period_s = float(control_period_s)
         self.command_hold_s = COMMAND_HOLD_PERIODS * self.control_period_s
+        # one window: the others' estimates are fitted over it, and the braking guard
+        # allows for their lag
         self.planner = make_planner(spec.planner, config, control_period_s=self.control_period_s,
                                     static_map=static_map, mechanisms=mechanisms,
-                                    tuning=tuning)
+                                    tuning=tuning, estimation_window_s=ESTIMATION_WINDOW_S)
         self.tracker = NeighborTracker(spec.id, ESTIMATION_WINDOW_S)
         self.snapshot: PoseSnapshot | None = None
         self.command = (0.0, 0.0)

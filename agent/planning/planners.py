@@ -176,6 +176,9 @@ class ViaPointPlanner:
         mechanisms: the mechanisms to run instead of `name`'s under `config`.
         tuning: eIFP-MPC's tracker weights and OSQP settings instead of those of
             `config`'s profile (`profile_tuning`); ifp and eifp run no tracker.
+        estimation_window_s: the window the others' velocity estimates are fitted over
+            (`agent.planning.estimation.NeighborTracker`); the braking guard allows for
+            their lag, half of it [s].
     """
 
     def __init__(self, name: str, config: PlannerConfig, *,
@@ -183,7 +186,8 @@ class ViaPointPlanner:
                  timer: Timer = time.perf_counter,
                  static_map: StaticMap | None = None,
                  mechanisms: Mechanisms | None = None,
-                 tuning: MpcTuning | None = None) -> None:
+                 tuning: MpcTuning | None = None,
+                 estimation_window_s: float = ESTIMATION_WINDOW_S) -> None:
         from agent.planning.eifp import EifpSelector
         from agent.planning.ifp import plan_ifp
 
@@ -195,6 +199,7 @@ class ViaPointPlanner:
         self._timer = timer
         self.mech = mechanisms if mechanisms is not None else mechanisms_of(name, config)
         self.tuning = tuning if tuning is not None else profile_tuning(config)
+        self.estimation_window_s = estimation_window_s
         self._selector = EifpSelector(config, self.mech) if name != "ifp" else None
         self._plan_ifp = plan_ifp
         self._trackers: dict[RobotLimits, MpcTracker] = {}
@@ -336,7 +341,7 @@ class ViaPointPlanner:
         assert others.recent_interval_s is not None
         reaction_s = observation.pose_age_s + self.control_period_s
         # how much an other robot's velocity estimate may trail its velocity now
-        lag_s = 0.5 * ESTIMATION_WINDOW_S + observation.pose_age_s
+        lag_s = 0.5 * self.estimation_window_s + observation.pose_age_s
 
         fresh = observation.pose_age_s <= RECENT_SPEED_MAX_AGE_S
         # the headings the robot sweeps before it stands: up to when a braking command can
@@ -455,7 +460,8 @@ def make_planner(name: str, config: PlannerConfig, *,
                  timer: Timer = time.perf_counter,
                  static_map: StaticMap | None = None,
                  mechanisms: Mechanisms | None = None,
-                 tuning: MpcTuning | None = None) -> Planner:
+                 tuning: MpcTuning | None = None,
+                 estimation_window_s: float = ESTIMATION_WINDOW_S) -> Planner:
     """The planner called `name` (one of `PLANNER_NAMES`).
 
     Args:
@@ -466,10 +472,13 @@ def make_planner(name: str, config: PlannerConfig, *,
         tuning: eIFP-MPC's tracker weights and OSQP settings, instead of those of
             `config`'s profile (`agent.planning.mpc_qp.profile_tuning`); the other
             planners ignore it.
+        estimation_window_s: the window of the others' velocity estimates, whose lag
+            eIFP-MPC's braking guard allows for (`ViaPointPlanner`) [s].
     """
     if name == "orca":
         return OrcaPlanner(config, control_period_s=control_period_s, timer=timer)
     if name in PLANNER_NAMES:
         return ViaPointPlanner(name, config, control_period_s=control_period_s, timer=timer,
-                               static_map=static_map, mechanisms=mechanisms, tuning=tuning)
+                               static_map=static_map, mechanisms=mechanisms, tuning=tuning,
+                               estimation_window_s=estimation_window_s)
     raise ValueError(f"unknown planner {name!r}; expected one of {', '.join(PLANNER_NAMES)}")

@@ -160,7 +160,8 @@ def _percentiles(values: Sequence[float]) -> tuple[float, float, float]:
 
 
 def run_bench(planner: str, n: int, cycles: int, seed: int = 0) -> BenchSamples:
-    """Time `cycles` planning cycles of `planner` in a crowd of `n` robots.
+    """Time `cycles` planning cycles of `planner` in a crowd of `n` robots
+    (`bench_scenario`, starts jittered by up to `JITTER_M`).
 
     Args:
         planner: one of `PLANNER_NAMES`.
@@ -168,10 +169,24 @@ def run_bench(planner: str, n: int, cycles: int, seed: int = 0) -> BenchSamples:
         cycles: planning calls to time (>= 1), over as many episodes as it takes.
         seed: seeds the per-episode start jitter.
     """
+    return time_cycles(bench_scenario(n, planner), cycles, seed, jitter_m=JITTER_M)
+
+
+def time_cycles(base: Scenario, cycles: int, seed: int = 0, *,
+                jitter_m: float = JITTER_M) -> BenchSamples:
+    """Time `cycles` planning cycles of the robots of `base`, episode after episode (see the
+    module docstring); `run_bench` on any scene.
+
+    Args:
+        base: the scene; each episode starts from it, jittered.
+        cycles: planning calls to time (>= 1), over as many episodes as it takes.
+        seed: seeds the per-episode start jitter.
+        jitter_m: each episode moves every start by up to this much [m].
+    """
     from agent.planning.controller import RobotController
     from world.sim.dynamics import WorldSim
 
-    base = bench_scenario(n, planner)
+    n = len(base.robots)
     cfg = base.planner_config
     ticks_per_round = round(WORLD_RATE_HZ / CONTROL_RATE_HZ)
     dt_s = 1.0 / WORLD_RATE_HZ
@@ -183,7 +198,7 @@ def run_bench(planner: str, n: int, cycles: int, seed: int = 0) -> BenchSamples:
     out = BenchSamples()
     rng = np.random.default_rng(seed)
     while len(out) < cycles:
-        scenario = jitter_starts(base, JITTER_M, rng)
+        scenario = jitter_starts(base, jitter_m, rng)
         world = WorldSim(scenario, cmd_timeout_s=CMD_TIMEOUT_S)
         controllers = [RobotController(spec, cfg, scenario.goal_tolerance_m,
                                        control_period_s=period_s)
@@ -223,7 +238,7 @@ def run_bench(planner: str, n: int, cycles: int, seed: int = 0) -> BenchSamples:
         out.passed_centre += int(np.count_nonzero(passed))
         out.contacts += world.contact_count
         if len(out) == counted_before:
-            raise RuntimeError(f"bench {planner} N={n}: an episode had no cycle to time "
+            raise RuntimeError(f"bench {base.name} N={n}: an episode had no cycle to time "
                                f"(excluded: {dict(out.excluded)})")
     return out
 

@@ -73,7 +73,7 @@ def test_an_empty_out_of_ours_is_used_and_closed_to_others(tmp_path):
 def test_two_runs_of_one_second_get_two_directories(tmp_path, monkeypatch):
     from orchestrator.cli import run
 
-    monkeypatch.setattr(run, "DEFAULT_RUNS_DIR", tmp_path / "runs")
+    monkeypatch.chdir(tmp_path)  # default run directories go under ./runs
     stopped = run.default_run_name  # the clock stopped at one second
     monkeypatch.setattr(run, "default_run_name", lambda *a: stopped(*a)[:-15] + "20260101-000000")
     for _ in range(2):
@@ -101,7 +101,7 @@ def test_a_paper_profile_run_says_so_in_its_name_header_and_plot_title(tmp_path,
         return real_save(fig, path, dpi)
 
     monkeypatch.setattr(plots, "save_figure", save)
-    monkeypatch.setattr(run, "DEFAULT_RUNS_DIR", tmp_path / "runs")
+    monkeypatch.chdir(tmp_path)  # default run directories go under ./runs
     main(["run", "setup_a", "--mode", "lockstep", "--profile", "paper"])
     (made,) = (tmp_path / "runs").iterdir()
     assert made.name.startswith("setup_a-eifp-mpc-paper-0-")

@@ -131,32 +131,58 @@ def test_threat_ahead_gets_a_via_point_and_side():
     assert res.waypoints_m.shape[0] >= 3
 
 
-def test_lines_arcs_reference_is_the_default_and_reaches_the_reference(monkeypatch):
-    import agent.planning.spline
+def _reference(res, obs: Observation, *, lines_arcs: bool, corner_radius_m: float,
+               start_radius_m: float, clamp_heading: bool = False) -> np.ndarray:
+    """(N + 1, 2) the reference `build_reference` gives for `res`'s waypoints with these
+    settings and the robot's state in `obs`."""
+    from agent.planning.spline import build_reference
 
-    seen = []
-    build = agent.planning.spline.build_reference
+    mpc = PlannerConfig().mpc
+    ref = build_reference(res.waypoints_m, obs.ego.heading_rad, LIMITS.v_max_mps,
+                          LIMITS.accel_max_mps2, mpc.dt_s, mpc.horizon_steps,
+                          v_start_mps=obs.ego.v_mps, clamp_heading=clamp_heading,
+                          lines_arcs=lines_arcs, corner_radius_m=corner_radius_m,
+                          start_radius_m=start_radius_m)
+    return np.column_stack((ref.x_m, ref.y_m))
 
-    def spy(*args, **kwargs):
-        seen.append((kwargs["lines_arcs"], kwargs["corner_radius_m"], kwargs["start_radius_m"]))
-        return build(*args, **kwargs)
 
-    monkeypatch.setattr(agent.planning.spline, "build_reference", spy)
+def test_lines_arcs_reference_is_the_default_and_reaches_the_reference():
     from agent.core.config import ReferenceConfig
 
-    moving = observation(0.0, 0.0, 0.0, 1.0, [[6.0, 0.2]], [[-1.0, 0.0]])
-    arcs = make_planner("eifp-mpc", PlannerConfig()).plan(moving, 0.0)
-    on_spline = make_planner("eifp-mpc", PlannerConfig())
-    on_spline.mech = replace(on_spline.mech, lines_arcs=False)
-    spline = on_spline.plan(moving, 0.0)
-    standing = observation(0.0, 0.0, 0.0, 0.0, [[6.0, 0.2]], [[-1.0, 0.0]])
-    wide = PlannerConfig(reference=ReferenceConfig(corner_radius_m=2.0))
-    make_planner("eifp-mpc", wide).plan(standing, 0.0)
     # Defaults R = 1 m, start arc 5 m; a standing robot turns on the spot (no start arc).
-    make_planner("eifp", PlannerConfig()).plan(moving, 0.0)  # the tracking law: the spline
-    assert seen == [(True, 1.0, 5.0), (False, 1.0, 5.0), (True, 2.0, 0.0), (False, 1.0, 5.0)]
+    # Moving at 1 m/s towards a still disc 6 m ahead: the start arc is within the horizon.
+    moving = observation(0.0, 0.0, 0.0, 1.0, [[6.0, 0.2]], [[0.0, 0.0]])
+    arcs = make_planner("eifp-mpc", PlannerConfig()).plan(moving, 0.0)
+    assert arcs.waypoints_m.shape[0] >= 3  # a via-point: legs to join
+    np.testing.assert_array_equal(arcs.debug.reference_m, _reference(
+        arcs, moving, lines_arcs=True, corner_radius_m=1.0, start_radius_m=5.0))
+    assert not np.allclose(arcs.debug.reference_m, _reference(
+        arcs, moving, lines_arcs=True, corner_radius_m=1.0, start_radius_m=0.0))
+    on_spline = make_planner("eifp-mpc", PlannerConfig(), mechanisms=replace(
+        EIFP_MPC_MECHANISMS, lines_arcs=False))
+    spline = on_spline.plan(moving, 0.0)
+    np.testing.assert_array_equal(spline.debug.reference_m, _reference(
+        spline, moving, lines_arcs=False, corner_radius_m=1.0, start_radius_m=5.0))
     np.testing.assert_array_equal(arcs.waypoints_m, spline.waypoints_m)  # same via-points
+    assert not np.allclose(arcs.debug.reference_m, spline.debug.reference_m)
     assert (arcs.v_mps, arcs.omega_radps) != (spline.v_mps, spline.omega_radps)
+    # Standing before a still disc 2 m ahead (two via-points, a corner within the horizon)
+    # or 6 m ahead (the start leg within it): the configured corner radius, no start arc.
+    wide = PlannerConfig(reference=ReferenceConfig(corner_radius_m=2.0))
+    used = {"lines_arcs": True, "corner_radius_m": 2.0, "start_radius_m": 0.0}
+    for disc_m, other in (([2.0, 0.0], {"corner_radius_m": 1.0}),
+                          ([6.0, 0.2], {"start_radius_m": 5.0})):
+        standing = observation(0.0, 0.0, 0.0, 0.0, [disc_m], [[0.0, 0.0]])
+        still = make_planner("eifp-mpc", wide).plan(standing, 0.0)
+        np.testing.assert_array_equal(still.debug.reference_m,
+                                      _reference(still, standing, **used))
+        assert not np.allclose(still.debug.reference_m,
+                               _reference(still, standing, **(used | other)))
+    # eifp's tracking law follows the spline, clamped to the heading when moving
+    law = make_planner("eifp", PlannerConfig()).plan(moving, 0.0)
+    np.testing.assert_array_equal(law.debug.reference_m, _reference(
+        law, moving, lines_arcs=False, corner_radius_m=1.0, start_radius_m=5.0,
+        clamp_heading=True))
 
 
 def test_the_paper_profile_runs_the_papers_tracker_without_the_guard():
@@ -185,6 +211,8 @@ def test_a_tuning_given_to_the_planner_is_the_one_its_tracker_runs(config):
     spec = RobotSpec(0, (0.0, 0.0, 0.0), (10.0, 0.0), planner="eifp-mpc")
     controller = RobotController(spec, config, 0.25, tuning=tuning)
     assert controller.planner.tuning is tuning
+    # the braking guard allows for the lag of the estimates the controller makes
+    assert controller.planner.estimation_window_s == controller.tracker.window_s
 
 
 @pytest.mark.parametrize("planner", ["eifp-mpc", "eifp", "ifp"])
@@ -227,23 +255,25 @@ def test_unknown_planner_name():
         make_planner("rrt", PlannerConfig())
 
 
-def test_mpc_solver_failure_is_counted_and_brakes(monkeypatch):
-    planner = make_planner("eifp-mpc", PlannerConfig())
+def test_mpc_solver_failure_is_counted_and_brakes():
+    # A tuning OSQP cannot solve: a negative weight on the speed error (r_v = -10) makes the
+    # QP's cost non-convex, which OSQP finds while it iterates (status OSQP_NON_CVX). The
+    # tracker's failure path (each OSQP outcome is tested in test_mpc.py) must reach the
+    # planner's result: the status, the count and a braking command.
+    from agent.planning.mpc_qp import MpcTuning
+
     obs = observation(0.0, 0.0, 0.0, 1.0, [], [])
-    planner.plan(obs, 0.0)
-    tracker = next(iter(planner._trackers.values()))
-    # The tracker's own failure path (OSQP failures themselves are tested in test_mpc.py):
-    # the planner must pass the braking command and the status through.
-    from agent.planning import mpc as mpc_module
-
-    def failing(self, state, last, reference, *args, **kwargs):
-        return self._fail(np.asarray(state, float), np.asarray(last, float), 0)
-
-    monkeypatch.setattr(mpc_module.MpcTracker, "solve", failing)
-    res = planner.plan(obs, 0.1)
-    assert res.status == PlanStatus.SOLVER_FAILED
-    assert tracker.failures == 1
-    assert res.v_mps < 1.0 and res.v_mps >= 0.0
+    assert make_planner("eifp-mpc", PlannerConfig()).plan(obs, 0.0).status is PlanStatus.OK
+    planner = make_planner("eifp-mpc", PlannerConfig(), tuning=MpcTuning(r_v=-10.0))
+    res = planner.plan(obs, 0.0)
+    tracker = planner._mpc(obs)
+    assert res.status is PlanStatus.SOLVER_FAILED
+    assert tracker.failures == 1 and res.solver_iterations > 0  # OSQP ran and gave up
+    # the tracker's braking: v falls at accel_max over one MPC step, omega stays 0
+    dt_s = PlannerConfig().mpc.dt_s
+    assert res.v_mps == pytest.approx(1.0 - LIMITS.accel_max_mps2 * dt_s)
+    assert res.omega_radps == 0.0
+    assert planner.plan(obs, dt_s).status is PlanStatus.SOLVER_FAILED and tracker.failures == 2
 
 
 def test_stage_times_come_from_the_injected_timer():

@@ -10,6 +10,7 @@ from hypothesis import strategies as st
 
 from agent.core.config import PlannerConfig, RobotLimits, SafetyConfig
 from agent.core.types import EgoState, Observation, Others
+from agent.planning.mechanisms import EIFP_MPC_MECHANISMS
 from agent.planning.planners import RECENT_SPEED_MAX_AGE_S, make_planner
 from agent.planning.safety import (
     braking_speed_limit,
@@ -295,12 +296,8 @@ def _observation(ahead_m: float, pose_age_s: float, is_robot: bool = False,
                        limits=RobotLimits(), others=others, pose_age_s=pose_age_s)
 
 
-@pytest.fixture(autouse=True)
-def _half_second_window(monkeypatch):
-    # The guard tests' arithmetic takes a 0.5 s estimation window: estimates lag 0.25 s.
-    import agent.planning.planners
-
-    monkeypatch.setattr(agent.planning.planners, "ESTIMATION_WINDOW_S", 0.5)
+WINDOW_S = 0.5
+"""The guard tests' arithmetic takes a 0.5 s estimation window: estimates lag 0.25 s."""
 
 
 def _planner(margin_m: float, guard: bool = True):
@@ -308,10 +305,9 @@ def _planner(margin_m: float, guard: bool = True):
     # reference it slows to 1.04 m/s for the turn at the start of its path), so the speeds
     # below are the guard's alone.
     config = PlannerConfig(safety=SafetyConfig(braking_margin_m=margin_m))
-    planner = make_planner("eifp-mpc", config)
-    planner.mech = replace(planner.mech, lines_arcs=False, clamp_heading=True,
-                           braking_guard=guard)
-    return planner
+    mechanisms = replace(EIFP_MPC_MECHANISMS, lines_arcs=False, clamp_heading=True,
+                         braking_guard=guard)
+    return make_planner("eifp-mpc", config, mechanisms=mechanisms, estimation_window_s=WINDOW_S)
 
 
 def test_eifp_mpc_speed_is_capped_by_the_guard_and_braking_stays_within_the_rate_limit():
@@ -361,7 +357,7 @@ def _one_pass_guard(planner, obs: Observation, v_mps: float, omega_radps: float)
     """The guard as the module docstring defines it: the exact unseen speed-ups, one pass."""
     ego, limits, others = obs.ego, obs.limits, obs.others
     reaction_s = obs.pose_age_s + planner.control_period_s
-    lag_s = 0.5 * 0.5 + obs.pose_age_s
+    lag_s = 0.5 * WINDOW_S + obs.pose_age_s
     unseen = unseen_speed_up_mps(
         (ego.x_m, ego.y_m), others.position_m, others.heading_rad, others.is_robot,
         accel_mps2=limits.accel_max_mps2, turn_rate_radps=limits.omega_max_radps, lag_s=lag_s,

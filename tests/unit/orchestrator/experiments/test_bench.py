@@ -98,18 +98,14 @@ def test_bench_scenario_is_a_dense_circle():
         small.planner_config.threats.sensing_radius_m / 2.0)
 
 
-def test_arrived_cycles_are_excluded_and_counted(monkeypatch):
+def test_arrived_cycles_are_excluded_and_counted():
     # Robot 0 sits on its goal (ARRIVED every cycle); robot 1 crosses 10 m.
-    def at_goal(n: int, planner: str) -> Scenario:
-        return Scenario(
-            name="at_goal", description="", time_limit_s=60.0, goal_tolerance_m=0.25,
-            planner_config=PlannerConfig(),
-            robots=(RobotSpec(0, (0.0, 4.0, 0.0), (0.0, 4.0), planner=planner),
-                    RobotSpec(1, (-5.0, 0.0, 0.0), (5.0, 0.0), planner=planner)))
-
-    monkeypatch.setattr(bench, "bench_scenario", at_goal)
-    monkeypatch.setattr(bench, "JITTER_M", 0.0)
-    samples = bench.run_bench("eifp", 2, cycles=30)
+    at_goal = Scenario(
+        name="at_goal", description="", time_limit_s=60.0, goal_tolerance_m=0.25,
+        planner_config=PlannerConfig(),
+        robots=(RobotSpec(0, (0.0, 4.0, 0.0), (0.0, 4.0), planner="eifp"),
+                RobotSpec(1, (-5.0, 0.0, 0.0), (5.0, 0.0), planner="eifp")))
+    samples = bench.time_cycles(at_goal, cycles=30, jitter_m=0.0)
     assert len(samples) == 30 and set(samples.statuses) <= {"ok", "escape", "no_feasible"}
     # Robot 0 was excluded once per timed round: as often as robot 1 was counted.
     assert samples.excluded == {"arrived": 30}

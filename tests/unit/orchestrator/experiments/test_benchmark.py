@@ -172,14 +172,7 @@ def test_tables_have_one_line_per_row_and_the_columns():
     assert all(line.count("|") == len(bm.COLUMNS) + 1 for line in md[2:6])
 
 
-def test_write_outputs(tmp_path, monkeypatch):
-    from orchestrator.analysis import plots
-
-    def plot(rows, path, title=""):  # the figure itself: test_plots
-        Path(path).write_bytes(b"png")
-        return Path(path)
-
-    monkeypatch.setattr(plots, "plot_benchmark", plot)
+def test_write_outputs(tmp_path):
     rows = bm.summarize([fake("c", "a", 0), fake("c", "b", 0)])
     paths = bm.write_outputs(tmp_path, rows, [fake("c", "a", 0)],
                              {"mode": "lockstep", "seeds": [0], "seed_set": "quick"})
