@@ -26,6 +26,16 @@ USAGE_ERROR = 2
 this module stays free of zenoh)."""
 
 
+class FlagError(ValueError):
+    """Flags a process refuses together, each valid on its own (plain TCP on every interface,
+    ``--relay`` without ``--tls`` ...): `flag` names the one at fault, the message says why.
+    The world records it in its ``end`` event (``reason`` bad_input, ``flag``)."""
+
+    def __init__(self, flag: str, message: str) -> None:
+        super().__init__(message)
+        self.flag = flag
+
+
 class Parser(argparse.ArgumentParser):
     """An `argparse.ArgumentParser` whose usage errors are one line on stderr and exit
     status 2 (BAD_INPUT): ``<prog>: error: <message> (see --help)``. Subparsers are made

@@ -22,10 +22,12 @@ what comes out and logs.
 It exits 0 on the ``end`` `ControlMsg` and on SIGTERM/SIGINT/SIGHUP, and with
 `ExitCode.WORLD_LOST` when the world's token stays away past its grace
 (`agent.robot_cycle.WorldWatch`) or no pose arrives for ``--pose-timeout-s`` while running.
+Once its signal handlers are in place it logs its start line, ``robot <id> start:
+{"run": ..., "connect": ...}`` (JSON: the run and the endpoint it dials, before it connects).
 On exit it logs one line ``robot <id> exit: reason='...' code=N rejected=N stale=N ...
 seq=N cpu_sense_us=N ...`` to stderr: the counters of `agent.robot_cycle.RobotCounters`,
-the last seq and `CpuMeter.summary`. The launcher collects these lines into
-``robots.json``.
+the last seq and `CpuMeter.summary`. The launcher collects both lines into ``robots.json``
+(`orchestrator.experiments.distributed.collect_robot_exits`).
 
 Exit status (`agent.process.ExitCode`): OK (end of run, or a signal), TRANSPORT (cannot
 connect before the startup deadline), BAD_INPUT (no valid configuration), WORLD_LOST (the
@@ -47,6 +49,7 @@ cost per cycle is in docs/scale.md (`orchestrator bench --process`).
 from __future__ import annotations
 
 import contextlib
+import json
 import logging
 import os
 import queue
@@ -475,8 +478,9 @@ def _run_agent(options: AgentOptions, stop: StopFlag, on_ready: Callable[[], Non
     session: zenoh.Session | None = None
     deadline = time.monotonic() + options.startup_timeout_s
     use_one_zenoh_thread()
-    log.info("robot %d: run %s, connecting to %s", options.robot_id, options.run_id,
-             options.connect)
+    # the start line: where the robot dials, for the launcher (robots.json) and tests
+    log.info("robot %d start: %s", options.robot_id,
+             json.dumps({"run": options.run_id, "connect": options.connect}))
     try:
         session = connect(options, stop, deadline)
         world_zid = world_zid_of(session, options)

@@ -44,7 +44,9 @@ restarts).
 Events (``events.jsonl``, sim time ``t``; ``wall`` is Unix time where detection latency
 matters): world_ready, robot_joined, robot_lost, robot_rejoined, robot_left, unknown_robot,
 start, arrived, contact, cmd_timeout, rejected, startup_timeout, end (with ``tick_ms``: the
-loop's tick wall times, p50 / p99 / mean / max, and the ``overruns`` counter).
+loop's tick wall times, p50 / p99 / mean / max, and the ``overruns`` counter; a world that
+refuses its flags ends at once with reason ``bad_input``, the message as ``error`` and the
+flag at fault as ``flag``, `agent.flags.FlagError`).
 
 Exit status (`agent.process.ExitCode.of_run`): OK every robot arrived with no contact,
 CONTACT, ROBOT_LOST, INTERRUPTED or INCOMPLETE otherwise; BAD_INPUT for bad arguments or a
@@ -493,30 +495,35 @@ def world_settings(options: WorldOptions, scenario: Scenario) -> dict[str, str]:
     `options.connect`.
 
     Raises:
-        ValueError: a plain endpoint with TLS, TLS with `connect` (the access control is
-            enforced by the world's own router), relays without TLS or naming robots that
-            are not in the scenario, or a TLS file that is missing or unreadable.
+        agent.flags.FlagError: TLS with `connect` (the access control is enforced by the
+            world's own router), a TLS file that is missing or unreadable, relays without
+            TLS, or plain TCP on every interface.
+        ValueError: a plain endpoint with TLS, or relays naming robots that are not in the
+            scenario.
     """
     tls = None
     if options.tls_dir is not None:
         if options.connect:
-            raise ValueError("--tls with --connect: the world's own router enforces the run's "
-                             "access control; robots on other hosts reach it through a relay "
-                             "router (python -m world.router), so the world listens")
+            raise argtypes.FlagError(
+                "--tls", "--tls with --connect: the world's own router enforces the run's "
+                "access control; robots on other hosts reach it through a relay router "
+                "(python -m world.router), so the world listens")
         tls = TlsFiles.in_dir(options.tls_dir, WORLD_CN)
         problem = check_tls_files(tls)
         if problem:
-            raise ValueError(f"--tls {options.tls_dir}: {problem}")
+            raise argtypes.FlagError("--tls", f"--tls {options.tls_dir}: {problem}")
     if options.relays and tls is None:
-        raise ValueError("--relay needs --tls: relays are told apart by their certificates")
+        raise argtypes.FlagError("--relay", "--relay needs --tls: relays are told apart by "
+                                 "their certificates")
     if options.connect:
         return session_settings(mode="client", connect=[options.connect],
                                 connect_timeout_ms=int(options.wait_robots_s * 1e3),
                                 zid=options.zid)
     listen = options.listen or DEFAULT_ENDPOINT
     if tls is None and argtypes.every_interface(listen):
-        raise ValueError(f"--listen {listen}: every interface only with --tls (mutual TLS "
-                         "and access control); plain TCP listens on one address")
+        raise argtypes.FlagError("--listen", f"--listen {listen}: every interface only with "
+                                 "--tls (mutual TLS and access control); plain TCP listens "
+                                 "on one address")
     acl = None
     if tls is not None:
         acl = access_control(options.run_id, [r.id for r in scenario.robots],
@@ -550,7 +557,9 @@ def run_world(options: WorldOptions) -> int:
                 settings = world_settings(options, scenario)
             except ValueError as exc:
                 log.error("%s", exc)
-                recorder.event("end", 0.0, reason="bad_input", success=False, error=str(exc))
+                flag = exc.flag if isinstance(exc, argtypes.FlagError) else None
+                recorder.event("end", 0.0, reason="bad_input", success=False, error=str(exc),
+                               flag=flag)
                 return ExitCode.BAD_INPUT
             try:
                 session = open_session(settings)

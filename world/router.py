@@ -129,8 +129,9 @@ def router_settings(options: RouterOptions) -> dict[str, str]:
             raise ValueError(f"--tls {options.tls_dir}: {problem}")
         acl = relay_access_control(options.run_id, options.robot_ids)
     if tls is None and argtypes.every_interface(options.listen):
-        raise ValueError(f"--listen {options.listen}: every interface only with --tls (mutual "
-                         "TLS and access control); plain TCP listens on one address")
+        raise argtypes.FlagError("--listen", f"--listen {options.listen}: every interface "
+                                 "only with --tls (mutual TLS and access control); plain "
+                                 "TCP listens on one address")
     # A router dials its connect endpoints in the background and redials a lost link
     # (connect/timeout_ms -1 with exit_on_failure false, the router default).
     return session_settings(mode="router", listen=[options.listen], connect=[options.connect],

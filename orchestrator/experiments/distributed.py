@@ -12,8 +12,9 @@ Ctrl-C or SIGTERM to the launcher.
 Files written in `out_dir` besides the world's (scenario.yaml, trajectory.csv,
 commands.csv, events.jsonl): ``world.log`` and ``robot_<id>.log`` (each process's stderr
 and stdout; a robot's last line is ``robot <id> exit: reason=... code=... rejected=N ...``),
-``robots.json`` (those exit lines parsed: every robot process's reason, code and counters,
-and the total of poses the robots rejected as malformed) and, with process faults,
+``robots.json`` (those exit lines parsed: every robot process's reason, code, counters and
+the endpoint it dialled, from its first line ``robot <id> start: {...}``, and the total of
+poses the robots rejected as malformed) and, with process faults,
 ``faults.jsonl`` (one line per signal sent: sim time, wall time, robot, action).
 
 Faults (`world.sim.faults.FaultPlan`): link faults and per-robot timing reach the
@@ -82,6 +83,8 @@ TLS_DIR = "tls"
 REFUSED_COUNTERS = ("refused_poses", "refused_control", "refused_config")
 """Robot counters of well-formed messages refused as not the world's (totals in robots.json)."""
 EXIT_LINE = re.compile(r"robot (\d+) exit: reason='([^']*)' code=(\d+)(.*)$", re.MULTILINE)
+START_LINE = re.compile(r"robot (\d+) start: (\{.*\})[ \t\r]*$", re.MULTILINE)
+"""A robot's first line (`agent.node`): its id, then a JSON object (``run``, ``connect``)."""
 
 
 def free_tcp_endpoint(host: str = "127.0.0.1") -> str:
@@ -249,13 +252,31 @@ class ProcessFaultScheduler:
         self.stopped.clear()
 
 
+def robot_starts(log_text: str) -> list[dict[str, Any]]:
+    """The start lines in a robot's log, parsed: ``robot`` (its id), ``run`` and
+    ``connect`` (the endpoint it dialled); a line that is not valid JSON is left out."""
+    starts = []
+    for m in START_LINE.finditer(log_text):
+        try:
+            fields = json.loads(m.group(2))
+        except ValueError:
+            continue
+        if isinstance(fields, dict):
+            starts.append({**fields, "robot": int(m.group(1))})
+    return starts
+
+
 def collect_robot_exits(out_dir: Path) -> dict[str, Any]:
-    """Every robot process's exit line, parsed (written as robots.json by the launcher)."""
+    """Every robot process's exit line, parsed, with the endpoint it dialled (``connect``,
+    from its start line; written as robots.json by the launcher)."""
     processes = []
     for log in sorted(Path(out_dir).glob("robot_*.log")):
-        for m in EXIT_LINE.finditer(log.read_text(errors="replace")):
+        text = log.read_text(errors="replace")
+        dialled = {s["robot"]: s.get("connect") for s in robot_starts(text)}
+        for m in EXIT_LINE.finditer(text):
             counters = {k: int(v) for k, v in re.findall(r"(\w+)=(\d+)", m.group(4))}
-            processes.append({"robot": int(m.group(1)), "log": log.name,
+            rid = int(m.group(1))
+            processes.append({"robot": rid, "log": log.name, "connect": dialled.get(rid),
                               "reason": m.group(2), "code": int(m.group(3)), **counters})
     return {"processes": processes,
             "rejected_poses": sum(p.get("rejected", 0) for p in processes),

@@ -40,6 +40,7 @@ import pytest
 import yaml
 
 from agent.process import ExitCode
+from orchestrator.experiments.distributed import robot_starts
 
 pytestmark = [pytest.mark.system, pytest.mark.docker, pytest.mark.timeout(2400)]
 
@@ -634,7 +635,7 @@ def test_robots_on_two_hosts_through_routers(docker_setup: DockerSetup, demo_fac
     for rid in range(ROBOTS_D):
         log = demo.logs(f"robot-{rid}")
         router = "router-b" if rid >= 2 else "world"
-        assert f"connecting to tls/{router}:7447" in log, log[-2000:]
+        assert [s["connect"] for s in robot_starts(log)] == [f"tls/{router}:7447"], log[-2000:]
         exit_line = next(line for line in log.splitlines() if f"robot {rid} exit:" in line)
         assert "reason='end (all_arrived)' code=0" in exit_line
         for counter in ("rejected=0", "refused_poses=0", "refused_control=0",

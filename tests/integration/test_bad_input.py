@@ -140,12 +140,13 @@ def test_world_and_router_refuse_a_plain_listener_on_every_interface(endpoint, t
     from world.scenario_file import load_scenario as load
 
     options = world_args(["--run", "r", "--scenario", str(SETUP_D), "--listen", endpoint])
-    with pytest.raises(ValueError, match="every interface only with --tls"):
+    with pytest.raises(flags.FlagError, match="every interface only with --tls") as world:
         world_settings(options, load(SETUP_D))
     relay = router_args(["--run", "r", "--name", "b", "--robots", "1", "--listen", endpoint,
                          "--connect", "tcp/127.0.0.1:7447"])
-    with pytest.raises(ValueError, match="every interface only with --tls"):
+    with pytest.raises(flags.FlagError, match="every interface only with --tls") as router:
         router_settings(relay)
+    assert world.value.flag == router.value.flag == "--listen"
 
 
 def test_the_relay_router_process_refuses_tcp_0_with_exit_2():

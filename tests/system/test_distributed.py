@@ -30,6 +30,7 @@ from eifp_wire import CommandMsg, ControlMsg, PosesMsg, ProtocolError, RunKeys, 
 from orchestrator.experiments.distributed import (
     free_tcp_endpoint,
     robot_command,
+    robot_starts,
     run_distributed,
     spawn_logged,
     stop_processes,
@@ -512,9 +513,9 @@ def test_robot_exits_cleanly_on_sigterm(tmp_path: Path) -> None:
     robot = spawn_logged(robot_command(run_id, 0, free_tcp_endpoint(), startup_timeout_s=60.0),
                          tmp_path / "robot_0.log")
     try:
-        # Wait until it says it is connecting (its signal handlers are in place), then stop it.
+        # Wait for its start line (its signal handlers are in place), then stop it.
         deadline = time.monotonic() + STARTUP_S
-        while "connecting to" not in (tmp_path / "robot_0.log").read_text():
+        while not robot_starts((tmp_path / "robot_0.log").read_text()):
             assert time.monotonic() < deadline and robot.poll() is None
             time.sleep(0.02)
         robot.send_signal(signal.SIGTERM)

@@ -101,6 +101,8 @@ def test_robots_behind_a_relay_router_complete_the_run(tmp_path: Path) -> None:
     exits = collect_robot_exits(tmp_path)
     (out / "robots.json").write_text(json.dumps(exits))
     assert sorted(p["robot"] for p in exits["processes"]) == list(ROBOTS), exits
+    assert {p["robot"]: p["connect"] for p in exits["processes"]} == {
+        rid: host_b if rid in BEHIND_RELAY else host_a for rid in ROBOTS}, exits
     assert all(p["reason"] == "end (all_arrived)" and p["code"] == 0
                for p in exits["processes"]), exits
     assert exits["refused_poses"] == 0 and exits["refused_control"] == 0, exits

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from orchestrator.cli import main as cli_main
-from orchestrator.experiments.distributed import collect_robot_exits
+from orchestrator.experiments.distributed import collect_robot_exits, robot_starts
 
 pytestmark = [pytest.mark.system, pytest.mark.timeout(180)]
 
@@ -111,13 +111,15 @@ def test_fleet_robots_leave_with_the_fleet(tmp_path: Path, how: str) -> None:
         if proc.poll() is None:
             proc.kill()
             proc.wait()
-    # No world, so no run files: which address each robot dialled is in its log only.
-    assert "connecting to tcp/127.0.0.2:9" in (tmp_path / "robot_1.log").read_text()
+    # No world, so no run files: which address each robot dialled is in its start line.
+    (start_1,) = robot_starts((tmp_path / "robot_1.log").read_text())
+    assert (start_1["robot"], start_1["run"], start_1["connect"]) == (1, "t", "tcp/127.0.0.2:9")
     if how == "sigterm":
-        assert "connecting to tcp/127.0.0.1:9" in (tmp_path / "robot_0.log").read_text()
+        (start_0,) = robot_starts((tmp_path / "robot_0.log").read_text())
+        assert (start_0["robot"], start_0["connect"]) == (0, "tcp/127.0.0.1:9")
         exits = collect_robot_exits(tmp_path)["processes"]  # robots.json's form
-        assert sorted((p["robot"], p["reason"], p["code"]) for p in exits) == [
-            (0, "signal", 0), (1, "signal", 0)], exits
+        assert sorted((p["robot"], p["reason"], p["code"], p["connect"]) for p in exits) == [
+            (0, "signal", 0, "tcp/127.0.0.1:9"), (1, "signal", 0, "tcp/127.0.0.2:9")], exits
 
 
 def test_bench_process_prints_a_robots_cpu_per_cycle_by_part(tmp_path: Path, capsys) -> None:

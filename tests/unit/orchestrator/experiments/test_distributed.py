@@ -10,9 +10,11 @@ import pytest
 
 from eifp_wire import ProtocolError
 from orchestrator.experiments.distributed import (
+    collect_robot_exits,
     fleet_command,
     free_tcp_endpoint,
     robot_command,
+    robot_starts,
     run_distributed,
     world_command,
 )
@@ -91,3 +93,18 @@ def test_the_default_startup_deadline_grows_with_the_robot_count() -> None:
     assert default_startup_timeout_s(4) == STARTUP_S_MIN
     assert default_startup_timeout_s(128) == 128 * STARTUP_S_PER_ROBOT > STARTUP_S_MIN
     assert default_startup_timeout_s(256) > default_startup_timeout_s(128)
+
+
+def test_start_lines_give_where_each_robot_dialled_and_robots_json_keeps_it(tmp_path: Path):
+    # As agent.node logs them (the system tests check the real processes' lines).
+    start = ('2026-01-01 00:00:00,000 agent INFO robot 2 start: '
+             '{"run": "r1", "connect": "tls/10.0.0.2:7447"}')
+    exit_line = "2026-01-01 00:00:09,000 agent INFO robot 2 exit: reason='signal' code=0 plans=7"
+    assert robot_starts(start + "\r\n") == [
+        {"robot": 2, "run": "r1", "connect": "tls/10.0.0.2:7447"}]
+    assert robot_starts("robot 2 start: {not json}\nrobot 2 start: [1]\n") == []
+    (tmp_path / "robot_2.log").write_text(f"{start}\nplanning\n{exit_line}\n")
+    (tmp_path / "robot_3.log").write_text("robot 3 exit: reason='signal' code=0\n")
+    (two, three) = collect_robot_exits(tmp_path)["processes"]
+    assert (two["robot"], two["connect"], two["plans"]) == (2, "tls/10.0.0.2:7447", 7)
+    assert (three["robot"], three["connect"]) == (3, None)  # no start line: not known
