@@ -99,5 +99,5 @@ def test_the_readme_test_command_is_what_ci_runs() -> None:
         assert step in ci, f".ci/run does not run the README's `{step}`"
     # What CI adds, the README says.
     intro = README[m.start():m.start() + 600]
-    for extra in ("rm -rf .venv", "--upgrade pip", "EIFP_DOCKER_BUILD=1"):
+    for extra in ("rm -rf .venv", "--upgrade pip", "EIFP_DOCKER_BUILD=1", "HYPOTHESIS_PROFILE=ci"):
         assert extra in ci and extra in intro, extra

@@ -12,8 +12,9 @@ from agent.core.types import PlanDebug
 from eifp_wire.limits import ProtocolError
 from eifp_wire.messages import CommandMsg, ControlMsg, PlanDebugMsg, RunConfigMsg
 from eifp_wire.poses import PosesMsg
+from tests.examples import examples
 
-FUZZ = settings(max_examples=300, deadline=None, database=None,
+FUZZ = settings(max_examples=examples(300), deadline=None, database=None,
                 suppress_health_check=[HealthCheck.too_slow])
 """Hypothesis settings of the fuzz tests: many examples, no deadline, no example database."""
 

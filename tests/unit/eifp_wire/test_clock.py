@@ -15,6 +15,7 @@ from eifp_wire.clock import (
     max_seq,
     next_seq,
 )
+from tests.examples import examples
 
 # --- sequence numbers -----------------------------------------------------------------------
 
@@ -55,7 +56,7 @@ def test_the_64_step_walk_is_stopped_and_the_robot_passes_it_a_second_later() ->
     assert check_seq(genuine, last, world_t_s=t0_s + 1.5 + MAX_CMD_AHEAD_S + 0.02) is None
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=examples(200), deadline=None)
 @given(steps=st.lists(st.tuples(st.floats(0.0, 0.5), st.integers(1, 2**40)), max_size=60),
        t0_s=st.floats(0.0, 600.0))
 def test_no_forged_walk_outruns_the_genuine_robot_by_more_than_the_bound(

@@ -21,6 +21,7 @@ from agent.planning.eifp import (
 from agent.planning.ifp import ESCAPE_STANDING_MPS, ViaPlan
 from agent.planning.mechanisms import EIFP_MECHANISMS
 from agent.planning.threats import as_complex
+from tests.examples import examples
 
 R = 0.2
 CFG = PlannerConfig()
@@ -321,7 +322,7 @@ def test_bad_configuration_raises(setting, value):
 coord = st.floats(-15, 15, allow_nan=False)
 
 
-@settings(max_examples=120, deadline=None)
+@settings(max_examples=examples(120), deadline=None)
 @given(
     st.lists(
         st.tuples(coord, coord, st.floats(-1.5, 1.5), st.floats(-1.5, 1.5), st.floats(0, 1)),

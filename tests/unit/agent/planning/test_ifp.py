@@ -12,6 +12,7 @@ from agent.core.types import EgoState, Observation, Others, PlanStatus, Side
 from agent.planning.ifp import ESCAPE_STANDING_MPS, ViaPlan, plan_ifp, select_earliest
 from agent.planning.mechanisms import VIA_MARGIN_M
 from agent.planning.viapoints import ESCAPE_MARGIN_M, candidate_pair
+from tests.examples import examples
 
 R = 0.2  # robot and obstacle radius
 CFG = PlannerConfig()  # d_safety 0.3 -> L = 0.7 between two 0.2 m discs
@@ -234,7 +235,7 @@ def test_sensing_radius_and_neighbour_cap_apply():
 coord = st.floats(-15, 15, allow_nan=False)
 
 
-@settings(max_examples=150, deadline=None)
+@settings(max_examples=examples(150), deadline=None)
 @given(
     st.lists(st.tuples(coord, coord, st.floats(-1.5, 1.5), st.floats(-1.5, 1.5)), max_size=10),
     st.floats(0, 1.1),

@@ -17,6 +17,7 @@ from agent.core.types import PlanStatus
 from agent.planning.mpc import MpcResult, MpcTracker
 from agent.planning.mpc_qp import MpcTuning
 from agent.planning.unicycle import step, wrap_angle
+from tests.examples import examples
 
 LIM = RobotLimits()
 CFG = MpcConfig()
@@ -426,7 +427,7 @@ _SHARED: dict[str, MpcTracker] = {}
 coord = st.floats(-20.0, 20.0, allow_nan=False)
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=examples(60), deadline=None)
 @given(
     state=st.tuples(coord, coord, st.floats(-10.0, 10.0)),
     last=st.tuples(st.floats(-3.0, 3.0), st.floats(-5.0, 5.0)),

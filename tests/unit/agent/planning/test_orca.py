@@ -11,6 +11,7 @@ from agent.core.config import PlannerConfig, RobotLimits, ThreatConfig
 from agent.core.types import Others
 from agent.planning.orca import OrcaCommand, OrcaController
 from agent.planning.unicycle import step
+from tests.examples import examples
 
 LIM = RobotLimits()
 CFG = PlannerConfig()
@@ -207,7 +208,7 @@ def test_invalid_inputs_raise():
 coord = st.floats(-20.0, 20.0, allow_nan=False)
 
 
-@settings(max_examples=80, deadline=None)
+@settings(max_examples=examples(80), deadline=None)
 @given(
     pose=st.tuples(coord, coord, st.floats(-10.0, 10.0)),
     goal=st.tuples(coord, coord),

@@ -18,6 +18,7 @@ from agent.planning.safety import (
     unseen_speed_up_mps,
     unseen_turn_closing_mps,
 )
+from tests.examples import examples
 
 R = 0.5
 
@@ -262,7 +263,7 @@ def test_a_speed_change_seen_in_the_newest_interval_replaces_the_blind_bound():
     assert capped == pytest.approx([0.45, 0.45])
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=examples(200), deadline=None)
 @given(speed=st.floats(0.0, 1.1), recent=st.floats(0.0, 1.5), off=st.floats(-4.0, 4.0),
        lag=st.floats(0.0, 0.6), recent_lag=st.floats(0.0, 0.6))
 def test_recent_speeds_never_make_the_unseen_term_larger(speed, recent, off, lag, recent_lag):
@@ -384,7 +385,7 @@ def _one_pass_guard(planner, obs: Observation, v_mps: float, omega_radps: float)
                limits.v_min_mps)
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=examples(300), deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), k=st.integers(1, 10),
        pose_age_s=st.sampled_from([0.0, 0.03, 0.05, 0.13, 0.4]),
        v_mps=st.floats(0.0, 1.1), omega_radps=st.floats(-1.5, 1.5))

@@ -18,6 +18,7 @@ from agent.planning.spline import (
     polyline_point_ahead,
     reference_point_ahead,
 )
+from tests.examples import examples
 
 V_MAX, ACCEL, DT, N = 1.1, 1.5, 0.1, 20
 
@@ -196,7 +197,7 @@ def test_points_ahead():
 coord = st.floats(-20, 20, allow_nan=False)
 
 
-@settings(max_examples=150, deadline=None)
+@settings(max_examples=examples(150), deadline=None)
 @given(
     st.lists(st.tuples(coord, coord), min_size=1, max_size=6),
     st.floats(-10, 10),
@@ -358,7 +359,7 @@ def test_line_arc_reference_without_via_points_is_the_straight_line():
         build_reference(two, 0.0, V_MAX, ACCEL, DT, N, lines_arcs=True, corner_radius_m=-1.0)
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=examples(300), deadline=None)
 @given(steps=st.lists(st.floats(-20.0, 20.0) | st.sampled_from([math.pi, -math.pi,
                                                                   2 * math.pi, 0.0]),
                       min_size=0, max_size=30),

@@ -16,6 +16,7 @@ from agent.planning.threats import (
     tcpa_dcpa,
     threat_records,
 )
+from tests.examples import examples
 
 
 def others(pos, vel, ids=None, radius=0.2):
@@ -158,7 +159,7 @@ def test_no_others_no_threats():
 finite = st.floats(-50, 50, allow_nan=False)
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=examples(200), deadline=None)
 @given(
     st.tuples(finite, finite),
     st.tuples(finite, finite),
@@ -178,7 +179,7 @@ def test_property_finite_in_finite_out(p_r, v_r, rows):
 grid = st.integers(-200, 200).map(lambda i: 0.25 * i)  # exact under shifts
 
 
-@settings(max_examples=100, deadline=None)
+@settings(max_examples=examples(100), deadline=None)
 @given(
     st.tuples(grid, grid),
     st.lists(st.tuples(grid, grid, grid, grid), min_size=1, max_size=6),

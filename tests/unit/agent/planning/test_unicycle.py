@@ -18,6 +18,7 @@ from agent.planning.unicycle import (
     track_reference,
     wrap_angle,
 )
+from tests.examples import examples
 
 LIM = RobotLimits()
 finite = st.floats(min_value=-50.0, max_value=50.0, allow_nan=False)
@@ -128,7 +129,7 @@ def test_clamp_command_bounds_win_over_an_out_of_bounds_last_command():
     assert v == LIM.v_max_mps
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=examples(200), deadline=None)
 @given(v=finite, w=finite, lv=finite, lw=finite, dt=st.floats(1e-3, 1.0))
 def test_clamp_command_always_within_bounds(v, w, lv, lw, dt):
     cv, cw = clamp_command(v, w, LIM, lv, lw, dt)

@@ -22,6 +22,7 @@ from agent.planning.viapoints import (
     escape_point,
     inflated_radius,
 )
+from tests.examples import examples
 
 RIGHT, LEFT = SIDES.index(Side.RIGHT), SIDES.index(Side.LEFT)
 
@@ -180,7 +181,7 @@ coord = st.floats(-20, 20, allow_nan=False)
 velocity = st.tuples(st.floats(-3, 3), st.floats(-3, 3))
 
 
-@settings(max_examples=500, deadline=None)
+@settings(max_examples=examples(500), deadline=None)
 @given(
     p=st.tuples(coord, coord),
     c=st.tuples(coord, coord),
@@ -217,7 +218,7 @@ def test_property_candidate_pair_is_the_papers_construction(p, c, v, radius, spe
         assert (x, y) == pytest.approx((expected.x, expected.y), abs=1e-6 * scale)
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=examples(300), deadline=None)
 @given(st.tuples(coord, coord), st.tuples(coord, coord), velocity, st.floats(0.05, 3.0),
        st.floats(0.05, 3.0))
 def test_property_feasible_candidates_are_on_the_cone_and_the_moving_disc(p, c, v, radius, speed):
@@ -236,7 +237,7 @@ def test_property_feasible_candidates_are_on_the_cone_and_the_moving_disc(p, c, 
         assert math.dist((x, y), centre) == pytest.approx(radius, abs=1e-7 * scale)
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=examples(200), deadline=None)
 @given(st.tuples(coord, coord), st.tuples(coord, coord), st.floats(0.05, 3.0))
 def test_property_tangent_points_touch_the_disc_at_right_angles(p, c, radius):
     q = math.dist(p, c)

@@ -9,6 +9,7 @@ from hypothesis import strategies as st
 
 from agent.core.config import PlannerConfig, RobotLimits
 from agent.core.scenario import ObstacleSpec, RobotSpec, Scenario
+from tests.examples import examples
 from world.sim.dynamics import (
     ALL_PAIRS_MAX_N,
     WorldSim,
@@ -136,7 +137,7 @@ def test_offline_robot_stops_and_stays_visible():
     assert sim.pose[1, 0] > sim.pose[0, 0] + 1.0
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=examples(60), deadline=None)
 @given(n=st.integers(0, 300), side=st.floats(1.0, 200.0), reach=st.floats(0.1, 30.0),
        seed=st.integers(0, 2**31 - 1))
 def test_near_pairs_equals_brute_force(n, side, reach, seed):

@@ -7,6 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from tests.examples import examples
 from world.sim.link import LINK_COMMANDS, LINK_POSES, FaultyLink, LinkFaults, link_rng
 
 
@@ -100,7 +101,7 @@ def test_rejects_bad_fault_values(bad: dict) -> None:
         LinkFaults(**bad)
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=examples(60), deadline=None)
 @given(latency=st.floats(0, 300), jitter=st.floats(0, 100), drop=st.floats(0, 1),
        dup=st.floats(0, 1), reorder=st.floats(0, 1), seed=st.integers(0, 2**32 - 1))
 def test_never_invents_messages_or_releases_early(latency, jitter, drop, dup, reorder,
