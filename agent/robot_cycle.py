@@ -79,6 +79,8 @@ plans. Chosen, not fitted: a tenth per control period forgets a start-up or crow
 within a few seconds while still covering the next few plans of a sustained overload."""
 STALE_PLAN_S = 1.0
 """Poses older than this [sim s] when planning: brake instead (compensation is capped there)."""
+MAX_KEYS_REMEMBERED = 256
+"""Pose keys whose cell a robot remembers (`RobotCycle._cell_of`); more start it afresh."""
 
 
 class Controls(Protocol):
@@ -311,6 +313,8 @@ class RobotCycle:
         self.assembler.hold(self.cells.cells or (), expected=True)
         self.cell_changes: list[CellChange] = []
         """Subscription changes for the node to make (`take_cell_changes`)."""
+        self._key_cells: dict[str, Cell] = {}
+        self._time_passed = (-1, -1.0)  # the (tick, time) of the last pose that passed
         self.counts = RobotCounters(refused_config=refused_config)
         self.clock = SimClock(config.time_scale)
         self.world = WorldWatch()
@@ -410,11 +414,21 @@ class RobotCycle:
 
     # --- sensing -------------------------------------------------------------------------------
 
+    def _cell_of(self, key: str) -> Cell:
+        """The cell of a pose key (`RunKeys.cell_of_poses`), remembered: a robot hears the
+        same few keys every tick. Raises `ProtocolError`."""
+        cell = self._key_cells.get(key)
+        if cell is None:
+            if len(self._key_cells) >= MAX_KEYS_REMEMBERED:
+                self._key_cells.clear()
+            cell = self._key_cells[key] = self.keys.cell_of_poses(key)[1]
+        return cell
+
     def _valid(self, key: str, payload: bytes, wall_s: float) -> tuple[Cell, PosesMsg] | None:
         """The cell and message of one pose sample if it passes every check, else None
         (counted)."""
         try:
-            _, cell = self.keys.cell_of_poses(key)
+            cell = self._cell_of(key)
         except ProtocolError as exc:
             self.reject("pose message", exc)
             return None
@@ -427,15 +441,18 @@ class RobotCycle:
             self.reject("pose message", exc)
             return None
         # The clock moves only on a pose that passed every check: a forged far-future
-        # pose would otherwise make every genuine one look out of date.
-        config = self.config
-        why = check_pose_time(msg.tick, msg.t_s, world_rate_hz=config.world_rate_hz,
-                              time_limit_s=config.time_limit_s,
-                              clock_s=self.clock.now_s(wall_s) if self.clock.started
-                              else None, time_scale=config.time_scale)
-        if why is not None:
-            self.refuse_pose(f"{why}: tick {msg.tick}, t {msg.t_s:.3f} s")
-            return None
+        # pose would otherwise make every genuine one look out of date. The cells of a tick
+        # share its tick and time: they are checked once.
+        if (msg.tick, msg.t_s) != self._time_passed:
+            config = self.config
+            why = check_pose_time(msg.tick, msg.t_s, world_rate_hz=config.world_rate_hz,
+                                  time_limit_s=config.time_limit_s,
+                                  clock_s=self.clock.now_s(wall_s) if self.clock.started
+                                  else None, time_scale=config.time_scale)
+            if why is not None:
+                self.refuse_pose(f"{why}: tick {msg.tick}, t {msg.t_s:.3f} s")
+                return None
+            self._time_passed = (msg.tick, msg.t_s)
         return cell, msg
 
     def _assemble(self, samples: Sequence[tuple[str, bytes]], arrived_wall_s: float,

@@ -77,12 +77,10 @@ def _index_range(lo_m: float, hi_m: float, size_m: float) -> range:
     return range(math.floor(lo_m / size_m + 0.5), math.floor(hi_m / size_m + 0.5) + 1)
 
 
-def covering(x_m: float, y_m: float, radius_m: float, size_m: float) -> frozenset[Cell]:
-    """Every cell with a point within `radius_m` of (x, y): the cells that cover the disc.
-
-    Exact up to `_EPS_M`: a cell is in the set when its nearest point is at most
-    ``radius_m + _EPS_M`` away.
-    """
+def cell_gaps(x_m: float, y_m: float, radius_m: float, size_m: float
+              ) -> list[tuple[Cell, float]]:
+    """Every cell with a point within `radius_m` of (x, y), and the squared distance from
+    (x, y) to its nearest point (0 for the cell of (x, y))."""
     r = radius_m + _EPS_M
     out = []
     for i in _index_range(x_m - r, x_m + r, size_m):
@@ -90,9 +88,19 @@ def covering(x_m: float, y_m: float, radius_m: float, size_m: float) -> frozense
         dx = max((i - 0.5) * size_m - x_m, 0.0, x_m - (i + 0.5) * size_m)
         for j in _index_range(y_m - r, y_m + r, size_m):
             dy = max((j - 0.5) * size_m - y_m, 0.0, y_m - (j + 0.5) * size_m)
-            if dx * dx + dy * dy <= r * r:
-                out.append((i, j))
-    return frozenset(out)
+            gap2 = dx * dx + dy * dy
+            if gap2 <= r * r:
+                out.append(((i, j), gap2))
+    return out
+
+
+def covering(x_m: float, y_m: float, radius_m: float, size_m: float) -> frozenset[Cell]:
+    """Every cell with a point within `radius_m` of (x, y): the cells that cover the disc.
+
+    Exact up to `_EPS_M`: a cell is in the set when its nearest point is at most
+    ``radius_m + _EPS_M`` away.
+    """
+    return frozenset(cell for cell, _ in cell_gaps(x_m, y_m, radius_m, size_m))
 
 
 def cells_near(xy: np.ndarray, radius_m: float, size_m: float) -> frozenset[Cell]:
@@ -149,8 +157,11 @@ class CellRule:
     def update(self, held: Iterable[Cell], x_m: float, y_m: float) -> frozenset[Cell]:
         """The cells to hold for a robot at (x, y) that holds `held`: every cell within
         ``add_radius_m`` and those of `held` still within ``drop_radius_m``."""
-        keep = covering(x_m, y_m, self.drop_radius_m, self.size_m)
-        return self.needed(x_m, y_m) | (frozenset(held) & keep)
+        held = held if isinstance(held, frozenset | set) else frozenset(held)
+        add2 = (self.add_radius_m + _EPS_M) ** 2
+        return frozenset(cell for cell, gap2 in cell_gaps(x_m, y_m, self.drop_radius_m,
+                                                          self.size_m)
+                         if gap2 <= add2 or cell in held)
 
     def published(self, robot_xy: np.ndarray) -> frozenset[Cell]:
         """The cells the world publishes, empty or not: every cell within ``drop_radius_m``

@@ -422,3 +422,16 @@ def test_refusals_are_logged_the_first_ten_then_every_hundredth() -> None:
     for _ in range(150):
         cycle.refuse_pose("from bb")
     assert cycle.counts.refused_poses == 150 and len(cycle.take_notices()) == 11
+
+
+def test_pose_keys_are_parsed_once_and_the_memory_of_them_is_bounded() -> None:
+    from agent.robot_cycle import MAX_KEYS_REMEMBERED
+
+    cycle = _cycle()
+    cycle.sense(_pose(10, 0.2), 1.0, 1.0)
+    assert set(cycle._key_cells) == {KEYS.poses_cell(0, c) for c in START_CELLS}
+    strangers = [(KEYS.poses_cell(0, (100 + k, 0)), b"") for k in range(2 * MAX_KEYS_REMEMBERED)]
+    assert cycle.sense(strangers, 1.1, 1.1) is False
+    assert cycle.counts.unheld_poses == len(strangers)
+    assert len(cycle._key_cells) <= MAX_KEYS_REMEMBERED
+    assert cycle.sense(_pose(15, 0.3), 1.2, 1.2) is True
