@@ -55,7 +55,7 @@ from eifp_wire import (
     encode_command,
     next_seq,
 )
-from eifp_wire.pose_cells import ASSEMBLY_WAIT_TICKS, CellAssembler, PoseView
+from eifp_wire.pose_cells import ASSEMBLY_WAIT_TICKS, HOLD_PERIODS, CellAssembler, PoseView
 from world.sim.cells import Cell, CellChange, CellRule, CellSubscription
 from world.sim.link import LINK_POSES, FaultyLink, LinkFaults, link_rng
 from world.sim.schedule import PlanSchedule
@@ -308,7 +308,7 @@ class RobotCycle:
         self.cells = CellSubscription(CellRule.of_config(config.planner), config.robot.start[:2])
         """The pose cells the robot holds; the node subscribes to them."""
         self.assembler = CellAssembler(
-            config.known_ids, hold_s=schedule.period_s,
+            config.known_ids, hold_s=HOLD_PERIODS * schedule.period_s,
             wait_s=ASSEMBLY_WAIT_TICKS / config.world_rate_hz / config.time_scale)
         self.assembler.hold(self.cells.cells or (), expected=True)
         self.cell_changes: list[CellChange] = []

@@ -17,12 +17,12 @@ merged as the lockstep loop merges the same cells (`world.sim.cells.ViewMerger`)
   (`ASSEMBLY_WAIT_TICKS` world ticks at the run's time scale). A robot that searches
   every cell (`CellAssembler.search`) knows no expected set and always waits.
 - An expected cell whose message of T is lost or late is *held* (``held``): its newest
-  message, at most `hold_s` of sim time older than T (one planning period), its discs moved
-  on to T at the velocity between that message and the one before (dead reckoning; a disc
-  seen once stays where it was). A disc that is also in a fresh message of T keeps the
-  fresh pose. With nothing that recent the cell is ``missing`` (its discs are not in the
-  view), and after `MAX_CELL_MISSES` releases in a row without it, it is expected again
-  only once it delivers (the world may have stopped publishing it).
+  message, at most `hold_s` of sim time older than T (`HOLD_PERIODS` planning periods), its
+  discs moved on to T at the velocity between that message and the one before (dead
+  reckoning; a disc seen once stays where it was). A disc that is also in a fresh message of
+  T keeps the fresh pose. With nothing that recent the cell is ``missing`` (its discs are
+  not in the view), and after `MAX_CELL_MISSES` releases in a row without it, it is expected
+  again only once it delivers (the world may have stopped publishing it).
 - A message of a tick already released is ``late``: it only updates what a hold would use.
 
 So a lost cell message costs the robot a tenth of a second of dead reckoning for the discs
@@ -49,6 +49,12 @@ back, so they normally all arrive within a millisecond; the wait only matters wh
 lost."""
 MAX_CELL_MISSES = 3
 """Releases in a row a cell may miss before it is no longer waited for."""
+HOLD_PERIODS = 3.0
+"""How many planning periods old a cell's message may be to fill in for a lost one (0.3 s
+at 10 Hz). Dead reckoned over that long from the velocity between its two newest messages
+(0.1 s apart), a disc within the robots' limits (1.5 m/s^2; 1.5 rad/s at 1.1 m/s, 1.65 m/s^2
+sideways) is off by at most a (0.05 t + t^2 / 2), about 0.1 m, a third of the default safety
+margin; one moving straight at a constant speed, as obstacles do, not at all."""
 
 
 def cell_payloads(msg: PosesMsg, cells: Iterable[Cell], size_m: float

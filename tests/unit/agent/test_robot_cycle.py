@@ -435,3 +435,9 @@ def test_pose_keys_are_parsed_once_and_the_memory_of_them_is_bounded() -> None:
     assert cycle.counts.unheld_poses == len(strangers)
     assert len(cycle._key_cells) <= MAX_KEYS_REMEMBERED
     assert cycle.sense(_pose(15, 0.3), 1.2, 1.2) is True
+
+
+def test_a_lost_cell_is_held_for_three_planning_periods_and_waited_for_half_a_tick() -> None:
+    cycle = _cycle()
+    assert cycle.assembler.hold_s == pytest.approx(0.3)
+    assert cycle.assembler.wait_s == pytest.approx(0.01)  # 50 Hz, time scale 1
