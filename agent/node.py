@@ -398,7 +398,12 @@ class RobotNode:
             raise RobotExit(reason, ExitCode.WORLD_LOST)
 
     def poll_poses(self) -> bool:
-        """Hand the ring to `RobotCycle.sense`; True if a fresh pose was observed."""
+        """Hand the ring to `RobotCycle.sense`; True if a fresh pose was observed.
+
+        What was queued since the loop's wait goes in too: a robot that was not scheduled
+        for a while must not take a tick's cells for lost while they wait in its queue."""
+        if not self.poses.queue.empty():
+            self._refuse(self.poses.wait(0.0)[1])
         fresh = self.cycle.sense(self.poses.take(), self.poses.rx_wall_s, time.monotonic())
         for change in self.cycle.take_cell_changes():
             self.pose_subs.apply(change)
@@ -467,9 +472,13 @@ class RobotNode:
         wait_s = self.cycle.nap_s(time.monotonic(), MAX_NAP_S)
         waited_s, refused = self.poses.wait(wait_s)
         self.stalls.waited(waited_s, wait_s)
-        for zid in refused:
-            self.cycle.refuse_pose(f"from {zid or 'an unnamed source'}")
+        self._refuse(refused)
         self._log_notices()
+
+    def _refuse(self, sources: list[str | None]) -> None:
+        """Count the pose samples refused as not the world's."""
+        for zid in sources:
+            self.cycle.refuse_pose(f"from {zid or 'an unnamed source'}")
 
     def run(self, startup_deadline: float) -> tuple[str, int]:
         """The robot's loop; returns (reason, exit status).

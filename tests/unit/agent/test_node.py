@@ -5,6 +5,8 @@ from __future__ import annotations
 
 from typing import Any
 
+import pytest
+
 from agent.node import CellPoses, PoseInbox
 from eifp_wire import RunKeys
 from world.sim.cells import CellChange
@@ -52,3 +54,23 @@ def test_searching_subscribes_to_every_cell_until_the_robot_is_found() -> None:
                            "-eifp/r1/poses/*/0/0", "+eifp/r1/poses/*/5/0",
                            "-eifp/r1/poses/*/*/*"]
     assert poses.every is None and list(poses.subs) == [(5, 0)]
+
+
+class _Sample:
+    def __init__(self, key: str, payload: bytes) -> None:
+        import zenoh
+
+        self.key_expr, self.payload, self.source_info = key, zenoh.ZBytes(payload), None
+
+
+def test_the_inbox_takes_what_is_queued_without_waiting_and_counts_it() -> None:
+    """`RobotNode.poll_poses` moves what came since the loop's wait into the ring with
+    ``wait(0.0)``, so a tick's late cells waiting in the queue are assembled, not lost."""
+    inbox = PoseInbox(None)
+    assert inbox.wait(0.0) == (pytest.approx(0.0, abs=0.05), [])
+    for k in range(3):
+        inbox.queue.put(_Sample(KEYS.poses_cell(0, (k, 0)), b"x" * (k + 1)))  # type: ignore[arg-type]
+    inbox.wait(0.0)
+    assert inbox.take() == [(KEYS.poses_cell(0, (k, 0)), b"x" * (k + 1)) for k in range(3)]
+    assert inbox.summary() == {"rx_pose_msgs": 3, "rx_pose_bytes": 6}
+    assert inbox.take() == []
