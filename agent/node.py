@@ -8,14 +8,17 @@ what comes out and logs.
 
 1. Connect (retrying until ``--startup-timeout-s``), fetch this robot's `RunConfigMsg` from
    the world's queryable (retrying with the same deadline), build the cycle (`make_cycle`).
-2. Declare the pose subscriber (Zenoh's receiving thread puts each sample on a queue the
-   loop blocks on, `PoseInbox`; the loop keeps the newest `POSE_RING` of them: the robot
-   always acts on the newest pose, never a backlog), the control subscriber, the
+2. Declare one pose subscriber per cell the robot holds (`world.sim.cells`; Zenoh's
+   receiving thread puts each sample on a queue the loop blocks on, `PoseInbox`; the loop
+   keeps the newest `POSE_RING` of them: the robot acts on the newest tick, never a
+   backlog), the control subscriber, the
    world-liveliness subscriber, the command publisher (DROP, express), the debug publisher
    (its plans' internals for viewers, `PlanDebugMsg`, DROP, express) and, last, its own
    liveliness token.
 3. Loop: drain control and liveliness (their callbacks fill an `Inbox` each), hand the
-   ring to `RobotCycle.sense`, and when a planning slot is due plan, publish one
+   ring to `RobotCycle.sense` (which assembles one view per tick from the cells'
+   messages), make the subscription changes it asks for (`CellPoses`: subscribe to new
+   cells before dropping old ones), and when a planning slot is due plan, publish one
    `CommandMsg` and the plan's `PlanDebugMsg`. ``--plan-delay-ms`` holds every command back
    that long (a CPU-starved robot).
 
@@ -35,12 +38,14 @@ world is gone).
 
 Planning slots are staggered over the world's ticks (`world.sim.schedule.plan_phase_s`:
 robot k plans on the ticks k mod 5 of each 0.1 s period), so only a fifth of the robots
-plan on any one pose. The world publishes tick t on the pose slot ``poses/<t mod 5>``
+plan on any one pose. The world publishes tick t on the pose slot ``poses/<t mod 5>/...``
 (`world.sim.schedule.pose_slot_count`) and a robot subscribes to the one slot its plans fall
-on (`world.sim.schedule.plan_pose_slot`): it receives and decodes 10 poses per second
+on (`world.sim.schedule.plan_pose_slot`): it receives and decodes 10 ticks per second
 instead of 50, and the router sends a fifth of the bytes. A robot whose plan slots are not
 on one pose slot (``--control-phase-s`` between ticks, ``--control-rate-hz`` 20 ...)
-subscribes to every slot (``poses/*``). Between poses the loop blocks on the pose queue
+subscribes to its cells on every slot (``poses/*/<i>/<j>``). The exit line also has the
+pose messages and bytes the robot received (``rx_pose_msgs``, ``rx_pose_bytes``) and the
+assembler's counts (``cells_held``, ...). Between poses the loop blocks on the pose queue
 (woken by the pose itself: no polling while the world runs late), at most `MAX_NAP_S`.
 Zenoh runs on one thread of the process (`agent.process.use_one_zenoh_thread`). A robot's
 cost per cycle is in docs/scale.md (`orchestrator bench --process`).
@@ -56,7 +61,7 @@ import queue
 import sys
 import time
 from collections import deque
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from typing import Protocol
 
 import zenoh
@@ -84,12 +89,13 @@ from agent.startup import (
     world_zid_of,
 )
 from eifp_wire import RunConfigMsg, RunKeys, plan_pose_slot, pose_slot_count
+from world.sim.cells import Cell, CellChange
 from world.sim.link import LINK_POSES, FaultyLink, link_rng
 from world.sim.schedule import PlanSchedule, plan_phase_s
 
-POSE_RING = 2
+POSE_RING = 32
 """The world's newest pose samples a robot keeps after draining its queue (older ones are
-dropped unread)."""
+dropped unread): two ticks of the 3 x 3 cells a robot holds at most, and more."""
 MAX_NAP_S = 0.25
 """Longest wait for a pose: without poses, control and liveliness messages are read at least
 this often. Longer than the control period, so a robot receiving its poses wakes for them
@@ -144,6 +150,9 @@ class PoseInbox:
         self.ring: deque[zenoh.Sample] = deque(maxlen=size)
         self.rx_wall_s = 0.0
         """When the loop last took samples off the queue (monotonic): as they arrived."""
+        self.rx_msgs = 0
+        self.rx_bytes = 0
+        """Pose samples (and their payload bytes) taken off the queue, refused ones too."""
 
     def wait(self, wait_s: float) -> tuple[float, list[str | None]]:
         """Block until a sample arrives or `wait_s` passed, then move every queued sample
@@ -156,6 +165,8 @@ class PoseInbox:
         self.rx_wall_s = time.monotonic()
         refused: list[str | None] = []
         while True:
+            self.rx_msgs += 1
+            self.rx_bytes += len(sample.payload)
             zid = None if self.world_zid is None else source_zid(sample)
             if self.world_zid is None or is_world(zid, self.world_zid):
                 self.ring.append(sample)
@@ -165,11 +176,57 @@ class PoseInbox:
                 return self.rx_wall_s - napped, refused
             sample = self.queue.get_nowait()
 
-    def take(self) -> list[bytes]:
-        """The ring's payloads, oldest first; the ring is left empty."""
-        payloads = [sample.payload.to_bytes() for sample in self.ring]
+    def take(self) -> list[tuple[str, bytes]]:
+        """The ring's samples as (key expression, payload), oldest first; the ring is left
+        empty."""
+        samples = [(str(sample.key_expr), sample.payload.to_bytes()) for sample in self.ring]
         self.ring.clear()
-        return payloads
+        return samples
+
+    def summary(self) -> dict[str, int]:
+        """``rx_pose_msgs`` and ``rx_pose_bytes`` for the exit line."""
+        return {"rx_pose_msgs": self.rx_msgs, "rx_pose_bytes": self.rx_bytes}
+
+
+class CellPoses:
+    """A robot's pose subscribers, one per cell it holds (and one on every cell while it
+    searches for itself), all feeding one `PoseInbox`.
+
+    Args:
+        session: the robot's session.
+        keys: the run's keys.
+        slot: the pose slot the robot plans on (None: every slot).
+        inbox: where every sample goes.
+    """
+
+    def __init__(self, session: zenoh.Session, keys: RunKeys, slot: int | None,
+                 inbox: PoseInbox) -> None:
+        self.session, self.keys, self.slot = session, keys, slot
+        self.handler = enqueue_on_receive(inbox.queue.put)
+        self.subs: dict[Cell, zenoh.Subscriber[None]] = {}
+        self.every: zenoh.Subscriber[None] | None = None
+
+    def _declare(self, key: str) -> zenoh.Subscriber[None]:
+        return self.session.declare_subscriber(key, self.handler)
+
+    def hold(self, cells: Iterable[Cell]) -> None:
+        """Subscribe to `cells`."""
+        for cell in sorted(cells):
+            if cell not in self.subs:
+                self.subs[cell] = self._declare(self.keys.poses_cell(self.slot, cell))
+
+    def apply(self, change: CellChange) -> None:
+        """Subscribe to what `change` adds (or to every cell), then drop what it drops."""
+        self.hold(change.added)
+        if change.search and self.every is None:
+            self.every = self._declare(self.keys.poses_every_cell(self.slot))
+        for cell in change.dropped:
+            sub = self.subs.pop(cell, None)
+            if sub is not None:
+                sub.undeclare()
+        if change.found and self.every is not None:
+            self.every.undeclare()
+            self.every = None
 
 
 @contextlib.contextmanager
@@ -289,12 +346,11 @@ class RobotNode:
         self.pose_slot = plan_pose_slot(
             schedule.period_s, schedule.phase_s or 0.0, 1.0 / config.world_rate_hz,
             pose_slot_count(config.world_rate_hz, config.control_rate_hz))
-        pose_key = (self.keys.poses_all if self.pose_slot is None
-                    else self.keys.poses_slot(self.pose_slot))
         self.poses = PoseInbox(world_zid)
-        self.pose_sub = session.declare_subscriber(pose_key,
-                                                   enqueue_on_receive(self.poses.queue.put))
-        log.info("robot %d: poses from %s", self.robot_id, pose_key)
+        self.pose_subs = CellPoses(session, self.keys, self.pose_slot, self.poses)
+        self.pose_subs.hold(self.cycle.cells.cells or ())
+        log.info("robot %d: poses of cells %s on slot %s", self.robot_id,
+                 sorted(self.pose_subs.subs), "*" if self.pose_slot is None else self.pose_slot)
         # Control and the world's liveliness land in inboxes the loop checks with a C call.
         self.control_sub = Inbox()
         self.world_sub = Inbox()
@@ -345,8 +401,15 @@ class RobotNode:
             raise RobotExit(reason, ExitCode.WORLD_LOST)
 
     def poll_poses(self) -> bool:
-        """Hand the ring to `RobotCycle.sense`; True if a fresh pose was observed."""
+        """Hand the ring to `RobotCycle.sense`; True if a fresh pose was observed.
+
+        What was queued since the loop's wait goes in too: a robot that was not scheduled
+        for a while must not take a tick's cells for lost while they wait in its queue."""
+        if not self.poses.queue.empty():
+            self._refuse(self.poses.wait(0.0)[1])
         fresh = self.cycle.sense(self.poses.take(), self.poses.rx_wall_s, time.monotonic())
+        for change in self.cycle.take_cell_changes():
+            self.pose_subs.apply(change)
         self._log_notices()
         return fresh
 
@@ -412,9 +475,13 @@ class RobotNode:
         wait_s = self.cycle.nap_s(time.monotonic(), MAX_NAP_S)
         waited_s, refused = self.poses.wait(wait_s)
         self.stalls.waited(waited_s, wait_s)
-        for zid in refused:
-            self.cycle.refuse_pose(f"from {zid or 'an unnamed source'}")
+        self._refuse(refused)
         self._log_notices()
+
+    def _refuse(self, sources: list[str | None]) -> None:
+        """Count the pose samples refused as not the world's."""
+        for zid in sources:
+            self.cycle.refuse_pose(f"from {zid or 'an unnamed source'}")
 
     def run(self, startup_deadline: float) -> tuple[str, int]:
         """The robot's loop; returns (reason, exit status).
@@ -453,7 +520,7 @@ class RobotNode:
 
     def summary(self) -> str:
         """Counters, the last seq and `CpuMeter.summary` as key=value pairs (integers)."""
-        fields = {**self.cycle.summary_fields(), **self.cpu.summary()}
+        fields = {**self.cycle.summary_fields(), **self.poses.summary(), **self.cpu.summary()}
         return " ".join(f"{k}={v}" for k, v in fields.items())
 
 

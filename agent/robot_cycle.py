@@ -6,13 +6,19 @@ seconds, `wall_s`), sends what the cycle returns and logs its notices. Nothing h
 clock, touches Zenoh or logs, so every decision is tested by calling it
 (`tests/unit/agent/test_robot_cycle.py`).
 
-- **Sensing** (`RobotCycle.sense`): every payload of the pose ring is decoded (a malformed one
-  is rejected and counted), newest first; only the newest valid one goes on, the older ones
-  are ``skipped``. A pose whose tick and time do not fit the robot's clock
-  (`eifp_wire.clock.check_pose_time`) is refused (``refused_poses``). The one left sets the sim
-  clock (`SimClock`), passes through the injected pose link (`world.sim.link.FaultyLink`),
-  and what the link releases is observed by the controller, which drops stale or
-  out-of-order snapshots (``stale``).
+- **Sensing** (`RobotCycle.sense`): the world sends each tick's poses as one message per
+  cell of a grid, and the robot holds the cells near it (`world.sim.cells`). Every message
+  of the pose ring is decoded with its cell's decoder (a malformed one is rejected and
+  counted); one whose tick and time do not fit the robot's clock
+  (`eifp_wire.clock.check_pose_time`) is refused (``refused_poses``). Each valid one sets the
+  sim clock (`SimClock`) and goes to the `eifp_wire.pose_cells.CellAssembler`, which hands
+  out one view per tick once that tick's cells are in (or lost: see there). The newest view
+  (older ones are ``skipped``) passes through the injected pose link
+  (`world.sim.link.FaultyLink`: injected faults act on a robot's whole tick, as in lockstep
+  runs), and what the link releases is observed by the controller, which drops stale or
+  out-of-order snapshots (``stale``). The robot's own position in a view it observed moves
+  its cells (`world.sim.cells.CellSubscription.follow`); the changes wait in
+  `RobotCycle.cell_changes` for the node to subscribe and unsubscribe.
 - **Planning** (`RobotCycle.due`, `plan`, `command`): when the newest pose's stamp reaches the
   next planning slot (`world.sim.schedule.PlanSchedule`), plan for when the command will
   leave (the sim clock plus `RobotCycle.compute_s`); a pose older than `STALE_PLAN_S` gives a
@@ -35,18 +41,22 @@ from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Protocol
 
+import numpy as np
+
 from agent.core.types import PlanResult, PlanStatus, PoseSnapshot
 from eifp_wire import (
     ControlMsg,
     PlanDebugMsg,
-    PoseDecoder,
     PosesMsg,
     ProtocolError,
     RunConfigMsg,
+    RunKeys,
     check_pose_time,
     encode_command,
     next_seq,
 )
+from eifp_wire.pose_cells import ASSEMBLY_WAIT_TICKS, HOLD_PERIODS, CellAssembler, PoseView
+from world.sim.cells import Cell, CellChange, CellRule, CellSubscription
 from world.sim.link import LINK_POSES, FaultyLink, LinkFaults, link_rng
 from world.sim.schedule import PlanSchedule
 
@@ -69,6 +79,8 @@ plans. Chosen, not fitted: a tenth per control period forgets a start-up or crow
 within a few seconds while still covering the next few plans of a sustained overload."""
 STALE_PLAN_S = 1.0
 """Poses older than this [sim s] when planning: brake instead (compensation is capped there)."""
+MAX_KEYS_REMEMBERED = 256
+"""Pose keys whose cell a robot remembers (`RobotCycle._cell_of`); more start it afresh."""
 
 
 class Controls(Protocol):
@@ -104,6 +116,8 @@ class RobotCounters:
             tick and time that do not fit the clock).
         refused_control: control messages not from the world's session.
         refused_config: configuration replies not from the world's session.
+        unheld_poses: pose messages of a cell the robot no longer holds (in flight when it
+            let the cell go).
     """
 
     rejected: int = 0
@@ -120,6 +134,7 @@ class RobotCounters:
     refused_poses: int = 0
     refused_control: int = 0
     refused_config: int = 0
+    unheld_poses: int = 0
 
     def as_dict(self) -> dict[str, int]:
         """Name -> count, in the exit line's order."""
@@ -244,7 +259,7 @@ class RobotCommand:
 
     robot_id: int
     seq: int
-    pose: PosesMsg
+    pose: PoseView
     rx_ns: int
     result: PlanResult
     hold_s: float
@@ -277,19 +292,29 @@ class RobotCycle:
     """
 
     def __init__(self, config: RunConfigMsg, controller: Controls, schedule: PlanSchedule, *,
-                 link: FaultyLink[tuple[PosesMsg, int]] | None = None,
+                 link: FaultyLink[tuple[PoseView, int]] | None = None,
                  world_zid: str | None = None, plan: bool = True,
                  refused_config: int = 0) -> None:
         self.config = config
         self.robot_id = config.robot.id
         self.controller = controller
         self.schedule = schedule
-        self.pose_link: FaultyLink[tuple[PosesMsg, int]] = (
+        self.pose_link: FaultyLink[tuple[PoseView, int]] = (
             link if link is not None
             else FaultyLink(LinkFaults(), link_rng(0, LINK_POSES, self.robot_id)))
         self.world_zid = world_zid
         self.plan_enabled = plan
-        self.decoder = PoseDecoder(config.known_ids)
+        self.keys = RunKeys(config.run_id)
+        self.cells = CellSubscription(CellRule.of_config(config.planner), config.robot.start[:2])
+        """The pose cells the robot holds; the node subscribes to them."""
+        self.assembler = CellAssembler(
+            config.known_ids, hold_s=HOLD_PERIODS * schedule.period_s,
+            wait_s=ASSEMBLY_WAIT_TICKS / config.world_rate_hz / config.time_scale)
+        self.assembler.hold(self.cells.cells or (), expected=True)
+        self.cell_changes: list[CellChange] = []
+        """Subscription changes for the node to make (`take_cell_changes`)."""
+        self._key_cells: dict[str, Cell] = {}
+        self._time_passed = (-1, -1.0)  # the (tick, time) of the last pose that passed
         self.counts = RobotCounters(refused_config=refused_config)
         self.clock = SimClock(config.time_scale)
         self.world = WorldWatch()
@@ -298,7 +323,7 @@ class RobotCycle:
         """How long [sim s] the robot expects its next plan to take, from sensing to
         sending: the longest recent plan time, decaying by `COMPUTE_DECAY` per plan, at most
         `STALE_PLAN_S`. The robot plans for the time its command will leave."""
-        self.newest: PosesMsg | None = None
+        self.newest: PoseView | None = None
         self.newest_rx_ns = 0
         self.last_rx_wall_s: float | None = None
         self.notices: list[str] = []
@@ -327,8 +352,16 @@ class RobotCycle:
         return out
 
     def summary_fields(self) -> dict[str, int]:
-        """The counters and the last seq, as the exit line lists them."""
-        return {**self.counts.as_dict(), "seq": self.seq}
+        """The counters, the assembler's (``cells_*``), the subscription changes and the
+        last seq, as the exit line lists them."""
+        return {**self.counts.as_dict(), **self.assembler.counts.as_dict(),
+                "cell_changes": self.cells.changes, "seq": self.seq}
+
+    def take_cell_changes(self) -> list[CellChange]:
+        """The subscription changes since the last call, in order: for each, subscribe to
+        what it adds before dropping what it drops."""
+        out, self.cell_changes = self.cell_changes, []
+        return out
 
     # --- the world's messages ----------------------------------------------------------------
 
@@ -370,50 +403,118 @@ class RobotCycle:
 
     def nap_s(self, wall_s: float, longest_s: float) -> float:
         """How long the loop may wait for a pose before the pose link releases one [wall s]."""
+        nap_s = longest_s
+        assembled = self.assembler.deadline_wall_s
+        if assembled is not None:
+            nap_s = min(nap_s, max(0.0, assembled - wall_s))
         due_s = self.pose_link.next_due_s
         if due_s is None:
-            return longest_s
-        return min(longest_s, max(0.0, (due_s - self.clock.now_s(wall_s)) / self.clock.time_scale))
+            return nap_s
+        return min(nap_s, max(0.0, (due_s - self.clock.now_s(wall_s)) / self.clock.time_scale))
 
     # --- sensing -------------------------------------------------------------------------------
 
-    def _newest_valid(self, payloads: Sequence[bytes], wall_s: float) -> PosesMsg | None:
-        """Decode every payload, newest (last) first; the newest one that passes every check."""
-        newest: PosesMsg | None = None
-        config = self.config
-        for payload in reversed(payloads):
-            try:
-                msg = self.decoder.decode(payload)
-            except ProtocolError as exc:
-                self.reject("pose message", exc)
-                continue
-            if newest is not None:
-                self.counts.skipped += 1
-                continue
-            # The clock moves only on a pose that passed every check: a forged far-future
-            # pose would otherwise make every genuine one look out of date.
+    def _cell_of(self, key: str) -> Cell:
+        """The cell of a pose key (`RunKeys.cell_of_poses`), remembered: a robot hears the
+        same few keys every tick. Raises `ProtocolError`."""
+        cell = self._key_cells.get(key)
+        if cell is None:
+            if len(self._key_cells) >= MAX_KEYS_REMEMBERED:
+                self._key_cells.clear()
+            cell = self._key_cells[key] = self.keys.cell_of_poses(key)[1]
+        return cell
+
+    def _valid(self, key: str, payload: bytes, wall_s: float) -> tuple[Cell, PosesMsg] | None:
+        """The cell and message of one pose sample if it passes every check, else None
+        (counted)."""
+        try:
+            cell = self._cell_of(key)
+        except ProtocolError as exc:
+            self.reject("pose message", exc)
+            return None
+        if not self.assembler.accepts(cell):
+            self.counts.unheld_poses += 1
+            return None
+        try:
+            msg = self.assembler.decode(cell, payload)
+        except ProtocolError as exc:
+            self.reject("pose message", exc)
+            return None
+        # The clock moves only on a pose that passed every check: a forged far-future
+        # pose would otherwise make every genuine one look out of date. The cells of a tick
+        # share its tick and time: they are checked once.
+        if (msg.tick, msg.t_s) != self._time_passed:
+            config = self.config
             why = check_pose_time(msg.tick, msg.t_s, world_rate_hz=config.world_rate_hz,
                                   time_limit_s=config.time_limit_s,
                                   clock_s=self.clock.now_s(wall_s) if self.clock.started
                                   else None, time_scale=config.time_scale)
             if why is not None:
                 self.refuse_pose(f"{why}: tick {msg.tick}, t {msg.t_s:.3f} s")
-                continue
-            newest = msg
-        return newest
+                return None
+            self._time_passed = (msg.tick, msg.t_s)
+        return cell, msg
 
-    def sense(self, payloads: Sequence[bytes], arrived_wall_s: float, wall_s: float) -> bool:
-        """The pose ring's payloads, oldest first, taken off the queue at `arrived_wall_s`;
-        returns True if a pose newer than any observed before was released to the controller.
+    def _assemble(self, samples: Sequence[tuple[str, bytes]], arrived_wall_s: float,
+                  wall_s: float) -> PoseView | None:
+        """Every valid message into the assembler; the newest view it releases (the older
+        ones are ``skipped``)."""
+        views: list[PoseView] = []
+        assembler = self.assembler
+        for key, payload in samples:
+            valid = self._valid(key, payload, wall_s)
+            if valid is None:
+                continue
+            cell, msg = valid
+            self.last_rx_wall_s = arrived_wall_s
+            self.clock.observe(msg.tick, msg.t_s, arrived_wall_s)
+            forced = assembler.add(cell, msg, arrived_wall_s)
+            if forced is not None:
+                views.append(forced)
+        view = assembler.ready(wall_s)
+        if view is not None:
+            views.append(view)
+        self.counts.skipped += max(0, len(views) - 1)
+        return views[-1] if views else None
+
+    def _follow(self, change: CellChange) -> None:
+        """Apply a subscription change to the assembler and queue it for the node."""
+        if change.empty:
+            return
+        assembler = self.assembler
+        assembler.hold(change.added, expected=False)
+        if change.search:
+            assembler.search()
+        assembler.drop(change.dropped)
+        if change.found:
+            assembler.found(self.cells.cells or ())
+        self.cell_changes.append(change)
+
+    def _observe(self, view: PoseView) -> bool:
+        """Hand a view to the controller; the robot's position in it moves its cells."""
+        snapshot = view.snapshot
+        rows = np.flatnonzero(snapshot.ids == self.robot_id)
+        if not self.controller.observe(snapshot):
+            self.counts.stale += 1
+            if rows.size == 0:
+                self._follow(self.cells.missed_self())
+            return False
+        x, y = snapshot.pose[int(rows[0]), :2].tolist()
+        self._follow(self.cells.follow(x, y))
+        return True
+
+    def sense(self, samples: Sequence[tuple[str, bytes]], arrived_wall_s: float,
+              wall_s: float) -> bool:
+        """The pose ring's samples (key expression, payload), oldest first, taken off the
+        queue at `arrived_wall_s`; returns True if a view newer than any observed before was
+        released to the controller.
 
         Without injected faults the pose link is a no-op and is bypassed.
         """
-        released: list[tuple[PosesMsg, int]] = []
-        newest = self._newest_valid(payloads, wall_s)
-        if newest is not None:
-            self.last_rx_wall_s = arrived_wall_s
-            self.clock.observe(newest.tick, newest.t_s, arrived_wall_s)
-            released.append((newest, round(arrived_wall_s * 1e9)))
+        released: list[tuple[PoseView, int]] = []
+        view = self._assemble(samples, arrived_wall_s, wall_s)
+        if view is not None:
+            released.append((view, round(view.rx_wall_s * 1e9)))
         link = self.pose_link
         if link.faults.active:
             now_s = self.clock.now_s(wall_s)
@@ -422,12 +523,10 @@ class RobotCycle:
             released = link.receive(now_s)
             self.counts.link_dropped = link.counts.dropped
         fresh = False
-        for msg, rx_ns in released:
-            if not self.controller.observe(msg.to_snapshot()):
-                self.counts.stale += 1
-                continue
-            self.newest, self.newest_rx_ns = msg, rx_ns
-            fresh = True
+        for view, rx_ns in released:
+            if self._observe(view):
+                self.newest, self.newest_rx_ns = view, rx_ns
+                fresh = True
         return fresh
 
     # --- planning ------------------------------------------------------------------------------

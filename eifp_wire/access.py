@@ -74,7 +74,8 @@ _ROBOT_SIDE_RULES = ("robot-sub", "robot-recv", "alive-watch", "alive-see", "rob
 
 def _robot_side_rules(p: str) -> list[dict[str, Any]]:
     """Rules shared by every robot and every relay (which carries robots): subscribe to and
-    receive poses and control, watch liveliness, see the world's declarations."""
+    receive poses (any pose cell: a robot's cells follow it) and control, watch liveliness,
+    see the world's declarations. Nobody but the world puts poses: no rule lets a remote."""
     return [
         _acl_rule("robot-sub", ["declare_subscriber"], ["ingress"],
                   [f"{p}/poses/**", f"{p}/control"]),
@@ -138,8 +139,10 @@ def access_control(run_id: str, robot_ids: Iterable[int],
     is allowed to.
 
     - ``robot-<i>``: put ``cmd/<i>`` and ``debug/<i>``; query ``config/<i>`` (and receive
-      the reply); declare the token ``alive/robot/<i>``; subscribe to ``poses/**`` and
-      ``control``; watch ``alive/**``. Robots see subscriber and queryable declarations
+      the reply); declare the token ``alive/robot/<i>``; subscribe to ``poses/**`` (every
+      cell of the pose grid, ``poses/<slot>/<i>/<j>``, and the wildcards over them: a robot
+      changes its cells as it moves, `world.sim.cells`) and ``control``; watch
+      ``alive/**``. Robots see subscriber and queryable declarations
       (a declared Publisher or Querier only sends once it has matched one); they cannot
       put, query or declare tokens anywhere else.
     - ``router-<name>`` (`relays`: name -> the robot ids behind that relay router, on

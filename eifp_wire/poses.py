@@ -9,7 +9,7 @@ id block once while it repeats byte for byte (`PoseDecoder`).
 from __future__ import annotations
 
 import typing
-from collections.abc import Collection
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass
 
 import msgpack
@@ -190,6 +190,18 @@ class PosesMsg:
             "ids": ids.astype(I4).tobytes(),
             "discs": values.astype(F8).tobytes(),
         })
+
+    def encode_parts(self, parts: Sequence[np.ndarray]) -> list[bytes]:
+        """One payload per part: the message that holds only the discs of that part (row
+        indices into `discs`, ascending), as `encode` gives it for such a message, without
+        checking again what this one's construction checked (the world's per-cell
+        messages, `eifp_wire.pose_cells.cell_payloads`)."""
+        ids, values = self.discs()
+        ids4, values8 = ids.astype(I4), values.astype(F8)
+        head = {"t": self.t_s, "tick": self.tick, "pub_ns": self.pub_ns, "clock": self.clock_id}
+        return [pack_message(self.TYPE, {**head, "ids": ids4[rows].tobytes(),
+                                         "discs": values8[rows].tobytes()})
+                for rows in parts]
 
     @classmethod
     def decode(cls, data: object, *, known_ids: Collection[int] | None = None) -> PosesMsg:

@@ -19,8 +19,9 @@ Lifecycle:
    ``dt / time_scale`` of wall time. Each tick drains liveliness changes, configuration
    queries and commands (all read from handler channels, never in callbacks), applies the
    newest command per robot (zero-order hold, `WorldSim.set_command`), steps the world,
-   publishes one `PosesMsg` (DROP, express) on the tick's pose slot
-   (``poses/<tick mod K>``, `world.sim.schedule.pose_slot_count`) and records the tick. The robots'
+   publishes one `PosesMsg` (DROP, express) per cell of the pose grid within reach of a
+   robot, on the tick's pose slot (``poses/<tick mod K>/<i>/<j>``,
+   `world.sim.schedule.pose_slot_count`, `WorldCycle.pose_cells`), and records the tick. The robots'
    plan internals (``debug/<id>``, `PlanDebugMsg`, through a ring) are validated and
    recorded into ``run.mcap`` (`RunRecorder.record_plan`).
 4. The run ends when every robot has arrived (``all_arrived``), when every robot has
@@ -84,7 +85,6 @@ from agent.process import (
 from eifp_wire import (
     WORLD_CN,
     ControlMsg,
-    PosesMsg,
     RunConfigMsg,
     RunKeys,
     TlsFiles,
@@ -96,6 +96,7 @@ from eifp_wire import (
 )
 from world.recorder import RunRecorder
 from world.scenario_file import ScenarioError, load_scenario
+from world.sim.cells import Cell
 from world.sim.link import LinkFaults
 from world.world_cycle import LOST_GRACE_S, WorldCycle
 
@@ -286,14 +287,15 @@ class WorldNode:
             self.keys.debug_all, zenoh.handlers.RingChannel(max(256, 8 * n)))
         self.alive_sub = session.liveliness().declare_subscriber(
             self.keys.alive_robot_all, history=True)
-        # One publisher per pose slot: tick t goes out on poses/<t mod K>, so a robot that
-        # plans once a control period on a fixed tick receives only its slot's poses.
+        # One publisher per pose slot and cell, declared when first used: tick t goes out
+        # on poses/<t mod K>/<i>/<j>, so a robot that plans once a control period on a fixed
+        # tick receives only its slot's poses, and only of the cells near it.
+        self.session = session
         self.pose_slots = pose_slot_count(options.rate_hz, options.control_rate_hz)
-        self.poses_pubs = [
-            session.declare_publisher(self.keys.poses_slot(slot),
-                                      congestion_control=zenoh.CongestionControl.DROP,
-                                      express=True)
-            for slot in range(self.pose_slots)]
+        self.poses_pubs: dict[tuple[int, Cell], zenoh.Publisher] = {}
+        for cell in self.cycle.published_cells():  # the start's, ready before the robots come
+            for slot in range(self.pose_slots):
+                self.poses_pub(slot, cell)
         # Start/end are rare and must arrive: reliable and blocking (a hung robot can hold
         # it up at most one transport lease, 1 s, before its link is closed).
         self.control_pub = session.declare_publisher(
@@ -392,13 +394,23 @@ class WorldNode:
             time.sleep(IDLE_POLL_S)
         return False
 
+    def poses_pub(self, slot: int, cell: Cell) -> zenoh.Publisher:
+        """The publisher of one pose slot and cell (declared on first use)."""
+        pub = self.poses_pubs.get((slot, cell))
+        if pub is None:
+            pub = self.poses_pubs[(slot, cell)] = self.session.declare_publisher(
+                self.keys.poses_cell(slot, cell),
+                congestion_control=zenoh.CongestionControl.DROP, express=True)
+        return pub
+
     def publish_poses(self) -> None:
-        """One `PosesMsg` with the current ground truth (dropped, never blocking, if slow),
-        on the pose slot of the current tick."""
-        pub = self.poses_pubs[pose_slot_of_tick(self.sim.tick, self.pose_slots)]
-        pub.put(PosesMsg.from_snapshot(self.sim.snapshot(), pub_ns=time.monotonic_ns(),
-                                       clock_id=self.clock_id).encode(),
-                source_info=zenoh.SourceInfo(pub.id, self.sim.tick))
+        """The current ground truth, one `PosesMsg` per published cell (dropped, never
+        blocking, if slow), on the pose slot of the current tick."""
+        tick = self.sim.tick
+        slot = pose_slot_of_tick(tick, self.pose_slots)
+        for cell, payload in self.cycle.pose_cells(time.monotonic_ns(), self.clock_id):
+            pub = self.poses_pub(slot, cell)
+            pub.put(payload, source_info=zenoh.SourceInfo(pub.id, tick))
 
     def tick(self) -> None:
         """Apply commands, step the world by dt, publish and record."""

@@ -18,6 +18,9 @@ sim time is the `WorldSim`'s own (`WorldCycle.sim`), stepped by `WorldCycle.step
   the robot's last is ``stale``, the others apply (zero-order hold, ``commands``).
 - **The end** (`end_reason`): every robot arrived, or every robot arrived or was lost for
   ``lost_grace_s`` of sim time, or the time limit.
+- **Poses** (`pose_cells`): the tick's poses as one message per cell of the pose grid
+  within reach of a robot, empty or not (`world.sim.cells.CellRule.published`,
+  `eifp_wire.pose_cells.cell_payloads`).
 """
 
 from __future__ import annotations
@@ -32,11 +35,14 @@ from eifp_wire import (
     MAX_CMD_AHEAD_S,
     CommandMsg,
     PlanDebugMsg,
+    PosesMsg,
     ProtocolError,
     RunKeys,
     check_seq,
     max_seq,
 )
+from eifp_wire.pose_cells import cell_payloads
+from world.sim.cells import Cell, CellRule
 from world.sim.dynamics import WorldSim
 from world.sim.link import LINK_COMMANDS, FaultyLink, LinkFaults, link_rng
 
@@ -139,6 +145,7 @@ class WorldCycle:
         self.scenario = scenario
         self.sim = WorldSim(scenario, cmd_timeout_s=cmd_timeout_s)
         self.robot_ids = frozenset(int(r) for r in self.sim.robot_ids)
+        self.cell_rule = CellRule.of_config(scenario.planner_config)
         self.known_ids = self.robot_ids | {o.id for o in scenario.obstacles}
         self.lost_grace_s = lost_grace_s
         self.configs = dict(configs or {})
@@ -299,6 +306,18 @@ class WorldCycle:
             return None
         self.counts.plans += 1
         return rid, msg
+
+    # --- poses ---------------------------------------------------------------------------------
+
+    def published_cells(self) -> frozenset[Cell]:
+        """The cells the world publishes now: every cell within reach of a robot."""
+        return self.cell_rule.published(self.sim.pose[:, :2])
+
+    def pose_cells(self, pub_ns: int = 0, clock_id: int = 0) -> list[tuple[Cell, bytes]]:
+        """The current tick's poses, one payload per published cell, cells sorted (each a
+        `PosesMsg` stamped `pub_ns` on clock `clock_id`)."""
+        msg = PosesMsg.from_snapshot(self.sim.snapshot(), pub_ns=pub_ns, clock_id=clock_id)
+        return cell_payloads(msg, self.published_cells(), self.cell_rule.size_m)
 
     # --- stepping and the end ----------------------------------------------------------------
 

@@ -22,6 +22,7 @@ import numpy as np
 from agent.core.config import PlannerConfig
 from agent.core.scenario import RobotSpec
 from agent.core.types import EgoState, Observation, Others, PlanResult, PlanStatus, PoseSnapshot
+from agent.planning.estimation import ESTIMATION_MARGIN_M as ESTIMATION_MARGIN_M  # re-exported
 from agent.planning.estimation import ESTIMATION_WINDOW_S, NeighborTracker
 from agent.planning.mechanisms import Mechanisms
 from agent.planning.mpc_qp import MpcTuning
@@ -35,9 +36,6 @@ COMMAND_HOLD_PERIODS = 1.5
 (`eifp_wire.messages.CommandMsg.hold_s`): one period plus half a period of jitter between two
 commands; a command that is not followed in time (lost or late on the link) then gives way
 to braking instead of acting until the world's time-out."""
-ESTIMATION_MARGIN_M = 5.0
-"""Only others within the sensing radius plus this are estimated: farther ones cannot come
-into range during the (<= 1 s) forward prediction below a closing speed of 5 m/s."""
 
 
 class RobotController:

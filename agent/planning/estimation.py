@@ -41,6 +41,11 @@ trails a speed change by about half of it (the braking guard allows for that lag
 averages out the pose noise of about 7 samples 0.1 s apart; much longer windows smooth
 over the others' own turns and lag their avoidance manoeuvres."""
 
+ESTIMATION_MARGIN_M = 5.0
+"""Only others within the sensing radius plus this are estimated (`RobotController`): farther
+ones cannot come into range during the (<= 1 s, `MAX_COMPENSATED_AGE_S` of
+`agent.planning.controller`) forward prediction below a closing speed of 5 m/s."""
+
 
 @final  # `reset` re-runs __init__
 class NeighborTracker:

@@ -17,11 +17,10 @@ from orchestrator.experiments.scale import (
     ROBOT_NICE,
     _fmt,
     format_rows,
-    format_world_rows,
     run_one,
-    world_tick_costs,
     write_outputs,
 )
+from orchestrator.experiments.world_bench import format_world_rows, world_tick_costs
 
 
 def _hosts(text: str) -> list[str]:

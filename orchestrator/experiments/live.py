@@ -3,9 +3,10 @@
 `orchestrator run --live` starts a Foxglove WebSocket server (`world.mcap_log.LiveView`) in
 the launcher. In lockstep mode the recorder tees into it (`world.recorder.RunRecorder`). In
 distributed mode the world and the robots are other processes, so `LiveBridge` joins the
-run's router as a Zenoh client and only subscribes: poses (every slot), commands and the
-robots' plan internals (``debug/*``), each through a small ring (the newest samples win,
-nothing queues up). It never publishes on the run's keys and declares no liveliness token,
+run's router as a Zenoh client and only subscribes: poses (every slot and every cell of the
+pose grid, gathered into one scene per tick by `TickGather`), commands and the robots' plan
+internals (``debug/*``), each through a small ring (the newest samples win, nothing queues
+up). It never publishes on the run's keys and declares no liveliness token,
 so the world does not wait for it and no robot sees it.
 
 Passive by construction: the world and the robots publish poses, commands and debug with
@@ -21,6 +22,7 @@ import logging
 import threading
 import time
 
+import numpy as np
 import zenoh
 
 from agent.core.scenario import Scenario
@@ -47,7 +49,38 @@ IDLE_S = 0.005
 CONNECT_S = 60.0
 """Wall deadline for the bridge to reach the world's router."""
 
+POSE_RING = 512
+"""Pose messages the bridge's ring holds: every cell of a few ticks."""
+
 log = logging.getLogger("live")
+
+
+class TickGather:
+    """The world's pose messages of one tick, one per cell of the pose grid, gathered into
+    that tick's robots: a tick is handed out whole once a message of a newer tick arrives
+    (a tick later than it happened, 20 ms at 50 Hz)."""
+
+    def __init__(self) -> None:
+        self.tick = -1
+        self.t_s = 0.0
+        self._ids: list[np.ndarray] = []
+        self._poses: list[np.ndarray] = []
+
+    def add(self, msg: PosesMsg) -> tuple[float, int, np.ndarray, np.ndarray] | None:
+        """One cell's message; returns (t, tick, robot ids (n,), poses (n, 3)) of the tick
+        it completes, or None. Messages of older ticks are dropped."""
+        out = None
+        if msg.tick > self.tick:
+            if self._ids:
+                ids = np.concatenate(self._ids)
+                ids, first = np.unique(ids, return_index=True)  # a cell heard twice
+                out = (self.t_s, self.tick, ids, np.concatenate(self._poses)[first])
+            self.tick, self.t_s, self._ids, self._poses = msg.tick, msg.t_s, [], []
+        elif msg.tick < self.tick:
+            return None
+        self._ids.append(msg.robot_ids)
+        self._poses.append(msg.robot_pose)
+        return out
 
 
 class LiveBridge:
@@ -76,6 +109,7 @@ class LiveBridge:
         self._stop = StopFlag()
         self._thread = threading.Thread(target=self._run, name="live-bridge", daemon=True)
         self._t_s = 0.0
+        self._ticks = TickGather()
 
     def start(self) -> LiveBridge:
         self._thread.start()
@@ -100,7 +134,7 @@ class LiveBridge:
             return
         try:
             poses = session.declare_subscriber(self.keys.poses_all,
-                                               zenoh.handlers.RingChannel(8))
+                                               zenoh.handlers.RingChannel(POSE_RING))
             cmds = session.declare_subscriber(self.keys.cmd_all, zenoh.handlers.RingChannel(256))
             debug = session.declare_subscriber(self.keys.debug_all,
                                                zenoh.handlers.RingChannel(256))
@@ -127,8 +161,11 @@ class LiveBridge:
                 continue
             self.counts["poses"] += 1
             self._t_s = max(self._t_s, msg.t_s)
-            if self.viz.tick(msg.t_s, msg.robot_ids, msg.robot_pose, tick=msg.tick):
-                self.live.time(msg.t_s)
+            whole = self._ticks.add(msg)
+            if whole is not None:
+                t_s, tick, ids, pose = whole
+                if self.viz.tick(t_s, ids, pose, tick=tick):
+                    self.live.time(t_s)
         return busy
 
     def _drain_commands(self, sub: SampleSubscriber) -> bool:

@@ -34,9 +34,17 @@ processes that map them; RSS where the kernel gives no PSS). Per N it reports:
 - cpu_ms_per_plan_sense / _plan / _send / _loop / _threads: where a robot process's CPU
   went, per plan it sent: the robots' own thread and process CPU clocks over their loops
   (`agent.node.CpuMeter.summary`, from their exit lines in robots.json), summed over
-  the robots and divided by all their plans. sense: decoding and observing poses; plan:
-  estimates and the planner; send: encoding and publishing the command; loop: the rest of
-  the main thread; threads: the other threads (Zenoh's runtime, the pose callback's).
+  the robots and divided by all their plans. sense: decoding, assembling and observing
+  poses; plan: estimates and the planner; send: encoding and publishing the command; loop:
+  the rest of the main thread; threads: the other threads (Zenoh's runtime, the pose
+  callback's);
+- rx_bytes_per_robot_s / rx_msgs_per_robot_s: the pose payload bytes and messages one robot
+  received per second of sim time (per wall second at time scale 1), mean over the robots
+  (their exit lines: ``rx_pose_bytes``, ``rx_pose_msgs``, every message of the cells it
+  held); cells_partial_rate: the share of its views released without every expected cell
+  (`eifp_wire.pose_cells`);
+- world_tick_ms_mean / world_tick_us_per_robot: the world's mean tick wall time (drain,
+  step, publish every cell, record; the ``end`` event's ``tick_ms``), and divided by N.
 
 ``--hosts A,B``: the world listens on ``tls/0.0.0.0:PORT`` and robot k connects to
 ``tls/<hosts[k % len]>:PORT``, as robots on other hosts would (on Linux every 127.x.y.z
@@ -91,6 +99,8 @@ COLUMNS = (
     "connections",
     "launcher",
     *(f"cpu_ms_per_plan_{part}" for part in CPU_PARTS), "cpu_ms_per_plan_total",
+    "rx_bytes_per_robot_s", "rx_msgs_per_robot_s", "cells_partial_rate",
+    "world_tick_ms_mean", "world_tick_us_per_robot",
 )
 PLOTTED = (
     ("plan_ms_p50", "plan_ms_p99", "planning time [ms]"),
@@ -101,6 +111,8 @@ PLOTTED = (
     ("mem_total_mib", None, "total PSS [MiB]"),
     ("alive_s", None, "every robot alive after [s]"),
     ("contacts", None, "contacts"),
+    ("rx_bytes_per_robot_s", None, "pose bytes received per robot per s"),
+    ("world_tick_us_per_robot", None, "world tick per robot [us]"),
 )
 
 
@@ -267,6 +279,7 @@ def scale_row(metrics: dict[str, Any], events: Sequence[dict[str, Any]],
     lost = {int(e["robot"]) for e in events if e.get("kind") == "robot_lost" and "robot" in e}
     end: dict[str, Any] = next((e for e in reversed(events) if e.get("kind") == "end"), {})
     sim_time_s = float(metrics.get("sim_time_s") or 0.0)
+    tick_ms = (end.get("tick_ms") or {}).get("mean")
     return {
         "agents": n,
         "family": family,
@@ -283,6 +296,27 @@ def scale_row(metrics: dict[str, Any], events: Sequence[dict[str, Any]],
         "world_status": world_status,
         "connections": dict(sorted(sampler.connections.items())),
         **cpu_per_plan_ms(exits or {}),
+        **received_per_robot(exits or {}, sim_time_s),
+        "world_tick_ms_mean": tick_ms,
+        "world_tick_us_per_robot": None if tick_ms is None else float(tick_ms) * 1e3 / n,
+    }
+
+
+def received_per_robot(exits: dict[str, Any], sim_time_s: float) -> dict[str, float | None]:
+    """Pose bytes and messages one robot received per sim second, and the share of views
+    released without every expected cell, from robots.json's parsed exit lines (None where
+    no robot reported them)."""
+    reported = [p for p in exits.get("processes", ())
+                if "rx_pose_bytes" in p and "rx_pose_msgs" in p]
+    views = sum(int(p.get("cells_views", 0)) for p in reported)
+    per = len(reported) * sim_time_s
+    return {
+        "rx_bytes_per_robot_s": (sum(int(p["rx_pose_bytes"]) for p in reported) / per
+                                 if per > 0 else None),
+        "rx_msgs_per_robot_s": (sum(int(p["rx_pose_msgs"]) for p in reported) / per
+                                if per > 0 else None),
+        "cells_partial_rate": (sum(int(p.get("cells_partial", 0)) for p in reported) / views
+                               if views else None),
     }
 
 
@@ -440,80 +474,6 @@ def _plot_run(out_dir: Path) -> None:
 
 
 # --------------------------------------------------------------------------------------
-# The world's per-tick cost against N (in-process, no transport)
-# --------------------------------------------------------------------------------------
-
-WORLD_STAGES = ("step", "poses", "record", "commands")
-
-
-def world_tick_costs(n: int, ticks: int, out_dir: Path) -> dict[str, Any]:
-    """Time the world's work per tick for n robots of the `circles` family.
-
-    Per tick, as `world.node.WorldNode.tick` does it: decode and apply the commands that
-    arrive in one tick (n / 5: every robot sends one per 0.1 s), step the dynamics
-    (integration, arrivals, contacts), encode the `PosesMsg`, write the trajectory rows.
-    Robots drive straight at their goals (a constant command). Returns median microseconds
-    per stage and the PosesMsg size.
-    """
-    import numpy as np
-
-    from eifp_wire import CommandMsg, PosesMsg
-    from orchestrator.experiments.families import circles
-    from world.recorder import RunRecorder
-    from world.sim.dynamics import WorldSim
-
-    scenario = circles(n)
-    sim = WorldSim(scenario)
-    ids = [int(r) for r in sim.robot_ids]
-    known = frozenset(ids)
-    per_tick = max(1, n // 5)
-    payloads = [CommandMsg(rid, 0, 0.0, 0.5, 0.0, 1.0, "ok").encode() for rid in ids]
-    times: dict[str, list[float]] = {k: [] for k in WORLD_STAGES}
-    size = 0
-    with RunRecorder(out_dir, scenario) as recorder:
-        for tick in range(ticks):
-            t0 = time.perf_counter()
-            for k in range(per_tick):
-                j = (tick * per_tick + k) % n
-                msg = CommandMsg.decode(payloads[j], known_ids=known, expected_robot_id=ids[j])
-                sim.set_command(msg.robot_id, msg.v_mps, msg.omega_radps)
-                recorder.record_command(sim.t_s, msg.robot_id, tick, 0.0, msg.v_mps,
-                                        msg.omega_radps, msg.plan_ms, msg.status)
-            t1 = time.perf_counter()
-            sim.step(0.02)
-            t2 = time.perf_counter()
-            data = PosesMsg.from_snapshot(sim.snapshot()).encode()
-            t3 = time.perf_counter()
-            recorder.record_tick(sim.t_s, sim.robot_ids, sim.pose, sim.applied)
-            t4 = time.perf_counter()
-            size = len(data)
-            for key, dt in zip(WORLD_STAGES, (t2 - t1, t3 - t2, t4 - t3, t1 - t0)):
-                times[key].append(dt * 1e6)
-    row: dict[str, Any] = {"agents": n, "ticks": ticks, "poses_bytes": size,
-                           "poses_bytes_per_robot": size / n}
-    total = np.sum([times[k] for k in WORLD_STAGES], axis=0)
-    row["tick_us_p50"] = float(np.percentile(total, 50))
-    row["tick_us_per_robot"] = row["tick_us_p50"] / n
-    for key in WORLD_STAGES:
-        row[f"{key}_us_p50"] = float(np.percentile(times[key], 50))
-    return row
-
-
-def format_world_rows(rows: Sequence[dict[str, Any]]) -> str:
-    """The world benchmark's table."""
-    head = ["N", "tick us p50", "us/robot", *(f"{k} us" for k in WORLD_STAGES), "PosesMsg B",
-            "B/robot"]
-    body = [[str(r["agents"]), f"{r['tick_us_p50']:.0f}", f"{r['tick_us_per_robot']:.2f}",
-             *(f"{r[f'{k}_us_p50']:.0f}" for k in WORLD_STAGES), str(r["poses_bytes"]),
-             f"{r['poses_bytes_per_robot']:.1f}"] for r in rows]
-    widths = [max(len(h), *(len(b[i]) for b in body)) for i, h in enumerate(head)]
-    lines = ["  ".join(h.ljust(w) for h, w in zip(head, widths)),
-             "  ".join("-" * w for w in widths)]
-    lines += ["  ".join(c.ljust(w) for c, w in zip(b, widths)) for b in body]
-    return "\n".join(lines)
-
-
-# --------------------------------------------------------------------------------------
 # Output
 # --------------------------------------------------------------------------------------
 
@@ -527,13 +487,17 @@ def _fmt(value: object, digits: int = 2) -> str:
     return str(value)
 
 
+def _kilo(value: object) -> float | None:
+    return float(value) / 1e3 if isinstance(value, int | float) else None
+
+
 def format_rows(rows: Sequence[dict[str, Any]]) -> str:
     """The printed table, one row per N."""
     head = ["N", "ok", "arrived", "contacts", "plan p50/p99 ms", "latency p50/p99 ms",
             "miss %", "CPU robots/world %", "CPU/robot %",
             "CPU ms/plan sense/plan/send/loop/threads = total", "sense->act p50/p99 ms",
-            "PSS/robot MiB", "PSS total MiB",
-            "alive s", "lost", "sim s", "wall s"]
+            "PSS/robot MiB", "PSS total MiB", "rx kB/s / msgs/s per robot",
+            "world tick us/robot", "alive s", "lost", "sim s", "wall s"]
     body = []
     for r in rows:
         miss = r["deadline_miss_rate"]
@@ -551,7 +515,11 @@ def format_rows(rows: Sequence[dict[str, Any]]) -> str:
             + f" = {_fmt(r.get('cpu_ms_per_plan_total'))}",
             f"{_fmt(r.get('sense_to_act_ms_p50'), 1)}/{_fmt(r.get('sense_to_act_ms_p99'), 1)}",
             _fmt(r["mem_robot_mib"], 1),
-            _fmt(r["mem_total_mib"], 0), _fmt(r["alive_s"], 1), _fmt(r["robots_lost"]),
+            _fmt(r["mem_total_mib"], 0),
+            f"{_fmt(_kilo(r.get('rx_bytes_per_robot_s')), 1)} / "
+            f"{_fmt(r.get('rx_msgs_per_robot_s'), 0)}",
+            _fmt(r.get("world_tick_us_per_robot"), 1),
+            _fmt(r["alive_s"], 1), _fmt(r["robots_lost"]),
             _fmt(r["sim_time_s"], 1),
             _fmt(r["wall_s"], 1),
         ])
@@ -587,9 +555,9 @@ def plot_scale(rows: Sequence[dict[str, Any]], path: Path) -> Path:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(12, 6.5), layout="constrained")
+    fig = Figure(figsize=(15, 6.5), layout="constrained")
     FigureCanvasAgg(fig)
-    axes = fig.subplots(2, 4).ravel()
+    axes = fig.subplots(2, 5).ravel()
     ns = [r["agents"] for r in rows]
     for ax, (main, second, title) in zip(axes, PLOTTED):
         for key, style in ((main, "o-"), (second, "s--")):

@@ -578,7 +578,7 @@ try:
 except zenoh.ZError:
     print("world: unreachable")
 s = session("tls/router-b:7447")
-others = [keys.cmd(0), keys.cmd(3), *(keys.poses_slot(k) for k in range(5)), keys.control]
+others = [keys.cmd(0), keys.cmd(3), *(keys.poses_cell(k, (0, 0)) for k in range(5)), keys.control]
 pubs = [s.declare_publisher(k) for k in [*others, keys.cmd(2)]]
 deadline = time.monotonic() + 10.0
 while not pubs[-1].matching_status.matching and time.monotonic() < deadline:

@@ -13,6 +13,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+import zenoh
 
 from agent import node as agent_node
 from agent.core.config import PlannerConfig
@@ -21,7 +22,8 @@ from agent.node import CpuMeter, PoseInbox, cpu_token
 from agent.planning.controller import RobotController
 from agent.process import StallWatch
 from agent.robot_cycle import RobotCycle
-from eifp_wire import PosesMsg, RunConfigMsg
+from eifp_wire import PosesMsg, RunConfigMsg, RunKeys
+from world.sim.cells import CellRule
 from world.sim.schedule import PlanSchedule
 
 
@@ -107,21 +109,38 @@ def test_the_token_is_given_back_when_the_work_raises() -> None:
 
 # --- the pose inbox ----------------------------------------------------------------------------
 
-class _Sample:
-    """A Zenoh sample as the pose inbox sees one: a payload and where it came from."""
+KEYS = RunKeys("r")
+RULE = CellRule.of_config(PlannerConfig())
 
-    def __init__(self, data: bytes, zid: str | None = None) -> None:
-        self.payload = SimpleNamespace(to_bytes=lambda: data)
+
+class _Sample:
+    """A Zenoh sample as the pose inbox sees one: its key, a payload and where it came from."""
+
+    def __init__(self, data: bytes, zid: str | None = None,
+                 key: str = KEYS.poses_cell(0, (0, 0))) -> None:
+        self.key_expr = key
+        self.payload = zenoh.ZBytes(data)
         self.source_info = (None if zid is None else
                             SimpleNamespace(source_id=SimpleNamespace(zid=zid, eid=1),
                                             source_sn=1))
 
 
 def _pose(tick: int, t_s: float) -> bytes:
+    """The message of cell (0, 0), which holds both robots."""
     return PosesMsg(t_s=t_s, tick=tick, robot_ids=[0, 1],
                     robot_pose=[[0, 0, 0], [5, 0, 3.1]], robot_radius_m=[0.5, 0.5],
                     obstacle_ids=[], obstacle_xy_m=np.zeros((0, 2)),
                     obstacle_radius_m=[]).encode()
+
+
+def _tick(tick: int, t_s: float) -> list[_Sample]:
+    """The samples of one tick for a robot at the origin: each of its cells, only (0, 0)
+    not empty."""
+    empty = PosesMsg(t_s=t_s, tick=tick, robot_ids=[], robot_pose=np.zeros((0, 3)),
+                     robot_radius_m=[], obstacle_ids=[], obstacle_xy_m=np.zeros((0, 2)),
+                     obstacle_radius_m=[]).encode()
+    return [_Sample(_pose(tick, t_s) if cell == (0, 0) else empty,
+                    key=KEYS.poses_cell(0, cell)) for cell in sorted(RULE.needed(0.0, 0.0))]
 
 
 def test_the_robot_takes_a_pose_off_its_queue_when_it_arrives_and_clocks_from_then() -> None:
@@ -131,14 +150,15 @@ def test_the_robot_takes_a_pose_off_its_queue_when_it_arrives_and_clocks_from_th
                           time_limit_s=60.0, cmd_timeout_s=0.5, known_ids=(0, 1))
     cycle = RobotCycle(config, RobotController(spec, PlannerConfig(), 0.25), PlanSchedule(0.1))
     inbox = PoseInbox(None)
-    inbox.queue.put(_Sample(_pose(10, 0.2)))
+    for sample in _tick(10, 0.2):
+        inbox.queue.put(sample)
     before = time.monotonic()
-    waited_s, refused = inbox.wait(1.0)  # returns at once: a pose is waiting
-    assert len(inbox.ring) == 1 and inbox.queue.empty() and refused == []
+    waited_s, refused = inbox.wait(1.0)  # returns at once: a tick's cells are waiting
+    assert len(inbox.ring) == 9 and inbox.queue.empty() and refused == []
     assert before <= inbox.rx_wall_s <= time.monotonic() and waited_s < 0.5
     # As if it had been taken off 30 ms ago:
     assert cycle.sense(inbox.take(), inbox.rx_wall_s - 0.03, time.monotonic()) is True
-    assert not inbox.ring
+    assert not inbox.ring and cycle.newest is not None and cycle.newest.parts == 9
     assert cycle.clock.now_s(time.monotonic()) == pytest.approx(0.2 + 0.03, abs=0.01)
 
 
@@ -170,7 +190,8 @@ def test_the_ring_keeps_the_newest_poses_only() -> None:
     for tick in range(5):
         inbox.queue.put(_Sample(_pose(tick, 0.02 * tick)))
     inbox.wait(1.0)
-    assert inbox.take() == [_pose(3, 0.06), _pose(4, 0.08)]
+    key = KEYS.poses_cell(0, (0, 0))
+    assert inbox.take() == [(key, _pose(3, 0.06)), (key, _pose(4, 0.08))]
 
 
 # --- the CPU meter -----------------------------------------------------------------------------

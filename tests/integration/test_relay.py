@@ -111,7 +111,7 @@ def test_robots_behind_the_relay_reach_the_world_and_back(hosts: Hosts) -> None:
     until(lambda: pub.matching_status.matching, "robot 2's publisher to match the world")
     pub.put(b"c2")
     until(lambda: cmds.try_recv() is not None, "robot 2's command at the world")
-    world_pub = hosts.world.declare_publisher(k.poses_slot(0))
+    world_pub = hosts.world.declare_publisher(k.poses_cell(0, (-1, 2)))
     until(lambda: world_pub.matching_status.matching, "the world's poses to match robot 2")
     world_pub.put(b"p")
     sample = None
@@ -152,7 +152,7 @@ def test_each_router_drops_what_its_robots_may_not_send(hosts: Hosts) -> None:
     until(lambda: own.matching_status.matching, "robot 2's publisher to match the world")
     for key in (k.cmd(0), k.cmd(3), k.cmd(2)):
         robot2.put(key, b"x")
-    robot2.put(k.poses_slot(0), b"forged")
+    robot2.put(k.poses_cell(0, (0, 0)), b"forged")
     robot2.put(k.control, b"forged")
     alive = hosts.world.liveliness().declare_subscriber(f"{k.prefix}/alive/**", history=True)
     robot2.liveliness().declare_token(k.alive_robot(0))
@@ -178,7 +178,7 @@ def test_a_relay_certificate_speaks_only_for_its_robots(hosts: Hosts) -> None:
     until(lambda: allowed.matching_status.matching, "router-b's robot-3 key to match the world")
     for key in (k.cmd(0), k.cmd(1), k.cmd(3)):
         rogue.put(key, b"x")
-    rogue.put(k.poses_slot(0), b"forged")
+    rogue.put(k.poses_cell(0, (0, 0)), b"forged")
     assert received(cmds) == [k.cmd(3)]
     assert received(poses_at_0, 0.0) == []
 

@@ -223,11 +223,21 @@ def test_a_seq_jump_or_a_plan_from_the_future_is_refused_not_stored(rig: Rig) ->
     assert reasons["cmd.seq"] == 2 and reasons["cmd.pose_stamp"] == 1
 
 
+def _pose_publishers_match(rig: Rig, slot: int) -> list:
+    """The world's publishers of every cell it publishes now, on `slot`, once each matches a
+    subscriber (the world declares them on first use)."""
+    pubs = [rig.node.poses_pub(slot, cell) for cell, _ in rig.node.cycle.pose_cells()]
+    until(lambda: all(p.matching_status.matching for p in pubs), lambda: None,
+          "pose subscriber")
+    return pubs
+
+
 def test_control_and_poses_carry_the_worlds_source_info(rig: Rig) -> None:
     node = rig.node
     control = rig.client.declare_subscriber(rig.keys.control)
     poses = rig.client.declare_subscriber(rig.keys.poses_all)
     until(lambda: node.control_pub.matching_status.matching, lambda: None, "control to match")
+    _pose_publishers_match(rig, 0)
     node.put_control(ControlMsg("start", 0.0))
     node.publish_poses()
     for sub in (control, poses):
@@ -237,18 +247,26 @@ def test_control_and_poses_carry_the_worlds_source_info(rig: Rig) -> None:
         assert str(sample.source_info.source_id.zid) == str(rig.router.zid())
 
 
-def test_tick_publishes_poses(rig: Rig) -> None:
+def test_tick_publishes_poses_one_message_per_cell(rig: Rig) -> None:
+    """Every disc is within 5 m of the origin: it is all in cell (0, 0); the world also
+    publishes the empty cells around it, within reach of a robot."""
     poses = rig.client.declare_subscriber(rig.keys.poses_all)
     assert rig.node.pose_slots == 5  # 50 Hz world, 10 Hz control
-    pub = rig.node.poses_pubs[1]
-    until(lambda: pub.matching_status.matching, lambda: None, "pose subscriber")
+    pubs = _pose_publishers_match(rig, 1)
+    assert len(pubs) == 9
     rig.node.tick()
     got: list = []
-    until(lambda: bool(got), lambda: got.extend(filter(None, [poses.try_recv()])), "poses")
-    assert str(got[0].key_expr) == rig.keys.poses_slot(1)  # tick 1 on slot 1 mod 5
-    msg = PosesMsg.decode(got[0].payload.to_bytes(), known_ids={0, 4, -1})
-    assert msg.tick == 1 and msg.t_s == pytest.approx(0.02)
-    assert msg.robot_ids.tolist() == [0, 4] and msg.obstacle_ids.tolist() == [-1]
+    until(lambda: len(got) == 9, lambda: got.extend(filter(None, [poses.try_recv()])), "poses")
+    by_key = {str(s.key_expr): PosesMsg.decode(s.payload.to_bytes(), known_ids={0, 4, -1})
+              for s in got}
+    assert set(by_key) == {rig.keys.poses_cell(1, (i, j))  # tick 1 on slot 1 mod 5
+                           for i in (-1, 0, 1) for j in (-1, 0, 1)}
+    for key, msg in by_key.items():
+        assert msg.tick == 1 and msg.t_s == pytest.approx(0.02)
+        if key == rig.keys.poses_cell(1, (0, 0)):
+            assert msg.robot_ids.tolist() == [0, 4] and msg.obstacle_ids.tolist() == [-1]
+        else:
+            assert msg.robot_ids.shape == (0,) and msg.obstacle_ids.shape == (0,)
 
 
 def test_run_configs_encode_every_robot(tmp_path: Path) -> None:
@@ -323,9 +341,10 @@ def test_a_pose_subscriber_puts_each_sample_on_the_robots_queue(rig: Rig) -> Non
     if isinstance(handler, zenoh.handlers.Callback):
         assert handler.indirect is False  # on Zenoh's thread: no thread of its own
     samples: queue.SimpleQueue = queue.SimpleQueue()
-    sub = rig.client.declare_subscriber(rig.keys.poses_slot(0), enqueue_on_receive(samples.put))
+    sub = rig.client.declare_subscriber(rig.keys.poses_cell(0, (0, 0)),
+                                        enqueue_on_receive(samples.put))
     try:
-        pub = rig.node.poses_pubs[0]
+        pub = rig.node.poses_pub(0, (0, 0))
         until(lambda: pub.matching_status.matching, lambda: None, "pose subscriber")
         rig.node.publish_poses()  # tick 0: slot 0
         sample = samples.get(timeout=DEADLINE_S)

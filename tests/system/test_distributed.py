@@ -246,7 +246,9 @@ def test_killed_robot_is_detected_and_avoided(tmp_path: Path, launch) -> None:
     run.start(scenario, [0, 1], time_scale=1.0)
     keys = RunKeys(run.run_id)
     with client_session(run.endpoint) as session:
-        poses = session.declare_subscriber(keys.poses_all, zenoh.handlers.RingChannel(1))
+        # Both robots are in pose cell (0, 0) (within 10 m of the origin), on every slot.
+        poses = session.declare_subscriber(keys.poses_cell(None, (0, 0)),
+                                           zenoh.handlers.RingChannel(1))
         deadline = time.monotonic() + STARTUP_S + RUN_S
         while True:
             sample = poses.try_recv()
@@ -369,12 +371,15 @@ def test_rogue_publisher_is_rejected_and_counted(tmp_path: Path, launch) -> None
     sent_cmds = 0
     with client_session(run.endpoint) as session:
         wait_for_event(run.out_dir, lambda e: e["kind"] == "start", STARTUP_S, run.world)
-        # Robot 0's pose slot (robots subscribe to theirs only); the garbage goes to every
-        # slot, once per period, right after robot 0's pose.
-        poses = session.declare_subscriber(keys.poses_slot(0), zenoh.handlers.RingChannel(1))
-        rogue_poses = session.declare_publisher(keys.poses_all)
+        # Robot 0's pose slot (robots subscribe to theirs only) and pose cell (both robots
+        # are in cell (0, 0) and hold it); the garbage goes to that cell on both robots'
+        # slots (robot k plans on slot k), once per period, right after robot 0's pose.
+        poses = session.declare_subscriber(keys.poses_cell(0, (0, 0)),
+                                           zenoh.handlers.RingChannel(1))
+        rogue_poses = [session.declare_publisher(keys.poses_cell(slot, (0, 0)))
+                       for slot in (0, 1)]
         rogue_cmds = {rid: session.declare_publisher(keys.cmd(rid)) for rid in (0, 1, 7)}
-        for pub in (rogue_poses, *rogue_cmds.values()):
+        for pub in (*rogue_poses, *rogue_cmds.values()):
             wait_matching(pub)
 
         def next_real_pose() -> PosesMsg:
@@ -400,13 +405,14 @@ def test_rogue_publisher_is_rejected_and_counted(tmp_path: Path, launch) -> None
             rogue_cmds[rid].put(payload)
             sent_cmds += 1
         # One garbage pose right after each real one: it lands between two real poses in
-        # the robots' 2-slot rings, so it is read (and rejected), not overwritten.
+        # the robots' rings, so it is read (and rejected), not overwritten.
         bad_poses = garbage_poses(real)
         for payload in bad_poses:
             next_real_pose()
             # With the world's source info copied, past the robots' source check and on to
             # their decoder.
-            rogue_poses.put(payload, source_info=world_source[-1])
+            for pub in rogue_poses:
+                pub.put(payload, source_info=world_source[-1])
 
         end = wait_for_event(run.out_dir, lambda e: e["kind"] == "end", RUN_S, run.world)
     assert wait_exit(run.world) == 0, (run.out_dir / "world.log").read_text()

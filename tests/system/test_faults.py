@@ -165,15 +165,19 @@ def test_ten_thousand_malformed_messages_are_counted_and_survived(tmp_path: Path
     sent_poses = 0
     with client_session(endpoint) as session:
         wait_for_event(out, lambda e: e["kind"] == "start", STARTUP_S)
-        poses = session.declare_subscriber(keys.poses_all, zenoh.handlers.RingChannel(1))
+        # Both lanes' robots are in pose cell (0, 0) (within 10 m of the origin).
+        poses = session.declare_subscriber(keys.poses_cell(None, (0, 0)),
+                                           zenoh.handlers.RingChannel(1))
         # Reliable and blocking: nothing of ours may be dropped on the way, so the world's
         # count can be compared exactly.
         pubs = {k: session.declare_publisher(
                     k, congestion_control=zenoh.CongestionControl.BLOCK,
                     reliability=zenoh.Reliability.RELIABLE)
                 for k in (keys.cmd(0), keys.cmd(1), keys.cmd(7), f"{keys.prefix}/cmd/abc")}
-        pose_pub = session.declare_publisher(keys.poses_all)  # every robot's pose slot
-        for pub in (*pubs.values(), pose_pub):
+        # Cell (0, 0) on each robot's pose slot (robot k plans on slot k): each robot gets
+        # every forged pose once, and its decoder sees it.
+        pose_pubs = [session.declare_publisher(keys.poses_cell(slot, (0, 0))) for slot in (0, 1)]
+        for pub in (*pubs.values(), *pose_pubs):
             wait_matching(pub)
         real = None
         deadline = time.monotonic() + RUN_S
@@ -206,8 +210,9 @@ def test_ten_thousand_malformed_messages_are_counted_and_survived(tmp_path: Path
                 cmd_garbage[k % len(cmd_garbage)] if k % 3 else rng.bytes(int(rng.integers(200))))
             if k % burst == burst - 1:
                 if sent_poses < 200:
-                    pose_pub.put(pose_garbage[sent_poses % len(pose_garbage)],
-                                 source_info=world_source)
+                    for pose_pub in pose_pubs:
+                        pose_pub.put(pose_garbage[sent_poses % len(pose_garbage)],
+                                     source_info=world_source)
                     sent_poses += 1
                 pause = t0 + (k + 1) / rate_hz - time.monotonic()
                 if pause > 0:

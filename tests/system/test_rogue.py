@@ -165,7 +165,8 @@ def first_pose(run: Run, session) -> tuple[PosesMsg, object]:
     import zenoh
 
     keys = RunKeys(run.run_id)
-    sub = session.declare_subscriber(keys.poses_all, zenoh.handlers.RingChannel(1))
+    # Every robot holds pose cell (0, 0): the one every forged pose below goes to.
+    sub = session.declare_subscriber(keys.poses_cell(None, (0, 0)), zenoh.handlers.RingChannel(1))
     wait_for_event(run.out_dir, lambda e: e["kind"] == "start", STARTUP_S, run.world)
     deadline = time.monotonic() + RUN_S
     while (sample := sub.try_recv()) is None:
@@ -218,7 +219,7 @@ def test_with_tls_a_rogue_without_a_certificate_cannot_connect_and_a_stolen_one_
             session.put(keys.control, ControlMsg("end", real.t_s, "forged").encode(),
                         source_info=sample.source_info)
             for slot in range(5):
-                session.put(keys.poses_slot(slot), real.encode(),
+                session.put(keys.poses_cell(slot, (0, 0)), real.encode(),
                             source_info=sample.source_info)
         end, robots, metrics = run.finish()
     finally:
@@ -305,8 +306,8 @@ def test_without_tls_every_forgery_fails_and_is_counted(runs) -> None:
                         obstacle_radius_m=real.obstacle_radius_m)]
         for msg in far:
             for slot in range(5):
-                rogue.put(keys.poses_slot(slot), msg.encode(), source_info=world_source)
-                rogue.put(keys.poses_slot(slot), msg.encode())
+                rogue.put(keys.poses_cell(slot, (0, 0)), msg.encode(), source_info=world_source)
+                rogue.put(keys.poses_cell(slot, (0, 0)), msg.encode())
             time.sleep(0.05)  # pacing: the two forgeries about two world ticks apart
         # (c) The end of the run, from the rogue's own session.
         rogue.put(keys.control, ControlMsg("end", real.t_s, "forged").encode())
@@ -319,7 +320,7 @@ def test_without_tls_every_forgery_fails_and_is_counted(runs) -> None:
         sent = 0
         while time.monotonic() - t0 < 2.0:
             for slot in range(5):
-                rogue.put(keys.poses_slot(slot), real.encode())
+                rogue.put(keys.poses_cell(slot, (0, 0)), real.encode())
             for rid in ROBOTS:
                 rogue.put(keys.cmd(rid), CommandMsg(rid, 0, real.t_s, 1.0, 0.0, 1.0,
                                                     "ok").encode())

@@ -4,17 +4,22 @@ Same `world.sim.dynamics.WorldSim` and `agent.planning.controller.RobotControlle
 distributed processes; only the transport is replaced by in-process links. Each world tick:
 
 1. process faults (kill, stop, restart) and the world's view of them (liveliness, lease);
-2. the tick's snapshot enters the pose link of every robot whose pose slot it is on (as the
-   world publishes tick t on ``poses/<t mod K>`` and a robot subscribes to its slot,
-   `world.sim.schedule.plan_pose_slot`; every tick for a robot whose plans do not keep one slot);
-3. each robot observes what its link releases and, on its planning ticks, plans on the true
-   sim time (so it sees the poses' real age) and sends its command into its command link,
-   ``plan_delay_ms`` late for a slow robot;
+2. the tick's snapshot is cut into the cells of the pose grid (`world.sim.cells.split_cells`,
+   as the world publishes one message per cell), and each robot whose pose slot the tick is
+   on (as the world publishes tick t on ``poses/<t mod K>/...`` and a robot subscribes to
+   its slot, `world.sim.schedule.plan_pose_slot`; every tick for a robot whose plans do not
+   keep one slot) gets the view of the cells it holds (`world.sim.cells.merge_parts`, the
+   same merge a robot process makes of its cells' messages) into its pose link;
+3. each robot observes what its link releases, moves its cells with its own position in it
+   (`world.sim.cells.CellSubscription`, as the robot process does) and, on its planning
+   ticks, plans on the true sim time (so it sees the poses' real age) and sends its command
+   into its command link, ``plan_delay_ms`` late for a slow robot;
 4. the world applies what the command links release (the newest ``seq`` per robot only),
    steps the dynamics and the sink records the tick.
 
 Without faults every link delivers at once and every robot plans on tick 0 mod K: all robots
-see the same snapshot, plan, and their commands apply before the world steps. Process faults
+see the same tick (each the discs of its cells), plan, and their commands apply before the
+world steps. Process faults
 are emulated: ``kill`` takes a robot offline for good (the world brakes it; it stays as an
 obstacle); ``stop`` freezes its controller and the world takes it offline after the
 transport lease (`world.sim.schedule.LINK_LEASE_MS`), back when it resumes; ``restart`` is a kill
@@ -37,6 +42,7 @@ from agent.core.scenario import RobotSpec, Scenario
 from agent.core.types import PlanResult, PoseSnapshot
 from agent.planning.controller import RobotController
 from agent.planning.routing import StaticMap
+from world.sim.cells import Cell, CellChange, CellRule, CellSubscription, merge_parts, split_cells
 from world.sim.dynamics import WorldSim
 from world.sim.faults import FaultPlan
 from world.sim.lifecycle import EPS_S, ProcessState, RobotLifecycle, Transition
@@ -112,6 +118,7 @@ class _Robot:
     phase_ticks: int
     pose_slot: int | None
     plan_delay_s: float
+    cells: CellSubscription
     seq: int = 0
     life: RobotLifecycle = field(default_factory=RobotLifecycle)
 
@@ -156,6 +163,7 @@ class _Loop:
         self.world_rate_hz, self.control_rate_hz = world_rate_hz, control_rate_hz
         self.dt_s = 1.0 / world_rate_hz
         self.slots = pose_slot_count(world_rate_hz, control_rate_hz)
+        self.cell_rule = CellRule.of_config(scenario.planner_config)
         self.static_map = StaticMap.of_obstacles(scenario.obstacles)
         self.robots = [self._robot(spec) for spec in scenario.robots]
         self.by_id = {r.spec.id: r for r in self.robots}
@@ -184,7 +192,8 @@ class _Loop:
             ticks_per_cycle=_ticks_per(world_rate_hz, rate_hz),
             phase_ticks=round(timing.phase_s * world_rate_hz),
             pose_slot=plan_pose_slot(1.0 / rate_hz, timing.phase_s, self.dt_s, self.slots),
-            plan_delay_s=timing.plan_delay_ms * 1e-3)
+            plan_delay_s=timing.plan_delay_ms * 1e-3,
+            cells=CellSubscription(self.cell_rule, spec.start[:2]))
 
     def progress(self) -> SimProgress:
         world = self.world
@@ -252,22 +261,31 @@ class _Loop:
                     self._set_offline(rid, False, t)
                 elif change is Transition.RESTARTED:
                     r.seq, r.ctrl = 0, self.controller(r.spec)
+                    r.cells = CellSubscription(self.cell_rule, r.spec.start[:2])
                     r.pose_link.clear()
                     r.cmd_link.clear()
                     self._set_offline(rid, False, t)
 
     def sense_and_plan(self, t: float, tick: int) -> None:
-        """2-3. Sense through the pose links (the robot's slot), plan on the planning ticks."""
+        """2-3. Sense through the pose links (the robot's slot and cells), plan on the
+        planning ticks."""
         snapshot = self.world.snapshot()
+        parts = split_cells(snapshot, self.cell_rule.size_m)
+        views: dict[frozenset[Cell] | None, PoseSnapshot] = {}  # robots holding the same cells
         slot = pose_slot_of_tick(tick, self.slots)
         for k, r in enumerate(self.robots):
             if r.pose_slot is None or r.pose_slot == slot:
-                r.pose_link.send(t, snapshot)
+                held = r.cells.cells
+                view = views.get(held)
+                if view is None:
+                    view = views[held] = merge_parts(parts, held, snapshot.stamp_s,
+                                                     snapshot.tick)
+                r.pose_link.send(t, view)
             if r.life.state is ProcessState.STOPPED:
                 continue
             for snap in r.pose_link.receive(t):
                 if r.life.up:
-                    r.ctrl.observe(snap)
+                    _observe(r, snap)
             if r.life.up and r.plans_on(tick):
                 self._plan(k, r, t)
 
@@ -342,6 +360,18 @@ class _Loop:
         return LockstepResult(reason=reason, all_arrived=all_arrived,
                               contacts=int(world.contact_count), sim_time_s=float(world.t_s),
                               ticks=int(world.tick), lost=lost)
+
+
+def _observe(r: _Robot, snapshot: PoseSnapshot) -> CellChange:
+    """The robot observes a view and moves its cells, as `agent.robot_cycle.RobotCycle`
+    does."""
+    if not r.ctrl.observe(snapshot):
+        if not bool((snapshot.ids == r.spec.id).any()):
+            return r.cells.missed_self()
+        return CellChange()
+    row = int(np.flatnonzero(snapshot.ids == r.spec.id)[0])
+    x, y = snapshot.pose[row, :2].tolist()
+    return r.cells.follow(x, y)
 
 
 def run_lockstep(scenario: Scenario, sink: RunSink, *, world_rate_hz: float = 50.0,

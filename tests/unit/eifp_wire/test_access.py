@@ -13,6 +13,7 @@ from eifp_wire.access import (
     run_tag,
     scoped_cn,
 )
+from eifp_wire.keys import RunKeys
 
 # --- access control ---------------------------------------------------------------------------
 
@@ -64,6 +65,27 @@ def test_no_client_may_publish_poses_control_or_answer_config() -> None:
     # ... but robots receive poses and control.
     assert allowed(acl, "robot-0", "put", "egress", "eifp/r1/poses/3")
     assert allowed(acl, "robot-0", "put", "egress", "eifp/r1/control")
+
+
+def test_robots_subscribe_to_pose_cells_and_only_the_world_publishes_them() -> None:
+    """The pose grid's keys (``poses/<slot>/<i>/<j>``, `RunKeys.poses_cell`) fall under the
+    same rules: a robot, a relay and an observer may subscribe to and receive any cell,
+    wildcards included; no client may put one. The world is the router's own session."""
+    acl = access_control("r1", [0, 1], relays={"b": [1]})
+    keys = RunKeys("r1")
+    cells = [keys.poses_cell(3, (-2, 7)), keys.poses_cell(None, (0, 0)),
+             keys.poses_every_cell(3), keys.poses_all]
+    for key in cells:
+        for cn in ("robot-0", "robot-1", "router-b", "observer"):
+            assert allowed(acl, cn, "declare_subscriber", "ingress", key), (cn, key)
+            assert allowed(acl, cn, "put", "egress", key), (cn, key)
+            assert not allowed(acl, cn, "put", "ingress", key), (cn, key)
+        assert not allowed(acl, "robot-9", "declare_subscriber", "ingress", key)
+    assert not allowed(acl, "robot-0", "put", "ingress", "eifp/r1/poses/**")
+    relay = relay_access_control("r1", [1])
+    assert allowed(relay, "robot-1", "declare_subscriber", "ingress", cells[0])
+    assert not allowed(relay, "robot-1", "put", "ingress", cells[0])
+    assert not allowed(relay, "robot-0", "declare_subscriber", "ingress", cells[0])
 
 
 def test_a_robot_queries_and_declares_only_its_own_keys() -> None:

@@ -4,7 +4,13 @@ from __future__ import annotations
 
 import pytest
 
-from eifp_wire.keys import MAX_POSE_SLOTS, RunKeys, check_robot_id, validate_run_id
+from eifp_wire.keys import (
+    MAX_CELL_INDEX,
+    MAX_POSE_SLOTS,
+    RunKeys,
+    check_robot_id,
+    validate_run_id,
+)
 from eifp_wire.limits import MAX_ROBOT_ID, ProtocolError
 
 
@@ -52,10 +58,35 @@ def test_debug_keys() -> None:
 def test_pose_slot_keys() -> None:
     k = RunKeys("r1")
     assert k.poses_slot(0) == "eifp/r1/poses/0" and k.poses_slot(4) == "eifp/r1/poses/4"
-    assert k.poses_all == "eifp/r1/poses/*"
+    assert k.poses_all == "eifp/r1/poses/*/*/*"
     for bad in (-1, MAX_POSE_SLOTS, 1.0, True, "1"):
         with pytest.raises(ProtocolError, match="pose slot"):
             k.poses_slot(bad)
+        with pytest.raises(ProtocolError, match="pose slot"):
+            k.poses_cell(bad, (0, 0))
+
+
+def test_pose_cell_keys_encode_the_slot_and_the_cell() -> None:
+    k = RunKeys("r1")
+    assert k.poses_cell(3, (-1, 2)) == "eifp/r1/poses/3/-1/2"
+    assert k.poses_cell(None, (0, 0)) == "eifp/r1/poses/*/0/0"
+    assert k.poses_every_cell(2) == "eifp/r1/poses/2/*/*"
+    assert k.poses_every_cell(None) == k.poses_all
+    for slot, cell in ((0, (0, 0)), (4, (-7, 12)), (999, (MAX_CELL_INDEX, -MAX_CELL_INDEX))):
+        assert k.cell_of_poses(k.poses_cell(slot, cell)) == (slot, cell)
+    for bad_cell in ((0,), (0, 0, 0), (1.0, 0), (True, 0), (MAX_CELL_INDEX + 1, 0), [0, 0]):
+        with pytest.raises(ProtocolError, match="pose cell"):
+            k.poses_cell(0, bad_cell)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("key", [
+    "eifp/r1/poses/3", "eifp/r1/poses/3/1", "eifp/r1/poses/3/1/2/3", "eifp/r1/poses/03/1/2",
+    "eifp/r1/poses/3/-0/2", "eifp/r1/poses/3/01/2", "eifp/r1/poses/3/+1/2",
+    "eifp/r1/poses/*/1/2", "eifp/r1/poses/3/x/2", "eifp/r2/poses/3/1/2",
+    "eifp/r1/poses/1000/1/2", "eifp/r1/poses/3/1000000000/2", "eifp/r1/cmd/3"])
+def test_bad_pose_cell_keys_are_refused(key: str) -> None:
+    with pytest.raises(ProtocolError):
+        RunKeys("r1").cell_of_poses(key)
 
 
 def test_robot_id_parsed_from_keys() -> None:

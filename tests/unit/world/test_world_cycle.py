@@ -231,3 +231,24 @@ def test_a_contact_is_an_event_and_a_notice() -> None:
     assert [(e.fields["a"], e.fields["b"]) for e in contacts] == [(0, 1)]
     assert cycle.take_notices()[0].startswith("contact 0-1, overlap ")
     assert cycle.end("all_arrived").fields["success"] is False
+
+
+# --- poses -------------------------------------------------------------------------------------
+
+def test_the_tick_goes_out_one_message_per_cell_within_reach_of_a_robot() -> None:
+    """Every disc of the scenario is near the origin, in cell (0, 0); the cells around it
+    are sent empty, so a robot holding them can tell a lost message from an empty cell."""
+    from eifp_wire import PosesMsg
+
+    cycle = _cycle()
+    out = dict(cycle.pose_cells(pub_ns=9, clock_id=3))
+    assert sorted(out) == [(i, j) for i in (-1, 0, 1) for j in (-1, 0, 1)]
+    for cell, payload in out.items():
+        msg = PosesMsg.decode(payload)
+        assert (msg.tick, msg.pub_ns, msg.clock_id) == (0, 9, 3)
+        if cell == (0, 0):
+            assert msg.robot_ids.tolist() == [0, 4] and msg.obstacle_ids.tolist() == [-1]
+        else:
+            assert msg.robot_ids.size == 0 and msg.obstacle_ids.size == 0
+    held = cycle.cell_rule.needed(-3.0, 0.0)  # robot 0's cells at its start
+    assert held <= set(out)

@@ -25,9 +25,9 @@ from orchestrator.experiments.scale import (
     format_rows,
     robot_endpoints,
     scale_row,
-    world_tick_costs,
     write_outputs,
 )
+from orchestrator.experiments.world_bench import world_tick_costs
 
 
 def fake_row(n: int, **extra: object) -> dict:
@@ -156,14 +156,19 @@ def test_outputs_are_written(tmp_path: Path) -> None:
     assert "20.0" in text.splitlines()[2]  # latency p99
 
 
-def test_world_tick_costs_report_stages_and_linear_message_size(tmp_path: Path) -> None:
+def test_world_tick_costs_report_stages_and_the_cells_sizes(tmp_path: Path) -> None:
     rows = [world_tick_costs(n, 5, tmp_path / str(n)) for n in (16, 64)]
     for row in rows:
         assert row["tick_us_p50"] > 0.0 and row["step_us_p50"] > 0.0
         assert (tmp_path / str(row["agents"]) / "trajectory.csv").stat().st_size > 0
-    # 36 bytes per robot (id int32 + x, y, theta, radius float64) plus a fixed envelope
-    # (msgpack's bin headers grow by a byte or two per column at 256 and 65536 bytes).
-    assert 36 * 48 <= rows[1]["poses_bytes"] - rows[0]["poses_bytes"] <= 36 * 48 + 10
+        assert 4 <= row["rx_msgs_per_robot"] <= 9 <= row["cells"]
+        assert 36 * 8 < row["rx_bytes_per_robot"] <= row["poses_bytes"]
+    # 36 bytes per robot (id int32 + x, y, theta, radius float64), and per cell an envelope
+    # of 66 bytes unstamped (msgpack's bin headers grow by a byte or two past 256 bytes).
+    small, large = rows
+    extra = large["poses_bytes"] - small["poses_bytes"] - 36 * 48
+    more_cells = large["cells"] - small["cells"]
+    assert 66 * more_cells <= extra <= 70 * more_cells
 
 
 def test_world_bench_command_writes_json(tmp_path: Path, capsys) -> None:
@@ -183,3 +188,27 @@ def test_world_bench_command_writes_json(tmp_path: Path, capsys) -> None:
 def test_parser_rejects(argv: list[str]) -> None:
     with pytest.raises(SystemExit):
         build_parser().parse_args(["scale", *argv])
+
+
+def test_received_bytes_and_the_worlds_tick_per_robot() -> None:
+    """From the robots' exit lines (robots.json) and the world's ``end`` event."""
+    from orchestrator.experiments.scale import received_per_robot
+
+    exits = {"processes": [
+        {"robot": 0, "rx_pose_bytes": 1000, "rx_pose_msgs": 10, "cells_views": 8,
+         "cells_partial": 1},
+        {"robot": 1, "rx_pose_bytes": 3000, "rx_pose_msgs": 30, "cells_views": 8,
+         "cells_partial": 0},
+        {"robot": 2, "plans": 3},  # an older exit line: not counted
+    ]}
+    got = received_per_robot(exits, 10.0)
+    assert got == {"rx_bytes_per_robot_s": 200.0, "rx_msgs_per_robot_s": 2.0,
+                   "cells_partial_rate": 1 / 16}
+    assert set(received_per_robot({}, 10.0).values()) == {None}
+    row = scale_row({"sim_time_s": 10.0}, [{"kind": "end", "tick_ms": {"mean": 2.5}}],
+                    ResourceSampler(), n=50, family="circles", planner="eifp-mpc",
+                    spawn_wall=0.0, spawn_mono=0.0, wall_s=12.0, time_scale=1.0,
+                    world_status=0, exits=exits)
+    assert row["world_tick_ms_mean"] == 2.5 and row["world_tick_us_per_robot"] == 50.0
+    assert row["rx_bytes_per_robot_s"] == 200.0
+    assert "0.2 / 2" in format_rows([row])

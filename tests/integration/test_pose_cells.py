@@ -1,0 +1,123 @@
+"""A robot crossing pose-cell borders over loopback Zenoh: the world's side publishes each
+tick one message per cell (`WorldCycle.pose_cells` does the same), the robot's side is the
+robot process's own pieces (`agent.node.PoseInbox`, `agent.node.CellPoses`,
+`agent.robot_cycle.RobotCycle`). No neighbour within the robot's reach is ever missing from
+a view, while its subscriptions follow it."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+import zenoh
+
+from agent.core.config import PlannerConfig
+from agent.core.scenario import RobotSpec
+from agent.node import CellPoses, PoseInbox
+from agent.planning.controller import RobotController
+from agent.robot_cycle import RobotCycle
+from eifp_wire import PosesMsg, RunConfigMsg, RunKeys, session_settings
+from eifp_wire.pose_cells import cell_payloads
+from orchestrator.experiments.distributed import free_tcp_endpoint
+from world.sim.cells import Cell, CellRule
+from world.sim.schedule import PlanSchedule
+
+pytestmark = pytest.mark.timeout(60)
+
+RUN = "cells-test"
+DEADLINE_S = 5.0
+RULE = CellRule.of_config(PlannerConfig())
+TIME_SCALE = 10.0
+"""The robot's clock runs 10 x wall time: 0.1 s of sim per update, published as fast as
+the robot takes them."""
+
+
+def _open(mode: str, endpoint: str) -> zenoh.Session:
+    conf = zenoh.Config()
+    if mode == "router":
+        settings = session_settings(mode="router", listen=[endpoint])
+    else:
+        settings = session_settings(mode="client", connect=[endpoint], connect_timeout_ms=5000)
+    for key, value in settings.items():
+        conf.insert_json5(key, value)
+    return zenoh.open(conf)
+
+
+@pytest.fixture
+def sessions() -> Iterator[tuple[zenoh.Session, zenoh.Session]]:
+    endpoint = free_tcp_endpoint()
+    world = _open("router", endpoint)
+    robot = _open("client", endpoint)
+    try:
+        yield world, robot
+    finally:
+        robot.close()
+        world.close()
+
+
+def test_a_robot_crossing_cell_borders_over_zenoh_sees_every_neighbour_in_reach(
+        sessions: tuple[zenoh.Session, zenoh.Session]) -> None:
+    world, session = sessions
+    keys = RunKeys(RUN)
+    rng = np.random.default_rng(11)
+    n_others = 40
+    others = rng.uniform([-50.0, -25.0], [50.0, 25.0], (n_others, 2))
+    ids = [0, *range(1, n_others + 1)]
+    spec = RobotSpec(0, (-30.0, 1.0, 0.0), (40.0, 1.0))
+    config = RunConfigMsg(run_id=RUN, robot=spec, planner=PlannerConfig(), goal_tolerance_m=0.25,
+                          control_rate_hz=10.0, world_rate_hz=50.0, time_scale=TIME_SCALE,
+                          time_limit_s=1000.0, cmd_timeout_s=0.5, known_ids=tuple(ids))
+    cycle = RobotCycle(config, RobotController(spec, PlannerConfig(), 0.25), PlanSchedule(0.1))
+    inbox = PoseInbox(str(world.zid()))
+    subs = CellPoses(session, keys, 0, inbox)
+    subs.hold(cycle.cells.cells or ())
+    pubs: dict[Cell, zenoh.Publisher] = {}
+
+    def publish(tick: int, ego_xy: np.ndarray) -> None:
+        xy = np.vstack([ego_xy, others])
+        pose = np.zeros((len(ids), 3))
+        pose[:, :2] = xy
+        msg = PosesMsg(t_s=tick / 50.0, tick=tick, robot_ids=ids, robot_pose=pose,
+                       robot_radius_m=[0.5] * len(ids), obstacle_ids=[],
+                       obstacle_xy_m=np.zeros((0, 2)), obstacle_radius_m=[])
+        for cell, payload in cell_payloads(msg, RULE.published(xy), RULE.size_m):
+            pub = pubs.get(cell)
+            if pub is None:
+                pub = pubs[cell] = world.declare_publisher(keys.poses_cell(0, cell))
+            pub.put(payload, source_info=zenoh.SourceInfo(pub.id, tick))
+
+    # Every publisher the first tick needs matches the robot's subscriptions before it starts
+    # (a robot process declares them before its liveliness token, which the world waits for).
+    start = np.array(spec.start[:2])
+    for cell in cycle.cells.cells or ():
+        pubs[cell] = world.declare_publisher(keys.poses_cell(0, cell))
+    deadline = time.monotonic() + DEADLINE_S
+    while not all(p.matching_status.matching for p in pubs.values()):
+        assert time.monotonic() < deadline, "the robot's first cells never matched"
+        time.sleep(0.005)
+
+    seen_cells: set[Cell] = set(cycle.cells.cells or ())
+    ego = start.copy()
+    for k in range(70):  # 1 m per update, from x = -30 to x = 40: three cell borders
+        tick = 5 * k
+        publish(tick, ego)
+        deadline = time.monotonic() + DEADLINE_S
+        while cycle.newest is None or cycle.newest.tick < tick:
+            assert time.monotonic() < deadline, f"tick {tick} never came"
+            inbox.wait(cycle.nap_s(time.monotonic(), 0.05))
+            cycle.sense(inbox.take(), inbox.rx_wall_s, time.monotonic())
+            for change in cycle.take_cell_changes():
+                subs.apply(change)
+        view = cycle.newest
+        assert view.tick == tick
+        near = np.linalg.norm(others - ego, axis=1) <= RULE.see_radius_m
+        want = {i + 1 for i in np.flatnonzero(near).tolist()}
+        assert want <= set(view.snapshot.ids.tolist()), f"tick {tick}: a neighbour missing"
+        assert cycle.cells.cells is not None and cycle.cells.cells == set(subs.subs)
+        seen_cells |= cycle.cells.cells
+        ego = ego + [1.0, 0.0]
+    assert {c[0] for c in seen_cells} >= {-2, -1, 0, 1, 2, 3}
+    assert cycle.cells.changes >= 12 and cycle.counts.unheld_poses >= 0
+    assert cycle.assembler.counts.views >= 70
