@@ -42,7 +42,11 @@ import yaml
 from agent.process import ExitCode
 from orchestrator.experiments.distributed import robot_starts
 
-pytestmark = [pytest.mark.system, pytest.mark.docker, pytest.mark.timeout(2400)]
+pytestmark = [pytest.mark.system, pytest.mark.docker, pytest.mark.timeout(2400),
+              pytest.mark.xdist_group("docker")]
+"""One xdist group: with `pytest tests -n 2` (the README's test command) this module's tests
+run in order on one worker (they share the image it builds, and the last checks the host),
+while the other worker runs the other layers."""
 
 REPO = Path(__file__).resolve().parents[2]
 LOCAL_BASE_IMAGE = "eifp-swarm-base:bookworm"
