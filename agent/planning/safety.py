@@ -10,12 +10,11 @@ able to cancel it before the gap is gone, given how late its command acts.
 
 For each other disc j at centre distance d, with gap g = d - r - r_j - margin, unit vector
 u from the robot to j and heading h, the robot closes along u at v cos a, where a is the
-smallest angle between u and the headings the robot sweeps if it keeps turning at the
-commanded rate until a braking command can act (the reaction time tau). From delayed poses
-(older than `agent.planning.planners.RECENT_SPEED_MAX_AGE_S`) the sweep runs on through the
-stop (tau + v / decel): a robot may then turn at full rate into one it had not faced. Over
-tau it keeps closing at that rate, then brakes at `decel`. The other's speed along u,
-w = v_j . u, changes the room R the robot has:
+smallest angle between u and the headings the robot sweeps (`sweep_rad`); the planner passes
+the sweep at the commanded rate on through the stop (tau + v / decel), because the world
+brakes a robot along its commanded arc (`agent.planning.planners.ViaPointPlanner
+._braking_guard`). Over tau it keeps closing at that rate, then brakes at `decel`. The
+other's speed along u, w = v_j . u, changes the room R the robot has:
 
   * receding (w > 0): it can brake as hard, which leaves w^2 / (2 decel) more room;
   * approaching (w < 0): it needs its own stopping distance c tau + c^2 / (2 decel),

@@ -354,8 +354,12 @@ def test_the_guard_leaves_a_robot_alone_that_faces_away():
     assert a.v_mps == b.v_mps
 
 
-def _one_pass_guard(planner, obs: Observation, v_mps: float, omega_radps: float) -> float:
-    """The guard as the module docstring defines it: the exact unseen speed-ups, one pass."""
+def _one_pass_guard(planner, obs: Observation, v_mps: float,
+                    omega_radps: float) -> tuple[float, float]:
+    """The guard as `ViaPointPlanner._braking_guard` defines it, written out once: the exact
+    unseen speed-ups in one pass, the robot's own turn swept on through its stop, and where
+    even the hardest braking misses the cap, the reachable turn (the last one, or either
+    end of one period's reach) that allows the highest speed."""
     ego, limits, others = obs.ego, obs.limits, obs.others
     reaction_s = obs.pose_age_s + planner.control_period_s
     lag_s = 0.5 * WINDOW_S + obs.pose_age_s
@@ -366,23 +370,34 @@ def _one_pass_guard(planner, obs: Observation, v_mps: float, omega_radps: float)
         recent_speed_mps=(others.recent_speed_mps
                           if obs.pose_age_s <= RECENT_SPEED_MAX_AGE_S else None),
         recent_lag_s=0.5 * others.recent_interval_s + obs.pose_age_s)
-    turning_s = reaction_s
+    turning_s = reaction_s + max(v_mps, 0.0) / limits.accel_max_mps2  # on through the stop
     if obs.pose_age_s > RECENT_SPEED_MAX_AGE_S:
-        turning_s += max(v_mps, 0.0) / limits.accel_max_mps2  # on through the stop
         unseen = np.maximum(unseen, unseen_turn_closing_mps(
             (ego.x_m, ego.y_m), others.position_m, others.velocity_mps, others.heading_rad,
             others.recent_turn_rate_radps, others.is_robot,
             turn_rate_max_radps=limits.omega_max_radps, age_s=obs.pose_age_s,
             reaction_s=reaction_s))
-    v_safe = braking_speed_limit(
-        (ego.x_m, ego.y_m), ego.heading_rad, obs.radius_m, others.position_m,
-        others.velocity_mps, others.radius_m, reaction_s=reaction_s,
-        decel_mps2=limits.accel_max_mps2, margin_m=planner.config.safety.braking_margin_m,
-        sweep_rad=heading_sweep_rad(omega_radps, turning_s), unseen_dv_mps=unseen)
+
+    def cap(omega: float) -> float:
+        return braking_speed_limit(
+            (ego.x_m, ego.y_m), ego.heading_rad, obs.radius_m, others.position_m,
+            others.velocity_mps, others.radius_m, reaction_s=reaction_s,
+            decel_mps2=limits.accel_max_mps2, margin_m=planner.config.safety.braking_margin_m,
+            sweep_rad=heading_sweep_rad(omega, turning_s), unseen_dv_mps=unseen)
+
+    v_safe = cap(omega_radps)
     if v_mps <= v_safe:
-        return v_mps
-    return max(v_safe, ego.v_mps - limits.accel_max_mps2 * planner.control_period_s,
-               limits.v_min_mps)
+        return v_mps, omega_radps
+    hardest = max(ego.v_mps - limits.accel_max_mps2 * planner.control_period_s,
+                  limits.v_min_mps)
+    if v_safe < hardest:
+        step = limits.alpha_max_radps2 * planner.control_period_s
+        lo = max(-limits.omega_max_radps, ego.omega_radps - step)
+        hi = min(limits.omega_max_radps, ego.omega_radps + step)
+        for omega in (ego.omega_radps, lo, hi):
+            if cap(omega) > v_safe:
+                v_safe, omega_radps = cap(omega), omega
+    return min(v_mps, max(v_safe, hardest)), omega_radps
 
 
 @settings(max_examples=examples(300), deadline=None)
@@ -436,19 +451,19 @@ def test_the_guard_reads_recent_speeds_from_fresh_poses_only():
     planner = _planner(0.05)
     # fresh poses: a leader seen keeping its speed is allowed a braking of a_max over half
     # the interval only, so the follower may go faster than under the blind bound
-    fresh_blind = planner._braking_guard(_follower(0.0, None), 1.1, 0.0)
-    fresh_seen = planner._braking_guard(_follower(0.0, 1.0), 1.1, 0.0)
+    fresh_blind = planner._braking_guard(_follower(0.0, None), 1.1, 0.0)[0]
+    fresh_seen = planner._braking_guard(_follower(0.0, 1.0), 1.1, 0.0)[0]
     # blind: the leader may recede at 1.0 - 1.5 x 0.25 = 0.625 m/s, room 0.25 + 0.625^2 / 3
     assert fresh_blind == pytest.approx(1.5 * (-0.1 + math.sqrt(0.01 + 2 * 0.3802 / 1.5)),
                                         abs=1e-3)
     # seen at 1.0: at least 1.0 - 1.5 x 0.05 = 0.925 m/s, room enough for the full 1.1 m/s
     assert fresh_seen == 1.1 > fresh_blind
     # a leader seen braking (0.6 m/s over the newest interval) takes that back
-    assert planner._braking_guard(_follower(0.0, 0.6), 1.1, 0.0) < fresh_seen
+    assert planner._braking_guard(_follower(0.0, 0.6), 1.1, 0.0)[0] < fresh_seen
     # poses older than RECENT_SPEED_MAX_AGE_S: the blind bound, recent speeds or not
     old = RECENT_SPEED_MAX_AGE_S + 0.05
-    assert planner._braking_guard(_follower(old, 1.0), 1.1, 0.0) == \
-        planner._braking_guard(_follower(old, None), 1.1, 0.0)
+    assert planner._braking_guard(_follower(old, 1.0), 1.1, 0.0)[0] == \
+        planner._braking_guard(_follower(old, None), 1.1, 0.0)[0]
 
 
 def _turn_term(heading, turn, *, velocity=(0.0, 1.0), is_robot=True, age=0.1, reaction=0.2):
@@ -508,16 +523,16 @@ def test_the_guard_reads_the_others_turns_from_delayed_poses_only():
     old = RECENT_SPEED_MAX_AGE_S + 0.05
     # delayed poses: one turning towards the robot's path limits the robot more than the
     # same other seen with no turn, and more still than one turning away
-    towards = planner._braking_guard(_crosser(old, 1.5), 1.1, 0.0)
-    straight = planner._braking_guard(_crosser(old, 0.0), 1.1, 0.0)
-    away = planner._braking_guard(_crosser(old, -1.5), 1.1, 0.0)
+    towards = planner._braking_guard(_crosser(old, 1.5), 1.1, 0.0)[0]
+    straight = planner._braking_guard(_crosser(old, 0.0), 1.1, 0.0)[0]
+    away = planner._braking_guard(_crosser(old, -1.5), 1.1, 0.0)[0]
     assert towards < straight - 0.1  # 0.85 (the hardest braking) against 0.99
     assert straight < away  # 0.99 against 1.03: the heading alone already counts
     # fresh poses: the turn is not read (no-fault runs decide as before), also where the
     # guard binds
-    fresh = planner._braking_guard(_crosser(0.0, 1.5, ahead_m=1.4), 1.1, 0.0)
+    fresh = planner._braking_guard(_crosser(0.0, 1.5, ahead_m=1.4), 1.1, 0.0)[0]
     assert fresh < 1.0
-    assert fresh == planner._braking_guard(_crosser(0.0, None, ahead_m=1.4), 1.1, 0.0)
+    assert fresh == planner._braking_guard(_crosser(0.0, None, ahead_m=1.4), 1.1, 0.0)[0]
 
 
 def _behind_right(pose_age_s: float) -> Observation:
@@ -533,14 +548,44 @@ def _behind_right(pose_age_s: float) -> Observation:
                        limits=RobotLimits(), others=others, pose_age_s=pose_age_s)
 
 
-def test_under_delayed_poses_the_guard_sweeps_its_own_turn_on_through_the_stop():
+def _stop_arc_cap(reaction_s: float, v_mps: float, omega_radps: float) -> float:
+    """v_safe against `_behind_right`'s obstacle (bearing -1.80 rad, gap 0.33 m) for a robot
+    turning at omega until stopped from v (decel 1.5, margin 0.05): the safety module's
+    formula, v cos a tau + v^2 cos a / (2 decel) = room, solved for v."""
+    bearing = math.atan2(-1.3, -0.3)
+    heading = max(bearing, omega_radps * (reaction_s + v_mps / 1.5))  # right turn sweeps down
+    cos_a = math.cos(bearing - heading)
+    room = math.hypot(0.3, 1.3) - 2 * R - 0.05
+    return 1.5 * (-reaction_s + math.sqrt(reaction_s ** 2 + 2.0 * room / (1.5 * cos_a)))
+
+
+def test_the_guard_sweeps_its_own_turn_on_through_the_stop():
+    # The world brakes a robot along its commanded arc, so the headings it faces are those
+    # swept until it stands, from fresh poses too (pillar_circle 40, evaluation seed 6: two
+    # robots escaping each other turned into each other while braking).
     planner = _planner(0.05)
-    # fresh poses: the turn over the reaction time (1.5 x 0.1 rad) does not face it
-    assert planner._braking_guard(_behind_right(0.0), 1.1, -1.5) == 1.1
-    # delayed (0.1 s): turning right at 1.5 rad/s until stopped, the robot faces it
-    # (sweep 1.5 (0.2 + 1.1 / 1.5) = 1.4 rad): 0.28 m of room, cos a = cos 0.40, so
-    # v 0.92 x 0.2 + v^2 0.92 / 3 = 0.28 gives about 0.71 m/s; the hardest braking
-    # from 1.0 in one period is 0.85
-    assert planner._braking_guard(_behind_right(0.1), 1.1, -1.5) == pytest.approx(0.85)
+    # fresh poses (reaction 0.1 s): turning right at 1.5 rad/s the robot faces the obstacle
+    # behind it on the right before it stands; the cap is within one period's braking
+    v, omega = planner._braking_guard(_behind_right(0.0), 1.1, -1.5)
+    assert v == pytest.approx(_stop_arc_cap(0.1, 1.1, -1.5)) and 0.85 < v < 1.0
+    assert omega == -1.5
     # turning left, away from it: no limit
-    assert planner._braking_guard(_behind_right(0.1), 1.1, 1.5) == 1.1
+    assert planner._braking_guard(_behind_right(0.0), 1.1, 1.5) == (1.1, 1.5)
+
+
+def test_a_turn_no_braking_can_make_safe_gives_way_to_the_safest_reachable_turn():
+    planner = _planner(0.05)
+    # delayed (0.1 s, reaction 0.2 s): the cap under the right turn is below the hardest
+    # braking from 1.0 m/s in one period (0.85), so the turn is the wrong one: of the turns
+    # reachable in a period (the last, 0, or 0 -+ alpha_max dt = -+0.6 rad/s) the robot keeps
+    # the last one, straight on, which never faces the obstacle, at the speed it asked for
+    assert _stop_arc_cap(0.2, 1.1, -1.5) < 0.85
+    assert planner._braking_guard(_behind_right(0.1), 1.1, -1.5) == (1.1, 0.0)
+    # an obstacle straight ahead (gap 0.2 m) is faced under every reachable turn: no turn
+    # allows more, so the robot keeps the turn it asked for and brakes as hard as it can
+    xy = np.array([[1.0 + 0.2, 0.0]])
+    ahead = replace(_behind_right(0.0), others=Others(
+        ids=np.array([-1]), position_m=xy, velocity_mps=np.zeros((1, 2)), radius_m=np.array([R]),
+        linearity=np.ones(1), track_start_m=xy, is_robot=np.array([False])))
+    v, omega = planner._braking_guard(ahead, 1.1, 0.3)
+    assert v == pytest.approx(1.0 - 1.5 * 0.1) and omega == 0.3
