@@ -19,8 +19,8 @@ Lifecycle:
    ``dt / time_scale`` of wall time. Each tick drains liveliness changes, configuration
    queries and commands (all read from handler channels, never in callbacks), applies the
    newest command per robot (zero-order hold, `WorldSim.set_command`), steps the world,
-   publishes one `PosesMsg` (DROP, express) per cell of the pose grid within reach of a
-   robot, on the tick's pose slot (``poses/<tick mod K>/<i>/<j>``,
+   publishes one `PosesMsg` (DROP, batched: `poses_pub`) per cell of the pose grid within
+   reach of a robot, on the tick's pose slot (``poses/<tick mod K>/<i>/<j>``,
    `world.sim.schedule.pose_slot_count`, `WorldCycle.pose_cells`), and records the tick. The robots'
    plan internals (``debug/<id>``, `PlanDebugMsg`, through a ring) are validated and
    recorded into ``run.mcap`` (`RunRecorder.record_plan`).
@@ -395,12 +395,19 @@ class WorldNode:
         return False
 
     def poses_pub(self, slot: int, cell: Cell) -> zenoh.Publisher:
-        """The publisher of one pose slot and cell (declared on first use)."""
+        """The publisher of one pose slot and cell (declared on first use).
+
+        DROP, so a slow robot never holds the world up, but not express: a tick's cells go
+        out as a burst, and an express message takes a transmission batch of its own, of
+        which Zenoh's data queue holds a few per link; a burst larger than that, while the
+        link's thread was not scheduled within `wait_before_drop` (1 ms), lost cells on a
+        loaded machine. Batched, a tick's cells share a frame, sent as soon as the link's
+        thread runs (Zenoh holds a batch back only under back-pressure)."""
         pub = self.poses_pubs.get((slot, cell))
         if pub is None:
             pub = self.poses_pubs[(slot, cell)] = self.session.declare_publisher(
                 self.keys.poses_cell(slot, cell),
-                congestion_control=zenoh.CongestionControl.DROP, express=True)
+                congestion_control=zenoh.CongestionControl.DROP, express=False)
         return pub
 
     def publish_poses(self) -> None:

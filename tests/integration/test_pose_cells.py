@@ -18,9 +18,10 @@ from agent.core.scenario import RobotSpec
 from agent.node import CellPoses, PoseInbox
 from agent.planning.controller import RobotController
 from agent.robot_cycle import RobotCycle
-from eifp_wire import PosesMsg, RunConfigMsg, RunKeys, session_settings
+from eifp_wire import PosesMsg, RunConfigMsg, RunKeys
 from eifp_wire.pose_cells import cell_payloads
 from orchestrator.experiments.distributed import free_tcp_endpoint
+from tests.integration.sessions import open_session
 from world.sim.cells import Cell, CellRule
 from world.sim.schedule import PlanSchedule
 
@@ -34,22 +35,11 @@ TIME_SCALE = 10.0
 the robot takes them."""
 
 
-def _open(mode: str, endpoint: str) -> zenoh.Session:
-    conf = zenoh.Config()
-    if mode == "router":
-        settings = session_settings(mode="router", listen=[endpoint])
-    else:
-        settings = session_settings(mode="client", connect=[endpoint], connect_timeout_ms=5000)
-    for key, value in settings.items():
-        conf.insert_json5(key, value)
-    return zenoh.open(conf)
-
-
 @pytest.fixture
 def sessions() -> Iterator[tuple[zenoh.Session, zenoh.Session]]:
     endpoint = free_tcp_endpoint()
-    world = _open("router", endpoint)
-    robot = _open("client", endpoint)
+    world = open_session("router", endpoint)
+    robot = open_session("client", endpoint)
     try:
         yield world, robot
     finally:

@@ -22,9 +22,9 @@ from eifp_wire import (
     RunKeys,
     max_seq,
     scoped_cn,
-    session_settings,
 )
 from orchestrator.experiments.distributed import free_tcp_endpoint
+from tests.integration.sessions import open_session
 from tests.unit.world.test_world_cycle import TWO_ROBOTS
 from world.node import WorldNode, WorldOptions, parse_args, run_configs
 from world.recorder import RunRecorder
@@ -34,17 +34,6 @@ pytestmark = pytest.mark.timeout(60)
 
 DEADLINE_S = 10.0
 SCENARIO = TWO_ROBOTS
-
-
-def open_session(mode: str, endpoint: str) -> zenoh.Session:
-    conf = zenoh.Config()
-    if mode == "router":
-        settings = session_settings(mode="router", listen=[endpoint])
-    else:
-        settings = session_settings(mode="client", connect=[endpoint], connect_timeout_ms=5000)
-    for key, value in settings.items():
-        conf.insert_json5(key, value)
-    return zenoh.open(conf)
 
 
 def until(condition: Callable[[], bool], step: Callable[[], None], what: str) -> None:
