@@ -74,6 +74,15 @@ which may lie behind it; a unicycle standing there may not find its way to a poi
 behind it at all (the MPC, linearised about standing, sees no gain in turning). eIFP's
 legs still keep every inflated disc, so the route's guidance is all that is relaxed."""
 
+WAYPOINT_PASSED_M = 1.0
+"""A route waypoint (not the goal) closer than this is also reached once the robot is past
+it along the route's next leg (on the far side of the line through it square to that leg),
+as a path follower switches waypoints: a robot pushed 0.37 m past a corner of its route,
+round a pillar, otherwise turned back for it and stood (`pillar_circle` 40, evaluation seed
+0, found while the evaluation ran). The waypoints after it are then looked at with as much
+less clearance as the robot is away from it, the most a line from there can lose against
+the route's leg. About a robot's diameter."""
+
 LOOKAHEAD_TOLERANCE_M = 1.0e-6
 """A sight line clears a disc when it keeps the clearance less this (rounding) [m]."""
 
@@ -381,7 +390,8 @@ class RouteFollower:
     The intermediate goal handed to eIFP is the farthest route waypoint (goal included)
     whose sight line from the robot keeps the route's clearance from every static disc
     (less what the robot already lacks of it, `_endpoint_keep`; past a waypoint within
-    `WAYPOINT_REACHED_M`, less that too); waypoints before it are
+    `WAYPOINT_REACHED_M`, or within `WAYPOINT_PASSED_M` and past it along the next leg,
+    less the distance to it too); waypoints before it are
     passed and never looked at again, so the goal moves only forward along the route.
     Cost per cycle: one sight-line check of the next few waypoints against the map.
 
@@ -424,12 +434,16 @@ class RouteFollower:
         need = _endpoint_keep(here, blocking.center_m, keep)
         starts = np.broadcast_to(here, ahead.shape)
         seen = segment_clears(starts, ahead, blocking.center_m, need)
-        reached = np.flatnonzero(np.hypot(*(ahead[:-1] - here).T) < WAYPOINT_REACHED_M)
+        away = np.hypot(*(ahead[:-1] - here).T)
+        past = ((here - ahead[:-1]) * (ahead[1:] - ahead[:-1])).sum(axis=1) > 0.0
+        reached = np.flatnonzero((away < WAYPOINT_REACHED_M)
+                                 | (past & (away < WAYPOINT_PASSED_M)))
         if reached.size:
             last = int(reached[-1])
             seen[last] = True
+            slack = max(WAYPOINT_REACHED_M, float(away[last]))
             beyond = segment_clears(starts[last + 1:], ahead[last + 1:], blocking.center_m,
-                                    np.maximum(need - WAYPOINT_REACHED_M, 0.0))
+                                    np.maximum(need - slack, 0.0))
             seen[last + 1:] |= beyond
         if not seen.any():
             return None

@@ -213,3 +213,29 @@ def test_a_waypoint_within_reach_is_reached_so_the_robot_is_not_sent_back_to_it(
     before = corner + (start - corner) * (2.0 * WAYPOINT_REACHED_M / math.dist(start, corner))
     target = far.intermediate_goal(before)
     assert target is not None and np.allclose(target, corner)
+
+
+def test_a_waypoint_the_robot_is_past_along_the_next_leg_is_passed() -> None:
+    from agent.planning.routing import WAYPOINT_PASSED_M, WAYPOINT_REACHED_M
+
+    # The route of the test above. A robot 0.56 m from the corner, beyond the reach, but
+    # past it along the next leg (0.5 m along it, 0.25 m in towards the pillar): the corner
+    # is passed, and the goal, in sight with the clearance less that distance, is the next
+    # goal; it was the corner behind the robot (`pillar_circle` 40: one stood for 80 s).
+    static = StaticMap(np.array([[0.48, -0.01]]), np.array([1.59]))
+    start, goal = np.array([17.34, -4.77]), np.array([-17.39, 4.66])
+    route = plan_route(start, goal, static, CLEARANCE_M)
+    assert route is not None and route.waypoints_m.shape[0] == 3
+    corner = route.waypoints_m[1]
+    along = (goal - corner) / math.dist(goal, corner)
+    inward = np.array([along[1], -along[0]])  # towards the pillar
+    assert np.dot(static.center_m[0] - corner, inward) > 0.0
+    here = corner + 0.5 * along + 0.25 * inward
+    assert WAYPOINT_REACHED_M < math.dist(here, corner) < WAYPOINT_PASSED_M
+    target = RouteFollower(route, static).intermediate_goal(here)
+    assert target is not None and np.allclose(target, goal)
+    # as far from the corner but before it, on the way there: the corner stays the goal
+    before = corner + math.dist(here, corner) * (start - corner) / math.dist(start, corner)
+    assert np.dot(before - corner, along) < 0.0
+    target = RouteFollower(route, static).intermediate_goal(before)
+    assert target is not None and np.allclose(target, corner)
