@@ -42,11 +42,10 @@ import yaml
 from agent.process import ExitCode
 from orchestrator.experiments.distributed import robot_starts
 
-pytestmark = [pytest.mark.system, pytest.mark.docker, pytest.mark.timeout(2400),
-              pytest.mark.xdist_group("docker")]
-"""One xdist group: with `pytest tests -n 2` (the README's test command) this module's tests
-run in order on one worker (they share the image it builds, and the last checks the host),
-while the other worker runs the other layers."""
+pytestmark = [pytest.mark.system, pytest.mark.docker, pytest.mark.timeout(2400)]
+# With `pytest tests -n 3` (the README's test command) pyproject's `--dist loadfile` keeps this
+# module's tests in order on one worker: they share the image it builds, and the last one
+# checks the host. (xdist's `loadgroup` marks did not group tests under pytest 9.)
 
 REPO = Path(__file__).resolve().parents[2]
 LOCAL_BASE_IMAGE = "eifp-swarm-base:bookworm"

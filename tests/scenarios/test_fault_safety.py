@@ -26,8 +26,7 @@ from orchestrator.experiments.lockstep import run_lockstep
 from world.sim.faults import build_plan
 
 SEEDS = (0, 1, 2)
-"""Link seeds (the latency and loss draws); every one must keep clear (one test each, so
-that `pytest -n 2` spreads them over its workers)."""
+"""Link seeds (the latency and loss draws); every one must keep clear (one test each)."""
 
 
 @pytest.mark.parametrize("seed", SEEDS)
