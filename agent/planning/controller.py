@@ -54,10 +54,11 @@ class RobotController:
             and `config` give (`agent.planning.planners.make_planner`).
         tuning: eIFP-MPC's tracker weights and OSQP settings instead of those of `config`'s
             profile (`agent.planning.planners.make_planner`).
+        command_hold_periods: how many control periods the world may apply one of this
+            robot's commands before it brakes (`COMMAND_HOLD_PERIODS`).
 
     Attributes:
-        command_hold_s: how long the world may apply one of this robot's commands before
-            it brakes (`COMMAND_HOLD_PERIODS` periods); sent with each command.
+        command_hold_s: `command_hold_periods` control periods; sent with each command.
     """
 
     def __init__(self, spec: RobotSpec, config: PlannerConfig, goal_tolerance_m: float,
@@ -65,15 +66,18 @@ class RobotController:
                  control_period_s: float = CONTROL_PERIOD_S,
                  static_map: StaticMap | None = None,
                  mechanisms: Mechanisms | None = None,
-                 tuning: MpcTuning | None = None) -> None:
+                 tuning: MpcTuning | None = None,
+                 command_hold_periods: float = COMMAND_HOLD_PERIODS) -> None:
         if not (np.isfinite(control_period_s) and control_period_s > 0.0):
             raise ValueError(f"control_period_s must be positive, got {control_period_s!r}")
+        if not (np.isfinite(command_hold_periods) and command_hold_periods > 0.0):
+            raise ValueError(f"command_hold_periods must be positive, got {command_hold_periods!r}")
         self.spec = spec
         self.config = config
         self.goal_tolerance_m = float(goal_tolerance_m)
         self.compensate_latency = compensate_latency
         self.control_period_s = float(control_period_s)
-        self.command_hold_s = COMMAND_HOLD_PERIODS * self.control_period_s
+        self.command_hold_s = float(command_hold_periods) * self.control_period_s
         # one window: the others' estimates are fitted over it, and the braking guard
         # allows for their lag
         self.planner = make_planner(spec.planner, config, control_period_s=self.control_period_s,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import pytest
 
@@ -112,13 +113,9 @@ def test_lost_commands_give_way_to_braking_after_their_hold(tmp_path):
     # (the end event counts it); a hold of 100 periods (longer than the 0.5 s time-out)
     # turns that off, and the robot keeps driving on its last command instead.
 
-    import agent.planning.controller
-
     def run(hold_periods: float, name: str) -> tuple[dict, list[float]]:
-        with pytest.MonkeyPatch.context() as patch:
-            patch.setattr(agent.planning.controller, "COMMAND_HOLD_PERIODS", hold_periods)
-            out = run_lockstep(two_lanes(), tmp_path / name,
-                               faults=build_plan(drop=0.5, seed=1))
+        faults = replace(build_plan(drop=0.5, seed=1), command_hold_periods=hold_periods)
+        out = run_lockstep(two_lanes(), tmp_path / name, faults=faults)
         assert out.success, out.metrics
         end = events_of(tmp_path / name)[-1]
         rows = (tmp_path / name / "trajectory.csv").read_text().splitlines()

@@ -78,6 +78,10 @@ class FaultPlan:
         timing: robot id -> `RobotTiming` (robots not listed: no timing fault).
         process: process faults, in any order.
         compensate_latency: the robots forward-predict by the age of the poses.
+        command_hold_periods: how many control periods the world may apply a robot's
+            command before it brakes (None: the controller's own,
+            `agent.planning.controller.COMMAND_HOLD_PERIODS`); a hold longer than the
+            world's command time-out switches the hold off.
     """
 
     links: LinkFaults = field(default_factory=LinkFaults)
@@ -85,6 +89,12 @@ class FaultPlan:
     timing: Mapping[int, RobotTiming] = field(default_factory=dict)
     process: tuple[ProcessFault, ...] = ()
     compensate_latency: bool = True
+    command_hold_periods: float | None = None
+
+    def __post_init__(self) -> None:
+        hold = self.command_hold_periods
+        if hold is not None and not (math.isfinite(hold) and hold > 0.0):
+            raise FaultSpecError(f"command_hold_periods: must be > 0, got {hold!r}")
 
     def timing_of(self, robot_id: int) -> RobotTiming:
         """The timing of `robot_id` (the default if it has none)."""
@@ -94,7 +104,7 @@ class FaultPlan:
     def active(self) -> bool:
         """True if anything at all is injected (or compensation is off)."""
         return bool(self.links.active or self.timing or self.process
-                    or not self.compensate_latency)
+                    or not self.compensate_latency or self.command_hold_periods is not None)
 
     def check(self, robot_ids: Collection[int]) -> None:
         """Raise `FaultSpecError` if a fault names a robot the scenario does not have."""
@@ -115,6 +125,7 @@ class FaultPlan:
             "timing": {str(k): vars(v) for k, v in sorted(self.timing.items())},
             "process": [vars(p) for p in self.process],
             "compensate_latency": self.compensate_latency,
+            "command_hold_periods": self.command_hold_periods,
         }
 
 

@@ -40,7 +40,7 @@ import numpy as np
 
 from agent.core.scenario import RobotSpec, Scenario
 from agent.core.types import PlanResult, PoseSnapshot
-from agent.planning.controller import RobotController
+from agent.planning.controller import COMMAND_HOLD_PERIODS, RobotController
 from agent.planning.routing import StaticMap
 from world.sim.cells import Cell, CellChange, CellRule, CellSubscription, merge_parts, split_cells
 from world.sim.dynamics import WorldSim
@@ -176,10 +176,13 @@ class _Loop:
 
     def controller(self, spec: RobotSpec) -> RobotController:
         rate_hz = self.plan.timing_of(spec.id).control_rate_hz or self.control_rate_hz
+        hold = self.plan.command_hold_periods
         return RobotController(spec, self.scenario.planner_config,
                                self.scenario.goal_tolerance_m,
                                compensate_latency=self.plan.compensate_latency,
-                               control_period_s=1.0 / rate_hz, static_map=self.static_map)
+                               control_period_s=1.0 / rate_hz, static_map=self.static_map,
+                               command_hold_periods=(COMMAND_HOLD_PERIODS if hold is None
+                                                     else hold))
 
     def _robot(self, spec: RobotSpec) -> _Robot:
         plan, world_rate_hz = self.plan, self.world_rate_hz

@@ -107,3 +107,15 @@ def test_a_planner_that_never_arrives_is_not_contact_free() -> None:
     # A robot lost to a robot fault does not count against the planner.
     (env,) = envelope(aggregate([row(0.0, 3, lost=1)], ["latency_ms"]), ["latency_ms"])
     assert env["max_latency_ms"] == 0.0
+
+
+@pytest.mark.parametrize("hold", [0.0, -1.0, float("nan"), float("inf")])
+def test_a_command_hold_that_is_not_a_positive_number_is_refused(hold):
+    with pytest.raises(FaultSpecError, match="command_hold_periods"):
+        FaultPlan(command_hold_periods=hold)
+
+
+def test_a_command_hold_is_an_experiment_and_recorded():
+    plan = FaultPlan(command_hold_periods=100.0)
+    assert plan.active and plan.to_json()["command_hold_periods"] == 100.0
+    assert not FaultPlan().active and FaultPlan().to_json()["command_hold_periods"] is None
