@@ -223,6 +223,16 @@ class Others:
                            unknown if recent_turn_rate_radps is None else recent_turn_rate_radps)
         return obj
 
+    def with_radius(self, radius_m: np.ndarray) -> Others:
+        """The same others with disc radii `radius_m` ((K,), finite, >= 0)."""
+        radius = np.asarray(radius_m, dtype=float).reshape(-1)
+        if radius.shape != self.radius_m.shape or not np.isfinite(radius).all() \
+                or (radius < 0.0).any():
+            raise ValueError(f"radius_m: expected {len(self)} finite radii >= 0")
+        obj = copy.copy(self)
+        object.__setattr__(obj, "radius_m", radius)
+        return obj
+
     def subset(self, index: np.ndarray) -> Others:
         """The others selected by an index or boolean mask, in that order."""
         # __post_init__ and `trusted` fill the optional columns (NaN where unknown)

@@ -46,12 +46,15 @@ class Guidance:
             `goal_m` is the final goal [m].
         left_m: route length still to go [m].
         strategy: GO, or YIELD (stand this cycle); REROUTE never leaves `RouteGuide`.
+        squeeze: plan with the squeeze margin against still discs this cycle
+            (`agent.planning.liveness`, rule 2).
     """
 
     goal_m: np.ndarray
     tail_m: np.ndarray
     left_m: float
     strategy: Strategy = Strategy.GO
+    squeeze: bool = False
 
 
 class RouteGuide:
@@ -115,9 +118,7 @@ class RouteGuide:
                                             observation.others)
             if strategy is Strategy.REROUTE:
                 taken = self._reroute(here, goal, observation)
-                self.liveness.rerouted(taken)
-                strategy = Strategy.GO if taken else self.liveness.fallback(
-                    now_s, observation.robot_id, here, observation.others)
+                strategy = self.liveness.rerouted(now_s, taken)
         also = None
         if self._round_knot and self.liveness is not None:
             slow = knot(here, observation.others, math.inf, self.liveness.config.slow_mps)
@@ -134,8 +135,9 @@ class RouteGuide:
         follower = self._follower
         rest = follower.remaining_m
         tail = rest[1:] if rest.shape[0] > 1 else _NO_TAIL
+        squeeze = self.liveness is not None and self.liveness.squeezing(now_s)
         return Guidance(goal_m=target, tail_m=tail, left_m=follower.progress_left_m(here),
-                        strategy=strategy)
+                        strategy=strategy, squeeze=squeeze)
 
     def _reroute(self, here: np.ndarray, goal: np.ndarray, observation: Observation) -> bool:
         """Rule 1 of `agent.planning.liveness`: a route round the slow robots near, if one

@@ -11,22 +11,34 @@ changes strategy (`Liveness.decide`), in this order (thresholds: `LivenessConfig
    discs, and the robot re-routes (`agent.planning.routing`). A route that is at most
    `LivenessConfig.detour_ratio` times the straight remainder is followed from now on
    (until the next re-route); the knot is then left to the side instead of pushed
-   through.
-2. **Yield by id.** Otherwise (no such route, or nobody slow), the robot yields for up
-   to `LivenessConfig.yield_s` while a sensed robot with a lower id, moving (at least
-   `slow_mps`), is within `LivenessConfig.yield_radius_m`: it stands (status YIELD) and
-   the others plan round a still disc, which they do well. A robot with no such lower id
-   near it does not yield: standing helps only a robot that moves.
+   through. If no such route is found, rule 2 follows at once.
+2. **Squeeze between still discs.** For `LivenessConfig.squeeze_s` the robot plans with
+   the smaller margin `LivenessConfig.squeeze_margin_m` instead of d_safety (Eq. 8)
+   against every sensed disc slower than `slow_mps` (`squeezed`): robots parked on
+   their goals in a lattice as dense as 2L (a 5x5 grid of mirror swaps 2.6 m apart, two
+   platoons 2.5 m apart) leave gaps that are wide enough for a robot's body but closed to
+   its inflated discs, and the last robots of such a crowd stood in a closed cell of
+   parked neighbours until the time limit. Moving robots keep the full margin, and the
+   braking guard keeps its own gap (`SafetyConfig.braking_margin_m`) to every disc, its
+   true radius, whatever the planner's margin.
+3. **Yield by id.** The robot yields for up to `LivenessConfig.yield_s` while a sensed
+   robot with a lower id, moving (at least `slow_mps`), is within
+   `LivenessConfig.yield_radius_m`: it stands (status YIELD) and the others plan round a
+   still disc, which they do well. A robot with no such lower id near it squeezes instead
+   (rule 2): standing helps only a robot that moves.
+
+Each time the robot is found stuck it applies the next rule, 1, 2, 3, 1, 2, ...; real
+progress starts the rotation again at rule 1.
 
 Why this terminates (no two robots mirror each other for ever): robots sense each other's
 ids, and ids are unique, so in every knot of stuck robots the one with the lowest id never
-yields to any of them, while every other stuck one stands for `yield_s`. The lowest one then
-plans against still discs only, which the via-point planner resolves (or routes round, by
-rule 1); when it has left the yield radius the next-lowest is the lowest, and so on.
-Yielding is bounded in time, and a yield restarts the progress clock, so a robot that
-waits in vain (say, behind a robot parked on its own goal) tries rule 1 and 2 again
-after another `stuck_after_s`, never stands for good. Nothing here is random, so lockstep
-runs stay deterministic.
+yields to any of them, while every other stuck one stands for `yield_s` every third stuck
+spell. The lowest one then plans against still discs only, which the via-point planner
+resolves, routes round (rule 1) or squeezes between (rule 2); when it has left the yield
+radius the next-lowest is the lowest, and so on. Yielding and squeezing are bounded in
+time, and each restarts the progress clock, so a robot that waits in vain (say, behind a
+robot parked on its own goal) tries the rules again after another `stuck_after_s`, never
+stands for good. Nothing here is random, so lockstep runs stay deterministic.
 """
 
 from __future__ import annotations
@@ -55,6 +67,10 @@ class LivenessConfig:
             straight distance left to the goal.
         yield_s: how long a yielding robot stands at most [s].
         yield_radius_m: a stuck robot yields to lower ids within this distance (centres) [m].
+        squeeze_margin_m: the margin of Eq. (8) against still discs while squeezing
+            (rule 2); at least the tracker's and the braking guard's gaps (0.1 and 0.05 m
+            by default) [m].
+        squeeze_s: how long a squeeze lasts [s].
     """
 
     stuck_after_s: float = 4.0
@@ -63,10 +79,12 @@ class LivenessConfig:
     detour_ratio: float = 3.0
     yield_s: float = 3.0
     yield_radius_m: float = 5.0
+    squeeze_margin_m: float = 0.1
+    squeeze_s: float = 8.0
 
     def __post_init__(self) -> None:
         for name in ("stuck_after_s", "progress_m", "slow_mps", "detour_ratio", "yield_s",
-                     "yield_radius_m"):
+                     "yield_radius_m", "squeeze_margin_m", "squeeze_s"):
             value = getattr(self, name)
             if not (isinstance(value, int | float) and math.isfinite(value) and value > 0.0):
                 raise ValueError(f"LivenessConfig.{name} must be positive, got {value!r}")
@@ -110,6 +128,10 @@ class Strategy(enum.Enum):
     YIELD = "yield"  # stand
 
 
+_ROTATION = (Strategy.REROUTE, None, Strategy.YIELD)
+"""The rules a stuck robot applies in turn (module docstring); None is the squeeze."""
+
+
 def knot(position_m: np.ndarray, others: Others, radius_m: float, slow_mps: float
          ) -> np.ndarray:
     """Indices of the sensed robots within `radius_m` moving slower than `slow_mps`."""
@@ -134,6 +156,21 @@ def lower_id_moving_near(robot_id: int, position_m: np.ndarray, others: Others,
                  & (speed >= moving_mps)).any())
 
 
+def squeezed(others: Others, d_safety_m: float, squeeze_margin_m: float, slow_mps: float
+             ) -> Others:
+    """`others` with every disc slower than `slow_mps` shrunk by d_safety - squeeze_margin
+    (not below 0): a planner that inflates them by d_safety (Eq. 8) then keeps
+    `squeeze_margin_m` from them (rule 2). Unchanged when the squeeze margin is no smaller."""
+    shrink = d_safety_m - squeeze_margin_m
+    if len(others) == 0 or shrink <= 0.0:
+        return others
+    still = np.hypot(*others.velocity_mps.T) < slow_mps
+    if not still.any():
+        return others
+    radius = np.where(still, np.maximum(others.radius_m - shrink, 0.0), others.radius_m)
+    return others.with_radius(radius)
+
+
 @final  # `reset` re-runs __init__
 class Liveness:
     """The strategy state of one robot: monitor, yield timer, and which rule comes next.
@@ -146,17 +183,23 @@ class Liveness:
         self.config = config
         self.monitor = ProgressMonitor(config)
         self._yield_until_s = -math.inf
-        self._tried_reroute = False
+        self._squeeze_until_s = -math.inf
+        self._next = 0  # index into _ROTATION
         self.reroutes = 0
         self.yields = 0
+        self.squeezes = 0
 
     def reset(self) -> None:
         """Forget everything (a new run)."""
         self.__init__(self.config)
 
+    def squeezing(self, now_s: float) -> bool:
+        """Whether the robot plans with the squeeze margin this cycle (rule 2)."""
+        return now_s < self._squeeze_until_s
+
     def decide(self, now_s: float, robot_id: int, position_m: np.ndarray, left_m: float,
                others: Others) -> Strategy:
-        """This cycle's strategy (module docstring).
+        """This cycle's strategy (module docstring); a squeeze shows in `squeezing`.
 
         Args:
             now_s: sim time [s].
@@ -174,26 +217,37 @@ class Liveness:
             self.monitor.restart(now_s, left_m)
         if not self.monitor.stuck(now_s, left_m):
             if self.monitor.progressed:
-                self._tried_reroute = False  # real progress: start the rules afresh
+                self._next = 0  # real progress: start the rules afresh
             return Strategy.GO
         self.monitor.restart(now_s, left_m)
-        if not self._tried_reroute:
-            self._tried_reroute = True
+        rule = _ROTATION[self._next]
+        self._next = (self._next + 1) % len(_ROTATION)
+        if rule is Strategy.REROUTE:
             return Strategy.REROUTE
-        self._tried_reroute = False
-        return self.fallback(now_s, robot_id, position_m, others)
+        if rule is Strategy.YIELD:
+            return self.fallback(now_s, robot_id, position_m, others)
+        return self._squeeze(now_s)
+
+    def _squeeze(self, now_s: float) -> Strategy:
+        self._squeeze_until_s = now_s + self.config.squeeze_s
+        self.squeezes += 1
+        return Strategy.GO
 
     def fallback(self, now_s: float, robot_id: int, position_m: np.ndarray, others: Others
                  ) -> Strategy:
-        """Rule 2 (yield by id), also when rule 1 found no route to take this cycle."""
+        """Rule 3 (yield by id), or rule 2 (squeeze) where no lower id moves near."""
         if lower_id_moving_near(robot_id, position_m, others, self.config.yield_radius_m,
                                 self.config.slow_mps):
             self._yield_until_s = now_s + self.config.yield_s
             self.yields += 1
             return Strategy.YIELD
-        return Strategy.GO
+        return self._squeeze(now_s)
 
-    def rerouted(self, taken: bool) -> None:
-        """Count a re-route the planner took (`taken`) after `Strategy.REROUTE`."""
+    def rerouted(self, now_s: float, taken: bool) -> Strategy:
+        """After `Strategy.REROUTE`: count a re-route the planner took (`taken`), or go on
+        to rule 2 (squeeze) at once when there was none to take."""
         if taken:
             self.reroutes += 1
+            return Strategy.GO
+        self._next = 2  # rule 2 now; rule 3 the next time
+        return self._squeeze(now_s)

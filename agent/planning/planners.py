@@ -45,7 +45,7 @@ from agent.core.config import PLANNER_NAMES, PlannerConfig, RobotLimits
 from agent.core.types import Observation, PlanDebug, PlanResult, PlanStatus, Side, StageTimes
 from agent.planning.estimation import ESTIMATION_WINDOW_S
 from agent.planning.guidance import RouteGuide
-from agent.planning.liveness import Strategy
+from agent.planning.liveness import Strategy, squeezed
 from agent.planning.mechanisms import Mechanisms
 from agent.planning.mechanisms import mechanisms as mechanisms_of
 from agent.planning.mpc_qp import MpcTuning, profile_tuning
@@ -250,14 +250,11 @@ class ViaPointPlanner:
                              cfg.threats.sensing_radius_m, cfg.threats.max_neighbors)
         if near is not observation.others:
             observation = observation.with_others(near)
-        tail = None
-        if self.guide is not None:
-            guided = self.guide.guide(observation, now_s)
-            if guided.strategy is Strategy.YIELD and not _inside_any(observation, cfg):
-                return _yield_result(observation, clock() - t0, self.control_period_s)
-            if guided.tail_m.shape[0]:
-                observation = observation.with_goal(guided.goal_m, guided.left_m)
-                tail = guided.tail_m
+        sensed = observation  # true radii, for the tracker and the braking guard
+        guided = self._guide(observation, now_s)
+        if guided is None:
+            return _yield_result(observation, clock() - t0, self.control_period_s)
+        observation, tail = guided
         if self._selector is None:
             via = self._plan_ifp(observation, cfg, clock)
         else:
@@ -282,7 +279,8 @@ class ViaPointPlanner:
         status = via.status
         predicted = None
         if self.name == "eifp-mpc":
-            preds, clearance = self._predictions(observation, ref.t_s)
+            # the tracker keeps its own margin from every disc's true radius, squeeze or not
+            preds, clearance = self._predictions(sensed, ref.t_s)
             res = self._mpc(observation).solve(
                 np.array([ego.x_m, ego.y_m, ego.heading_rad]), last, ref, preds, clearance
             )
@@ -290,8 +288,8 @@ class ViaPointPlanner:
             predicted = res
             if res.status != PlanStatus.OK:
                 status = res.status
-            if mech.braking_guard and len(observation.others):
-                v, omega = self._braking_guard(observation, v, omega)
+            if mech.braking_guard and len(sensed.others):
+                v, omega = self._braking_guard(sensed, v, omega)
         else:
             v, omega = track_reference(
                 ego.x_m, ego.y_m, ego.heading_rad, ref.x_m, ref.y_m,
@@ -323,6 +321,29 @@ class ViaPointPlanner:
             resolved_id=via.resolved_id, threats=via.threats, times=times,
             solver_iterations=int(iterations), debug=debug,
         )
+
+    def _guide(self, observation: Observation, now_s: float
+               ) -> tuple[Observation, np.ndarray | None] | None:
+        """Routes and liveness (`agent.planning.guidance`): None when the robot yields this
+        cycle, else the observation eIFP plans on (heading for the route's intermediate
+        goal; still discs shrunk while squeezing, `liveness.squeezed`) and the route's
+        waypoints after that goal (None: the goal is the final one)."""
+        if self.guide is None:
+            return observation, None
+        cfg = self.config
+        guided = self.guide.guide(observation, now_s)
+        if guided.strategy is Strategy.YIELD and not _inside_any(observation, cfg):
+            return None
+        tail = None
+        if guided.tail_m.shape[0]:
+            observation = observation.with_goal(guided.goal_m, guided.left_m)
+            tail = guided.tail_m
+        live = self.mech.liveness
+        if guided.squeeze and live is not None:
+            observation = observation.with_others(squeezed(
+                observation.others, cfg.safety.d_safety_m, live.squeeze_margin_m,
+                live.slow_mps))
+        return observation, tail
 
     def _braking_guard(self, observation: Observation, v_mps: float,
                        omega_radps: float) -> tuple[float, float]:

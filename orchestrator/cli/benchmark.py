@@ -51,7 +51,8 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.add_argument("--seeds", default=None,
                    help=f"'evaluation' ({','.join(map(str, EVALUATION_SEEDS))}, the default), "
                         f"'tuning' ({','.join(map(str, TUNING_SEEDS))}: tune on these, "
-                        "report on the others) or N (seeds 0..N-1); --quick: seed 0")
+                        "report on the others), N (seeds 0..N-1) or a list S1,S2,... of "
+                        "either set; --quick: seed 0")
     p.add_argument("--mode", choices=MODES, default="lockstep",
                    help="lockstep (default) or distributed (one process per robot)")
     p.add_argument("--time-scale", type=float, default=1.0,

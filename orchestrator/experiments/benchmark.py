@@ -38,16 +38,14 @@ from agent.core.scenario import Scenario
 from orchestrator.analysis.rundir import end_event, run_ending, safe_name, write_json
 from orchestrator.experiments.families import SETUPS, resolve
 from orchestrator.experiments.scenario_blocks import ideal_time_s
+from orchestrator.experiments.seeds import EVALUATION_SEEDS as EVALUATION_SEEDS
+from orchestrator.experiments.seeds import QUICK_SEEDS as QUICK_SEEDS
+from orchestrator.experiments.seeds import TUNING_SEEDS as TUNING_SEEDS
+from orchestrator.experiments.seeds import parse_seeds as parse_seeds
 
 if TYPE_CHECKING:
     from orchestrator.analysis.metrics import RunMetrics
 
-TUNING_SEEDS: tuple[int, ...] = tuple(range(100, 106))
-"""Seeds to tune planners on (`--seeds tuning`, 100-105); never reported by default."""
-EVALUATION_SEEDS: tuple[int, ...] = tuple(range(10))
-"""Seeds the suite reports on (the default, 0-9)."""
-QUICK_SEEDS: tuple[int, ...] = (0,)
-"""Seeds of `--quick` when `--seeds` is not given (the first evaluation seed)."""
 START_JITTER_M = 0.2
 """Every run's starts are moved by up to this much, drawn from the seed."""
 DEFAULT_PLANNERS: tuple[str, ...] = ("eifp-mpc", "orca")
@@ -155,31 +153,6 @@ def select_cases(cases: Sequence[Case], families: str | Sequence[str]) -> tuple[
                              f"some of {known}")
         wanted.update(expanded)
     return tuple(c for c in cases if wanted & {c.family, c.scenario, c.label})
-
-
-def parse_seeds(text: str | None, *, quick: bool = False) -> tuple[int, ...]:
-    """`evaluation`, `tuning`, or N (the evaluation seeds 0..N-1); None: the default
-    (`EVALUATION_SEEDS`, or `QUICK_SEEDS` with --quick).
-
-    Raises:
-        ValueError: anything else, or N reaching into the tuning seeds.
-    """
-    if text is None:
-        return QUICK_SEEDS if quick else EVALUATION_SEEDS
-    key = text.strip().lower()
-    if key == "evaluation":
-        return EVALUATION_SEEDS
-    if key == "tuning":
-        return TUNING_SEEDS
-    try:
-        n = int(key)
-    except ValueError:
-        raise ValueError(f"--seeds: expected 'evaluation', 'tuning' or a count, got "
-                         f"{text!r}") from None
-    if not 1 <= n <= min(TUNING_SEEDS):
-        raise ValueError(f"--seeds: a count must be 1..{min(TUNING_SEEDS)} (seeds 0..N-1, "
-                         f"below the tuning seeds), got {n}")
-    return tuple(range(n))
 
 
 # --------------------------------------------------------------------------------------

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -11,6 +12,7 @@ from agent.core.config import PlannerConfig, RobotLimits
 from agent.core.types import EgoState, Observation, Others, PlanStatus
 from agent.planning.guidance import RouteGuide
 from agent.planning.liveness import LivenessConfig, Strategy
+from agent.planning.mechanisms import EIFP_MPC_MECHANISMS
 from agent.planning.planners import make_planner
 from agent.planning.routing import StaticMap, segment_disc_distance
 from world.sim.dynamics import integrate_unicycle
@@ -109,17 +111,18 @@ def test_eifp_mpc_leaves_a_cup_that_traps_eifp_without_a_route() -> None:
 
 
 def test_a_robot_held_in_place_yields_to_a_moving_lower_id_and_never_to_a_higher() -> None:
-    """The planner's side of rule 2: a robot that makes no progress for `stuck_after_s`
-    stands (status YIELD, v = 0) while a lower id moves near it; with a higher id there it
-    keeps planning."""
-    def run(other_id: int) -> list[PlanStatus]:
+    """The planner's side of rule 3: a robot that makes no progress for `stuck_after_s`
+    a second time (rules 1 and 2 did not help) stands (status YIELD, v = 0) while a lower
+    id moves near it; with a higher id there it keeps planning."""
+    def run(other_id: int, cycles: int) -> list[PlanStatus]:
         planner = make_planner("eifp-mpc", PlannerConfig())
         statuses = []
-        for k in range(60):
+        for k in range(cycles):
             t = 0.1 * k
             # an other crossing 3 m ahead of the robot, which is held still (no progress)
-            other = Others(ids=np.array([other_id]), position_m=np.array([[3.0, -2.0 + 0.05 * k]]),
-                           velocity_mps=np.array([[0.0, 0.5]]), radius_m=np.array([0.5]),
+            other = Others(ids=np.array([other_id]),
+                           position_m=np.array([[3.0, -2.0 + 0.035 * k]]),
+                           velocity_mps=np.array([[0.0, 0.35]]), radius_m=np.array([0.5]),
                            linearity=np.ones(1), track_start_m=np.array([[3.0, -2.5]]),
                            is_robot=np.array([True]))
             res = planner.plan(observation(0.0, 0.0, 0.0, 0.0, (10.0, 0.0), other, robot_id=5), t)
@@ -128,10 +131,11 @@ def test_a_robot_held_in_place_yields_to_a_moving_lower_id_and_never_to_a_higher
                 assert res.v_mps == 0.0 and res.omega_radps == 0.0
         return statuses
 
-    lower = run(2)
-    assert PlanStatus.YIELD not in lower[:40]  # not stuck before 4 s
-    assert PlanStatus.YIELD in lower[40:]
-    assert PlanStatus.YIELD not in run(9)
+    lower = run(2, 100)
+    # stuck at 4 s: no slow robot to route round, so rule 2 (squeeze) at once
+    assert PlanStatus.YIELD not in lower[:80]
+    assert PlanStatus.YIELD in lower[80:]  # stuck again at 8 s: rule 3
+    assert PlanStatus.YIELD not in run(9, 100)
 
 
 def test_a_route_round_a_knot_is_followed_against_the_map_not_the_knot() -> None:
@@ -150,3 +154,50 @@ def test_a_route_round_a_knot_is_followed_against_the_map_not_the_knot() -> None
     # the knot has left: the goal is in sight on the (empty) map
     g = guide.guide(observation(*here, Others.empty()), 4.2)
     assert np.allclose(g.goal_m, (6.0, 0.0)) and g.tail_m.shape == (0, 2)
+
+
+def parked_cell(spacing_m: float) -> Others:
+    """Robots parked on the corners of a square lattice cell round the origin, and the
+    next column to the right: the cell is closed to inflated discs when spacing <= 2L."""
+    h = 0.5 * spacing_m
+    xy = np.array([(-h, -h), (-h, h), (h, -h), (h, h), (3 * h, -h), (3 * h, h)])
+    n = xy.shape[0]
+    return Others(ids=np.arange(1, n + 1), position_m=xy, velocity_mps=np.zeros((n, 2)),
+                  radius_m=np.full(n, 0.5), linearity=np.zeros(n), track_start_m=xy,
+                  is_robot=np.ones(n, dtype=bool))
+
+
+def drive_among(planner_cfg: LivenessConfig, others: Others, goal: tuple[float, float],
+                seconds: float) -> tuple[np.ndarray, float]:
+    """One eIFP-MPC robot from the origin among still `others`; its path and the smallest
+    gap between its disc and theirs."""
+    mech = dataclasses.replace(EIFP_MPC_MECHANISMS, liveness=planner_cfg)
+    planner = make_planner("eifp-mpc", PlannerConfig(), mechanisms=mech)
+    x = y = th = v = w = 0.0
+    path = [(x, y)]
+    for k in range(int(seconds * 10)):
+        res = planner.plan(observation(x, y, th, v, goal, others, robot_id=9), k * 0.1)
+        if res.status == PlanStatus.ARRIVED:
+            break
+        v, w = res.v_mps, res.omega_radps
+        for _ in range(5):
+            x, y, th = integrate_unicycle(np.array([[x, y, th]]), np.array([v]),
+                                          np.array([w]), 0.02)[0].tolist()
+            path.append((x, y))
+    pts = np.array(path)
+    gap = np.hypot(*(pts[:, None, :] - others.position_m[None]).transpose(2, 0, 1)) - 1.0
+    return pts, float(gap.min())
+
+
+def test_a_robot_in_a_cell_of_parked_robots_2L_apart_squeezes_out_to_its_goal() -> None:
+    """Rule 2: parked robots 2.6 m apart (2L with d_safety 0.3) close every side of the
+    cell to inflated discs, though a robot's body passes with 0.3 m either side (the last
+    robots of a 5x5 mirror grid stood in such cells). The squeeze gets it out to a goal
+    beyond the next column, keeping the tracker's margin; without it (a squeeze margin
+    equal to d_safety changes nothing) the robot never leaves the cell."""
+    others, goal = parked_cell(2.6), (5.0, 0.0)
+    path, gap = drive_among(LivenessConfig(), others, goal, 40.0)
+    assert math.dist(path[-1], goal) < 0.25
+    assert gap >= 0.05
+    path, _ = drive_among(LivenessConfig(squeeze_margin_m=0.3), others, goal, 40.0)
+    assert (np.abs(path) < 1.3).all()  # never out of the cell

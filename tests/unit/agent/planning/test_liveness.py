@@ -13,6 +13,7 @@ from agent.planning.liveness import (
     Strategy,
     knot,
     lower_id_moving_near,
+    squeezed,
 )
 
 CFG = LivenessConfig(stuck_after_s=4.0, progress_m=0.5, slow_mps=0.3, yield_s=3.0,
@@ -49,18 +50,56 @@ def test_helpers_pick_slow_robots_and_moving_lower_ids() -> None:
     assert not lower_id_moving_near(5, here, o, 2.5, 0.3)  # robot 2 is 3 m away
 
 
-def test_a_stuck_robot_reroutes_first_then_yields_to_a_moving_lower_id() -> None:
+def test_a_stuck_robot_reroutes_then_squeezes_then_yields_to_a_moving_lower_id() -> None:
     live = Liveness(CFG)
     here = np.zeros(2)
     mover = others([1], [(2.0, 0.0)], [(0.5, 0.0)])
     assert live.decide(0.0, 4, here, 10.0, mover) is Strategy.GO
     assert live.decide(4.0, 4, here, 10.0, mover) is Strategy.REROUTE
-    # the re-route did not help: another stuck spell, then rule 2
+    assert live.rerouted(4.0, True) is Strategy.GO and live.reroutes == 1
+    assert not live.squeezing(4.0)
+    # the re-route did not help: another stuck spell, then rule 2 for squeeze_s
     assert live.decide(7.9, 4, here, 10.0, mover) is Strategy.GO
-    assert live.decide(8.0, 4, here, 10.0, mover) is Strategy.YIELD
+    assert live.decide(8.0, 4, here, 10.0, mover) is Strategy.GO
+    assert live.squeezes == 1 and live.squeezing(8.0) and live.squeezing(15.9)
+    assert not live.squeezing(16.0)
+    # still stuck: rule 3
+    assert live.decide(11.9, 4, here, 10.0, mover) is Strategy.GO
+    assert live.decide(12.0, 4, here, 10.0, mover) is Strategy.YIELD
     assert live.yields == 1
-    assert live.decide(10.9, 4, here, 10.0, mover) is Strategy.YIELD
-    assert live.decide(11.0, 4, here, 10.0, mover) is Strategy.GO  # yield_s is over
+    assert live.decide(14.9, 4, here, 10.0, mover) is Strategy.YIELD
+    assert live.decide(15.0, 4, here, 10.0, mover) is Strategy.GO  # yield_s is over
+    # and round again: rule 1
+    assert live.decide(19.0, 4, here, 10.0, mover) is Strategy.REROUTE
+
+
+def test_a_reroute_that_finds_no_route_squeezes_at_once_and_progress_restarts_the_rules() -> None:
+    live = Liveness(CFG)
+    here = np.zeros(2)
+    parked = others([1], [(2.0, 0.0)], [(0.0, 0.0)])
+    live.decide(0.0, 4, here, 10.0, parked)
+    assert live.decide(4.0, 4, here, 10.0, parked) is Strategy.REROUTE
+    assert live.rerouted(4.0, False) is Strategy.GO
+    assert live.squeezing(4.0) and live.reroutes == 0 and live.squeezes == 1
+    # stuck again: rule 3, but nobody lower moves, so it squeezes again instead
+    assert live.decide(8.0, 4, here, 10.0, parked) is Strategy.GO and live.squeezes == 2
+    # progress: the rotation starts again at rule 1
+    assert live.decide(9.0, 4, here, 9.0, parked) is Strategy.GO
+    assert live.decide(13.0, 4, here, 9.0, parked) is Strategy.REROUTE
+
+
+def test_squeezed_shrinks_only_still_discs_by_the_margin_difference() -> None:
+    o = others([1, 2, -1], [(2, 0), (3, 0), (1, 1)], [(0.1, 0), (1, 0), (0, 0)],
+               [True, True, False])
+    o = o.with_radius(np.array([0.5, 0.5, 0.1]))
+    s = squeezed(o, 0.3, 0.1, 0.3)
+    # the slow robot and the obstacle lose 0.2 m (the obstacle not below 0); the mover keeps
+    assert s.radius_m.tolist() == pytest.approx([0.3, 0.5, 0.0])
+    assert s.ids.tolist() == o.ids.tolist() and np.array_equal(s.position_m, o.position_m)
+    assert squeezed(o, 0.3, 0.3, 0.3) is o  # no smaller margin: unchanged
+    assert squeezed(Others.empty(), 0.3, 0.1, 0.3) is not None
+    with pytest.raises(ValueError, match="radius_m"):
+        o.with_radius(np.array([0.5, -0.1, 0.1]))
 
 
 def test_the_lowest_id_never_yields_and_a_yield_ends_when_nobody_moves() -> None:
@@ -71,9 +110,9 @@ def test_the_lowest_id_never_yields_and_a_yield_ends_when_nobody_moves() -> None
         assert live.decide(float(t), 4, here, 10.0, higher) is not Strategy.YIELD
     live = Liveness(CFG)
     mover = others([1], [(2.0, 0.0)], [(0.5, 0.0)])
-    for t in (0.0, 4.0, 8.0):
+    for t in (0.0, 4.0, 8.0, 12.0):
         live.decide(t, 4, here, 10.0, mover)
-    assert live.decide(8.1, 4, here, 10.0, mover) is Strategy.YIELD
+    assert live.decide(12.1, 4, here, 10.0, mover) is Strategy.YIELD
     parked = others([1], [(2.0, 0.0)], [(0.0, 0.0)])
     assert live.decide(8.2, 4, here, 10.0, parked) is Strategy.GO
 
@@ -84,6 +123,7 @@ def test_fallback_yields_only_with_a_moving_lower_id_near() -> None:
     assert live.fallback(1.0, 3, here, others([1], [(1, 1)], [(0.4, 0)])) is Strategy.YIELD
     live = Liveness(CFG)
     assert live.fallback(1.0, 3, here, others([5], [(1, 1)], [(0.4, 0)])) is Strategy.GO
+    assert live.squeezing(1.0) and live.yields == 0  # rule 2 instead
 
 
 def test_two_robots_that_block_each_other_do_not_both_yield() -> None:
@@ -106,3 +146,5 @@ def test_config_refuses_non_positive_thresholds() -> None:
         LivenessConfig(yield_s=0.0)
     with pytest.raises(ValueError, match="stuck_after_s"):
         LivenessConfig(stuck_after_s=float("nan"))
+    with pytest.raises(ValueError, match="squeeze_margin_m"):
+        LivenessConfig(squeeze_margin_m=-0.1)

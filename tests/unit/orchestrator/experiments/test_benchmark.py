@@ -22,19 +22,6 @@ def test_tuning_and_evaluation_seeds_are_disjoint_and_enough():
     assert not set(bm.parse_seeds(str(min(bm.TUNING_SEEDS)))) & set(bm.TUNING_SEEDS)
 
 
-def test_parse_seeds():
-    assert bm.parse_seeds(None) == bm.EVALUATION_SEEDS
-    assert bm.parse_seeds(None, quick=True) == bm.QUICK_SEEDS
-    assert bm.parse_seeds("evaluation", quick=True) == bm.EVALUATION_SEEDS
-    assert bm.parse_seeds("Tuning") == bm.TUNING_SEEDS
-    assert bm.parse_seeds("3") == (0, 1, 2)
-    assert bm.parse_seeds("evaluation") == tuple(range(10))
-    assert bm.parse_seeds("tuning") == tuple(range(100, 106))
-    for bad in ("0", "-1", "101", "some", ""):
-        with pytest.raises(ValueError, match="--seeds"):
-            bm.parse_seeds(bad)
-
-
 def test_the_suite_covers_every_benchmark_family_and_the_setups():
     families = set(bm.family_names())
     assert families == {"circle", "circle_mixed", "crossing_45", "crossing_90", "crossing_135",
