@@ -357,6 +357,8 @@ def _fmt(value: object, scale: float = 1.0, digits: int = 1) -> str:
 
 def format_link_rows(rows: Sequence[dict[str, Any]]) -> str:
     """The printed table, one row per case and N (kB = 1000 bytes, per sim second)."""
+    from orchestrator.analysis.report import format_table
+
     head = ["case", "N", "host B", "border", "link kB/s down / up", "per host-B robot kB/s",
             "whole fleet kB/s", "host B robots rx kB/s", "TCP links", "ACL on", "sim s", "wall s"]
     body = [[r["case"], str(r["agents"]), str(r["host_b_robots"]), str(r["border_robots"]),
@@ -367,12 +369,7 @@ def format_link_rows(rows: Sequence[dict[str, Any]]) -> str:
              str(r["links"]) + ("" if r.get("relay_dialled_only_link", True) else " + bypass"),
              ",".join(r["acl_routers"]) or "-", _fmt(r["sim_s"]),
              _fmt(r["wall_s"], digits=0)] for r in rows]
-    widths = [max(len(h), *(len(b[i]) for b in body)) if body else len(h)
-              for i, h in enumerate(head)]
-    lines = ["  ".join(h.ljust(w) for h, w in zip(head, widths)),
-             "  ".join("-" * w for w in widths)]
-    lines += ["  ".join(c.ljust(w) for c, w in zip(b, widths)) for b in body]
-    return "\n".join(lines)
+    return format_table(head, body)
 
 
 def run_router_link(args: argparse.Namespace, out_root: Path) -> list[dict[str, Any]]:
