@@ -98,3 +98,17 @@ def test_rows_are_per_sim_second() -> None:
     table = format_link_rows([row, direct])
     assert "near" in table and "direct" in table and "15.0" not in table.splitlines()[0]
     assert "10.0 / 5.0" in table and "0.94" in table  # 15 kB/s over 16 robots
+
+
+def test_the_cli_refuses_before_any_run(tmp_path, capsys) -> None:
+    """A robot count that leaves host A fewer than 2 robots, and plain TCP (the routers'
+    access control needs TLS), are refused with status 2 and nothing started."""
+    from orchestrator.cli import main as cli_main
+
+    assert cli_main(["scale", "--router-link", "--agents", "32,17",
+                     "--out", str(tmp_path / "a")]) == 2
+    assert "host A" in capsys.readouterr().err
+    assert not list((tmp_path / "a").glob("*_32"))
+    assert cli_main(["scale", "--router-link", "--agents", "32", "--insecure",
+                     "--out", str(tmp_path / "b")]) == 2
+    assert "TLS" in capsys.readouterr().err
