@@ -87,6 +87,8 @@ def run(args: argparse.Namespace) -> int:
     if args.insecure and list(args.hosts) != ["127.0.0.1"]:
         raise BadInput("--hosts listens on every interface (0.0.0.0): not with --insecure, "
                        "only with TLS and the run's access control")
+    if args.world_bench and args.router_link:
+        raise BadInput("--world-bench and --router-link are separate benchmarks: one at a time")
     args.tls_ca_dir = tls_ca(args)
     out_root = Path(args.out)
     make_dir(out_root)

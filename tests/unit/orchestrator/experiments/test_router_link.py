@@ -112,3 +112,6 @@ def test_the_cli_refuses_before_any_run(tmp_path, capsys) -> None:
     assert cli_main(["scale", "--router-link", "--agents", "32", "--insecure",
                      "--out", str(tmp_path / "b")]) == 2
     assert "TLS" in capsys.readouterr().err
+    assert cli_main(["scale", "--router-link", "--world-bench", "--agents", "32",
+                     "--out", str(tmp_path / "c")]) == 2
+    assert "one at a time" in capsys.readouterr().err
