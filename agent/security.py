@@ -138,6 +138,13 @@ class RunCA:
     def cert_pem(self) -> bytes:
         return self.cert.public_bytes(serialization.Encoding.PEM)
 
+    def write(self, directory: Path) -> None:
+        """Write ``ca.pem`` and ``ca.key`` (0600) into `directory`, as `load` reads them:
+        for a tool that signs further certificates of the run (a relay's) besides
+        `make_run_pki`'s. The key then lives as long as that directory."""
+        write_new(Path(directory) / CA_CERT, self.cert_pem)
+        write_new(Path(directory) / CA_KEY, _key_pem(self.key), file_mode=PRIVATE_FILE_MODE)
+
     def issue(self, cn: str, sans: Iterable[str] = ()) -> tuple[bytes, bytes]:
         """``(certificate PEM, private key PEM)`` of a leaf for `cn` (TLS server and client),
         whose CN is `cn` scoped to the run (`eifp_wire.access.scoped_cn`: ``robot-3@<run tag>``)."""

@@ -70,6 +70,11 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     parser.add_argument("--world-bench", action="store_true",
                         help="instead of runs: time the world's per-tick work in-process for "
                              "each N (no processes, no transport)")
+    parser.add_argument("--router-link", action="store_true",
+                        help="instead of runs of the family: robots split between two hosts' "
+                             "routers; bytes crossing the link between them per N, with host "
+                             "B's robots near the border, far from it, and without a relay "
+                             "(docs/scale.md; --seconds defaults to 12)")
     parser.add_argument("--ticks", type=int, default=500,
                         help="ticks timed per N with --world-bench (default 500)")
     add_tls_args(parser)
@@ -82,6 +87,8 @@ def run(args: argparse.Namespace) -> int:
     if args.insecure and list(args.hosts) != ["127.0.0.1"]:
         raise BadInput("--hosts listens on every interface (0.0.0.0): not with --insecure, "
                        "only with TLS and the run's access control")
+    if args.world_bench and args.router_link:
+        raise BadInput("--world-bench and --router-link are separate benchmarks: one at a time")
     args.tls_ca_dir = tls_ca(args)
     out_root = Path(args.out)
     make_dir(out_root)
@@ -92,6 +99,23 @@ def run(args: argparse.Namespace) -> int:
                 for n in args.agents]
         print(format_world_rows(rows))
         print(write_json(out_root / "world_bench.json", {"argv": argv, "rows": rows}))
+        if args.json:
+            print(json.dumps({"rows": rows}))
+        return 0
+    if args.router_link:
+        from orchestrator.analysis.rundir import write_json
+        from orchestrator.experiments.router_link import format_link_rows, run_router_link
+
+        if args.insecure:
+            raise BadInput("--router-link: the routers' access control needs TLS; "
+                           "not with --insecure")
+        try:
+            rows = run_router_link(args, out_root)
+        except ValueError as exc:
+            raise BadInput(str(exc)) from exc
+        print(f"time scale {args.time_scale:g} (sim s per wall s); kB per sim second")
+        print(format_link_rows(rows))
+        print(write_json(out_root / "router_link.json", {"argv": argv, "rows": rows}))
         if args.json:
             print(json.dumps({"rows": rows}))
         return 0

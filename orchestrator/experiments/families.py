@@ -202,6 +202,21 @@ CIRCLES_TIME_LIMIT_S = 120.0
 (lockstep, 16 robots: all arrived at 83 s), more than the families' 4x rule allows."""
 
 
+def circle_tile(centre_xy: tuple[float, float], size: int, g: int, *, first_id: int
+                ) -> list[RobotSpec]:
+    """Circle g of the `circles` family: `size` robots on a circle of `CIRCLES_RADIUS_M`
+    around `centre_xy` [m], each swapping to the antipodal point, rotated by
+    g * 22.5 deg / 3; ids from `first_id` on."""
+    cx, cy = centre_xy
+    turn = g * math.pi / CIRCLES_GROUP / 3.0
+    robots = []
+    for k in range(size):
+        a = turn + 2.0 * math.pi * k / size
+        dx, dy = CIRCLES_RADIUS_M * math.cos(a), CIRCLES_RADIUS_M * math.sin(a)
+        robots.append(robot_spec(first_id + k, (cx + dx, cy + dy), (cx - dx, cy - dy)))
+    return robots
+
+
 def circles(n: int, rng: np.random.Generator | None = None) -> Scenario:
     """n robots in antipodal circles of up to 8 (radius 8 m), circles on a 19 m grid.
 
@@ -217,13 +232,9 @@ def circles(n: int, rng: np.random.Generator | None = None) -> Scenario:
     rows = math.ceil(groups / cols)
     robots: list[RobotSpec] = []
     for g, size in enumerate(sizes):
-        cx = (g % cols - (cols - 1) / 2.0) * CIRCLES_PITCH_M
-        cy = (g // cols - (rows - 1) / 2.0) * CIRCLES_PITCH_M
-        turn = g * math.pi / CIRCLES_GROUP / 3.0
-        for k in range(size):
-            a = turn + 2.0 * math.pi * k / size
-            dx, dy = CIRCLES_RADIUS_M * math.cos(a), CIRCLES_RADIUS_M * math.sin(a)
-            robots.append(robot_spec(len(robots), (cx + dx, cy + dy), (cx - dx, cy - dy)))
+        centre = ((g % cols - (cols - 1) / 2.0) * CIRCLES_PITCH_M,
+                  (g // cols - (rows - 1) / 2.0) * CIRCLES_PITCH_M)
+        robots += circle_tile(centre, size, g, first_id=len(robots))
     scenario = make_scenario(f"circles_{n}", f"{n} robots in {groups} antipodal circles of "
                              f"radius {CIRCLES_RADIUS_M:g} m, {CIRCLES_PITCH_M:g} m apart", robots)
     return dataclasses.replace(scenario, time_limit_s=CIRCLES_TIME_LIMIT_S)

@@ -49,3 +49,23 @@ def test_split_pki_gives_each_identity_its_own_directory(tmp_path) -> None:
     assert files["robot-1"] == TlsFiles.in_dir(tmp_path / "robot-1", "robot-1")
     assert sorted(p.name for p in (tmp_path / "robot-1").iterdir()) == [
         "ca.pem", "robot-1.key", "robot-1.pem"]
+
+
+def test_a_written_ca_signs_two_sets_of_one_run(tmp_path) -> None:
+    """`RunCA.write` then `make_run_pki(ca_dir=...)` twice (a relay's certificate first, the
+    run's own after, as orchestrator scale --router-link does): one CA issued both, and its
+    key is 0600 and never copied into the sets."""
+    from agent.security import RunCA
+
+    ca_dir = tmp_path / "ca"
+    ca_dir.mkdir(mode=0o700)
+    RunCA("r1").write(ca_dir)
+    assert stat.S_IMODE((ca_dir / "ca.key").stat().st_mode) == 0o600
+    relay = make_run_pki(tmp_path / "b", "r1", (), relays={"b": ()}, ca_dir=ca_dir)
+    run = make_run_pki(tmp_path / "a", "r1", [0], ca_dir=ca_dir)
+    ca = x509.load_pem_x509_certificate((ca_dir / "ca.pem").read_bytes())
+    for files in (relay["router-b"], run["world"], run["robot-0"]):
+        cert = x509.load_pem_x509_certificate(Path(files.cert).read_bytes())
+        assert cert.issuer == ca.subject
+        cert.verify_directly_issued_by(ca)
+    assert not (tmp_path / "a" / "ca.key").exists() and not (tmp_path / "b" / "ca.key").exists()
