@@ -13,7 +13,7 @@ from agent.core.types import EgoState, Observation, Others, PlanStatus
 from agent.planning.guidance import RouteGuide
 from agent.planning.liveness import LivenessConfig, Strategy
 from agent.planning.mechanisms import EIFP_MPC_MECHANISMS
-from agent.planning.planners import make_planner
+from agent.planning.planners import Planner, make_planner
 from agent.planning.routing import StaticMap, segment_disc_distance
 from world.sim.dynamics import integrate_unicycle
 
@@ -76,17 +76,16 @@ def test_without_a_map_the_goal_is_the_goal() -> None:
     assert math.isclose(g.left_m, 5.0)
 
 
-def drive(planner_name: str, static: StaticMap, start: tuple[float, float, float],
-          goal: tuple[float, float], seconds: float = 40.0) -> tuple[np.ndarray, float]:
-    """Plan and step one robot alone (10 Hz plans, 50 Hz unicycle); the path and the
-    smallest gap to a disc edge minus the robot's radius."""
-    planner = make_planner(planner_name, PlannerConfig(), static_map=static)
+def closed_loop(planner: Planner, others: Others, start: tuple[float, float, float],
+                goal: tuple[float, float], seconds: float, robot_id: int = 0
+                ) -> tuple[np.ndarray, float]:
+    """Plan and step one robot among still `others` (10 Hz plans, 50 Hz unicycle); the
+    path and the smallest gap between its disc (0.5 m) and theirs."""
     x, y, th = start
     v = w = 0.0
     path = [(x, y)]
-    others = as_others(static)
     for k in range(int(seconds * 10)):
-        res = planner.plan(observation(x, y, th, v, goal, others), k * 0.1)
+        res = planner.plan(observation(x, y, th, v, goal, others, robot_id), k * 0.1)
         if res.status == PlanStatus.ARRIVED:
             break
         v, w = res.v_mps, res.omega_radps
@@ -95,8 +94,15 @@ def drive(planner_name: str, static: StaticMap, start: tuple[float, float, float
                                           np.array([w]), 0.02)[0].tolist()
             path.append((x, y))
     pts = np.array(path)
-    gap = np.hypot(*(pts[:, None, :] - static.center_m[None]).transpose(2, 0, 1))
-    return pts, float((gap - static.radius_m - 0.5).min())
+    gap = np.hypot(*(pts[:, None, :] - others.position_m[None]).transpose(2, 0, 1))
+    return pts, float((gap - others.radius_m - 0.5).min())
+
+
+def drive(planner_name: str, static: StaticMap, start: tuple[float, float, float],
+          goal: tuple[float, float], seconds: float = 40.0) -> tuple[np.ndarray, float]:
+    """One robot alone with the static map; the path and the smallest gap to a disc."""
+    planner = make_planner(planner_name, PlannerConfig(), static_map=static)
+    return closed_loop(planner, as_others(static), start, goal, seconds)
 
 
 def test_eifp_mpc_leaves_a_cup_that_traps_eifp_without_a_route() -> None:
@@ -162,31 +168,21 @@ def parked_cell(spacing_m: float) -> Others:
     h = 0.5 * spacing_m
     xy = np.array([(-h, -h), (-h, h), (h, -h), (h, h), (3 * h, -h), (3 * h, h)])
     n = xy.shape[0]
+    # seen standing over the last interval too, as the estimator reports parked robots
     return Others(ids=np.arange(1, n + 1), position_m=xy, velocity_mps=np.zeros((n, 2)),
                   radius_m=np.full(n, 0.5), linearity=np.zeros(n), track_start_m=xy,
-                  is_robot=np.ones(n, dtype=bool))
+                  is_robot=np.ones(n, dtype=bool), heading_rad=np.zeros(n),
+                  recent_speed_mps=np.zeros(n), recent_interval_s=np.full(n, 0.1),
+                  recent_turn_rate_radps=np.zeros(n))
 
 
-def drive_among(planner_cfg: LivenessConfig, others: Others, goal: tuple[float, float],
+def drive_among(liveness: LivenessConfig, others: Others, goal: tuple[float, float],
                 seconds: float) -> tuple[np.ndarray, float]:
-    """One eIFP-MPC robot from the origin among still `others`; its path and the smallest
-    gap between its disc and theirs."""
-    mech = dataclasses.replace(EIFP_MPC_MECHANISMS, liveness=planner_cfg)
+    """One eIFP-MPC robot from the origin among still `others`, with these liveness
+    thresholds; its path and the smallest gap between its disc and theirs."""
+    mech = dataclasses.replace(EIFP_MPC_MECHANISMS, liveness=liveness)
     planner = make_planner("eifp-mpc", PlannerConfig(), mechanisms=mech)
-    x = y = th = v = w = 0.0
-    path = [(x, y)]
-    for k in range(int(seconds * 10)):
-        res = planner.plan(observation(x, y, th, v, goal, others, robot_id=9), k * 0.1)
-        if res.status == PlanStatus.ARRIVED:
-            break
-        v, w = res.v_mps, res.omega_radps
-        for _ in range(5):
-            x, y, th = integrate_unicycle(np.array([[x, y, th]]), np.array([v]),
-                                          np.array([w]), 0.02)[0].tolist()
-            path.append((x, y))
-    pts = np.array(path)
-    gap = np.hypot(*(pts[:, None, :] - others.position_m[None]).transpose(2, 0, 1)) - 1.0
-    return pts, float(gap.min())
+    return closed_loop(planner, others, (0.0, 0.0, 0.0), goal, seconds, robot_id=9)
 
 
 def test_a_robot_in_a_cell_of_parked_robots_2L_apart_squeezes_out_to_its_goal() -> None:
