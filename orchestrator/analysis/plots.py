@@ -6,6 +6,7 @@ display, no global state.
 from __future__ import annotations
 
 import io
+import math
 import sys
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -23,6 +24,7 @@ from agent.files import replace_file
 from eifp_wire import TIMING_COLUMNS
 from orchestrator.analysis.latency import WALL_STAGES
 from orchestrator.analysis.metrics import RunSpec, contact_episodes
+from orchestrator.analysis.panels import Panel
 from orchestrator.analysis.rundir import RunData, read_run_dir, read_timing
 
 DISC_INTERVAL_S = 10.0
@@ -458,3 +460,66 @@ def plot_benchmark(rows: Sequence[Mapping[str, Any]], path: Path, *, title: str 
     path = Path(path)
     save_figure(fig, path, 110)
     return path
+
+
+def figure_against_n(rows: Sequence[Mapping[str, Any]], panels: Sequence[Panel], *,
+                     ncols: int = 3, x_key: str = "agents", x_label: str = "robots N",
+                     title: str = "") -> Figure:
+    """One panel per figure against N, N on a log2 axis, y from 0 (a flat cost looks flat).
+
+    A missing value (None) leaves a gap. Panels past the last are hidden.
+
+    Args:
+        rows: one mapping per N, with `x_key` and the panels' keys.
+        panels: what to draw, in reading order.
+        ncols: panels per row of the figure.
+        x_key: the rows' column that holds N.
+        x_label: the x axes' label.
+        title: the figure's title (none if empty).
+    Raises:
+        ValueError: no rows or no panels.
+    """
+    if not rows or not panels:
+        raise ValueError("a figure against N needs at least one row and one panel")
+    ordered = sorted(rows, key=lambda r: float(r[x_key]))
+    ns = [float(r[x_key]) for r in ordered]
+    ncols = max(1, min(ncols, len(panels)))
+    nrows = -(-len(panels) // ncols)
+    fig = _figure(3.2 * ncols + 0.4, 2.6 * nrows + (0.3 if title else 0.0))
+    axes = fig.subplots(nrows, ncols, squeeze=False).ravel()
+    for ax, panel in zip(axes, panels):
+        labels = panel.labels or panel.keys
+        drawn = 0
+        for j, key in enumerate(panel.keys):
+            ys = [math.nan if r.get(key) is None else float(r[key]) * panel.factor
+                  for r in ordered]
+            drawn += sum(math.isfinite(y) for y in ys)
+            ax.plot(ns, ys, "o-" if j == 0 else "s--", ms=4, lw=1.2, label=labels[j])
+        if not drawn:
+            ax.text(0.5, 0.5, "no values", transform=ax.transAxes, ha="center", fontsize=8)
+        ax.set_title(panel.title, fontsize=9)
+        ax.set_xlabel(x_label, fontsize=8)
+        if min(ns) > 0:  # about a third of an octave either side
+            ax.set_xscale("log", base=2)
+            ax.set_xlim(min(ns) / 1.25, max(ns) * 1.25)
+        ax.set_xticks(ns, [f"{n:g}" for n in ns])
+        ax.minorticks_off()
+        high = ax.get_ylim()[1]
+        ax.set_ylim(0.0, high * 1.08 if drawn and high > 0 else None)  # room above the top
+        ax.tick_params(labelsize=7)
+        if len(panel.keys) > 1:
+            ax.legend(fontsize=6)
+        ax.grid(alpha=0.3)
+    for ax in axes[len(panels):]:
+        ax.set_visible(False)
+    if title:
+        fig.suptitle(title, fontsize=9)
+    return fig
+
+
+def plot_against_n(rows: Sequence[Mapping[str, Any]], panels: Sequence[Panel], path: Path, *,
+                   ncols: int = 3, x_label: str = "robots N", title: str = "",
+                   dpi: int = 100) -> Path:
+    """`figure_against_n`, written to `path` (`save_figure`)."""
+    fig = figure_against_n(rows, panels, ncols=ncols, x_label=x_label, title=title)
+    return save_figure(fig, Path(path), dpi)

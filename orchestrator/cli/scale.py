@@ -20,7 +20,11 @@ from orchestrator.experiments.scale import (
     run_one,
     write_outputs,
 )
-from orchestrator.experiments.world_bench import format_world_rows, world_tick_costs
+from orchestrator.experiments.world_bench import (
+    format_world_rows,
+    world_tick_costs,
+    write_world_outputs,
+)
 
 
 def _hosts(text: str) -> list[str]:
@@ -69,7 +73,8 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                              "scenario's time limit)")
     parser.add_argument("--world-bench", action="store_true",
                         help="instead of runs: time the world's per-tick work in-process for "
-                             "each N (no processes, no transport)")
+                             "each N (no processes, no transport); writes world_bench.json "
+                             "and world_bench.png, the per-robot cost against N")
     parser.add_argument("--router-link", action="store_true",
                         help="instead of runs of the family: robots split between two hosts' "
                              "routers; bytes crossing the link between them per N, with host "
@@ -93,12 +98,11 @@ def run(args: argparse.Namespace) -> int:
     out_root = Path(args.out)
     make_dir(out_root)
     if args.world_bench:
-        from orchestrator.analysis.rundir import write_json
-
         rows = [world_tick_costs(n, max(1, args.ticks), out_root / f"world_{n}")
                 for n in args.agents]
         print(format_world_rows(rows))
-        print(write_json(out_root / "world_bench.json", {"argv": argv, "rows": rows}))
+        for path in write_world_outputs(rows, out_root, argv):
+            print(path)
         if args.json:
             print(json.dumps({"rows": rows}))
         return 0

@@ -75,6 +75,8 @@ from typing import Any
 
 import psutil
 
+from orchestrator.analysis.panels import Panel
+
 SAMPLE_PERIOD_S = 0.5
 MEMORY_EVERY = 10
 """Read PSS on every this many samples (reading smaps_rollup costs ~1 ms per process)."""
@@ -103,17 +105,19 @@ COLUMNS = (
     "world_tick_ms_mean", "world_tick_us_per_robot",
 )
 PLOTTED = (
-    ("plan_ms_p50", "plan_ms_p99", "planning time [ms]"),
-    ("sense_to_act_ms_p50", "sense_to_act_ms_p99", "sense -> act [wall ms]"),
-    ("deadline_miss_rate", None, "deadline-miss rate"),
-    ("cpu_share_robots", "cpu_share_world", "CPU share of the machine"),
-    ("mem_robot_mib", None, "PSS per robot process [MiB]"),
-    ("mem_total_mib", None, "total PSS [MiB]"),
-    ("alive_s", None, "every robot alive after [s]"),
-    ("contacts", None, "contacts"),
-    ("rx_bytes_per_robot_s", None, "pose bytes received per robot per s"),
-    ("world_tick_us_per_robot", None, "world tick per robot [us]"),
+    Panel("planning time [ms]", ("plan_ms_p50", "plan_ms_p99")),
+    Panel("sense -> act [wall ms]", ("sense_to_act_ms_p50", "sense_to_act_ms_p99")),
+    Panel("deadline-miss rate", ("deadline_miss_rate",)),
+    Panel("CPU share of the machine", ("cpu_share_robots", "cpu_share_world")),
+    Panel("PSS per robot process [MiB]", ("mem_robot_mib",)),
+    Panel("total PSS [MiB]", ("mem_total_mib",)),
+    Panel("every robot alive after [s]", ("alive_s",)),
+    Panel("contacts", ("contacts",)),
+    Panel("pose kB received per robot per s", ("rx_bytes_per_robot_s",), factor=1e-3),
+    Panel("pose messages received per robot per s", ("rx_msgs_per_robot_s",)),
+    Panel("world tick per robot [us]", ("world_tick_us_per_robot",)),
 )
+"""The panels of scale.png."""
 
 
 @dataclass
@@ -551,31 +555,11 @@ def write_outputs(rows: Sequence[dict[str, Any]], out_root: Path, argv: Sequence
 
 
 def plot_scale(rows: Sequence[dict[str, Any]], path: Path) -> Path:
-    """One subplot per figure against N (log2 axis)."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
+    """One panel per figure of `PLOTTED` against N (log2 axis)."""
+    from orchestrator.analysis.plots import plot_against_n
 
-    fig = Figure(figsize=(15, 6.5), layout="constrained")
-    FigureCanvasAgg(fig)
-    axes = fig.subplots(2, 5).ravel()
-    ns = [r["agents"] for r in rows]
-    for ax, (main, second, title) in zip(axes, PLOTTED):
-        for key, style in ((main, "o-"), (second, "s--")):
-            if key is None:
-                continue
-            ys = [math.nan if r.get(key) is None else float(r[key]) for r in rows]
-            ax.plot(ns, ys, style, label=key)
-        ax.set_title(title, fontsize=9)
-        ax.set_xlabel("robot processes N", fontsize=8)
-        if len(set(ns)) > 1 and min(ns) > 0:
-            ax.set_xscale("log", base=2)
-        ax.set_xticks(ns, [str(n) for n in ns])
-        ax.tick_params(labelsize=7)
-        if second is not None:
-            ax.legend(fontsize=7)
-        ax.grid(alpha=0.3)
-    fig.savefig(path, dpi=100)
-    return path
+    return plot_against_n(rows, PLOTTED, path, ncols=4, x_label="robot processes N",
+                          title="orchestrator scale")
 
 
 # --------------------------------------------------------------------------------------

@@ -11,6 +11,12 @@ Besides the stage times it reports what the pose grid sends: the bytes of all ce
 messages of a tick, how many cells, and what one robot receives per tick (the mean over
 the robots of the bytes and messages of the cells it holds, `world.sim.cells`), the figure
 that should stay flat in N at a fixed density (the `circles` family tiles 8-robot circles).
+A robot takes one tick in `pose_slot_count` (its pose slot), `CONTROL_RATE_HZ` a second, so
+per second is per tick times that.
+
+Written to DIR: ``world_bench.json`` (rows and the command line) and ``world_bench.png``
+(`plot_world_bench`: the per-robot columns against N). Figures only: nothing here asserts a
+time budget.
 """
 
 from __future__ import annotations
@@ -20,8 +26,22 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from orchestrator.analysis.panels import Panel
+
 WORLD_STAGES = ("step", "poses", "record", "commands")
 """Stages of a world tick, timed separately."""
+WORLD_TICK_S = 0.02
+"""The world's tick [s] (50 Hz, as `world.node`'s default)."""
+CONTROL_RATE_HZ = 10.0
+"""A robot plans, sends a command and takes its slot's cells this often [Hz]."""
+WORLD_PLOTTED = (
+    Panel("a robot receives [pose kB/s]", ("rx_bytes_per_robot_s",), factor=1e-3),
+    Panel("a robot receives [pose messages/s]", ("rx_msgs_per_robot_s",)),
+    Panel("world tick per robot [us, p50]", ("tick_us_per_robot",)),
+    Panel("world tick stages per robot [us, p50]",
+          tuple(f"{k}_us_per_robot" for k in WORLD_STAGES), labels=WORLD_STAGES),
+)
+"""The panels of world_bench.png, the per-robot columns."""
 
 
 def world_tick_costs(n: int, ticks: int, out_dir: Path) -> dict[str, Any]:
@@ -35,6 +55,7 @@ def world_tick_costs(n: int, ticks: int, out_dir: Path) -> dict[str, Any]:
     from eifp_wire import CommandMsg
     from orchestrator.experiments.families import circles
     from world.recorder import RunRecorder
+    from world.sim.schedule import pose_slot_count
     from world.world_cycle import WorldCycle
 
     scenario = circles(n)
@@ -42,7 +63,7 @@ def world_tick_costs(n: int, ticks: int, out_dir: Path) -> dict[str, Any]:
     sim, rule = cycle.sim, cycle.cell_rule
     ids = [int(r) for r in sim.robot_ids]
     known = frozenset(ids)
-    per_tick = max(1, n // 5)
+    per_tick = max(1, n // pose_slot_count(1.0 / WORLD_TICK_S, CONTROL_RATE_HZ))
     payloads = [CommandMsg(rid, 0, 0.0, 0.5, 0.0, 1.0, "ok").encode() for rid in ids]
     times: dict[str, list[float]] = {k: [] for k in WORLD_STAGES}
     cells: list[tuple[tuple[int, int], bytes]] = []
@@ -56,7 +77,7 @@ def world_tick_costs(n: int, ticks: int, out_dir: Path) -> dict[str, Any]:
                 recorder.record_command(sim.t_s, msg.robot_id, tick, 0.0, msg.v_mps,
                                         msg.omega_radps, msg.plan_ms, msg.status)
             t1 = time.perf_counter()
-            sim.step(0.02)
+            sim.step(WORLD_TICK_S)
             t2 = time.perf_counter()
             cells = cycle.pose_cells()
             t3 = time.perf_counter()
@@ -73,12 +94,36 @@ def world_tick_costs(n: int, ticks: int, out_dir: Path) -> dict[str, Any]:
         "rx_msgs_per_robot": float(np.mean([len(h & size.keys()) for h in held])),
     }
     row["poses_bytes_per_robot"] = row["poses_bytes"] / n
+    row["rx_bytes_per_robot_s"] = row["rx_bytes_per_robot"] * CONTROL_RATE_HZ
+    row["rx_msgs_per_robot_s"] = row["rx_msgs_per_robot"] * CONTROL_RATE_HZ
     total = np.sum([times[k] for k in WORLD_STAGES], axis=0)
     row["tick_us_p50"] = float(np.percentile(total, 50))
     row["tick_us_per_robot"] = row["tick_us_p50"] / n
     for key in WORLD_STAGES:
         row[f"{key}_us_p50"] = float(np.percentile(times[key], 50))
+        row[f"{key}_us_per_robot"] = row[f"{key}_us_p50"] / n
     return row
+
+
+def plot_world_bench(rows: Sequence[dict[str, Any]], path: Path) -> Path:
+    """The per-robot columns of `WORLD_PLOTTED` against N, one panel each.
+
+    Raises:
+        ValueError: no rows.
+    """
+    from orchestrator.analysis.plots import plot_against_n
+
+    return plot_against_n(rows, WORLD_PLOTTED, path, ncols=2,
+                          title="orchestrator scale --world-bench (circles, in-process)")
+
+
+def write_world_outputs(rows: Sequence[dict[str, Any]], out_root: Path, argv: Sequence[str]
+                        ) -> list[Path]:
+    """world_bench.json and world_bench.png in out_root."""
+    from orchestrator.analysis.rundir import write_json
+
+    json_path = write_json(out_root / "world_bench.json", {"argv": list(argv), "rows": list(rows)})
+    return [json_path, plot_world_bench(rows, out_root / "world_bench.png")]
 
 
 def format_world_rows(rows: Sequence[dict[str, Any]]) -> str:

@@ -82,3 +82,50 @@ def test_latency_axis_ends_past_the_p99_not_at_a_single_stall() -> None:
     assert high < 4.0 and above == 1  # the stall is counted, not drawn
     low, high, above = latency_axis_ms(np.array([2.0, 2.0]))  # one value: a usable axis
     assert high > low and above == 0
+
+
+def test_figure_against_n_has_a_panel_per_quantity_on_a_log2_axis(tmp_path):
+    from orchestrator.analysis.panels import Panel
+    from orchestrator.analysis.plots import figure_against_n, plot_against_n
+
+    rows = [{"agents": 256, "rx": 2200.0, "tick": 19.0, "a": 1.0, "b": None},
+            {"agents": 64, "rx": 2000.0, "tick": 22.0, "a": 2.0, "b": 3.0}]  # any order
+    panels = [Panel("rx [kB]", ("rx",), 1e-3), Panel("tick [us]", ("tick",)),
+              Panel("parts", ("a", "b"), labels=("first", "second"))]
+    fig = figure_against_n(rows, panels, ncols=2)
+    shown = [ax for ax in fig.axes if ax.get_visible()]
+    assert [ax.get_title() for ax in shown] == ["rx [kB]", "tick [us]", "parts"]
+    assert len(fig.axes) == 4  # a 2 x 2 grid, the fourth hidden
+    assert all(ax.get_xscale() == "log" for ax in shown)
+    rx_line = shown[0].get_lines()[0]
+    assert list(rx_line.get_xdata()) == [64.0, 256.0]  # sorted by N
+    assert list(rx_line.get_ydata()) == pytest.approx([2.0, 2.2])  # the factor applied
+    assert np.isnan(shown[2].get_lines()[1].get_ydata()[1])  # a missing value is a gap
+    assert [t.get_text() for t in shown[2].get_legend().get_texts()] == ["first", "second"]
+    assert all(ax.get_ylim()[0] == 0.0 for ax in shown)
+    path = plot_against_n(rows, panels, tmp_path / "n.png")
+    from PIL import Image
+
+    with Image.open(path) as im:
+        assert im.format == "PNG"
+
+
+def test_figure_against_n_draws_a_single_n_and_refuses_nothing_to_draw():
+    from orchestrator.analysis.panels import Panel
+    from orchestrator.analysis.plots import figure_against_n
+
+    fig = figure_against_n([{"agents": 64, "x": 1.5, "y": None}],
+                           [Panel("x", ("x",)), Panel("y", ("y",))])
+    ax, empty = fig.axes
+    assert list(ax.get_lines()[0].get_xdata()) == [64.0]
+    assert [t.get_text() for t in ax.get_xticklabels()] == ["64"]
+    assert ax.get_xlim()[0] < 64.0 < ax.get_xlim()[1] and ax.get_ylim()[1] > 1.5
+    assert [t.get_text() for t in empty.texts] == ["no values"]  # said, not left blank
+    with pytest.raises(ValueError, match="at least one row"):
+        figure_against_n([], [Panel("x", ("x",))])
+    with pytest.raises(ValueError, match="at least one row"):
+        figure_against_n([{"agents": 64, "x": 1.5}], [])
+    with pytest.raises(ValueError, match="no columns"):
+        Panel("x", ())
+    with pytest.raises(ValueError, match="1 labels for 2 columns"):
+        Panel("x", ("a", "b"), labels=("a",))

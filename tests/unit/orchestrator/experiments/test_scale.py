@@ -19,6 +19,7 @@ from orchestrator.cli import main as cli_main
 from orchestrator.experiments.scale import (
     COLUMNS,
     CPU_PARTS,
+    PLOTTED,
     ResourceSampler,
     _cpu_at,
     cpu_per_plan_ms,
@@ -27,7 +28,12 @@ from orchestrator.experiments.scale import (
     scale_row,
     write_outputs,
 )
-from orchestrator.experiments.world_bench import world_tick_costs
+from orchestrator.experiments.world_bench import (
+    WORLD_PLOTTED,
+    WORLD_STAGES,
+    plot_world_bench,
+    world_tick_costs,
+)
 
 
 def fake_row(n: int, **extra: object) -> dict:
@@ -171,12 +177,47 @@ def test_world_tick_costs_report_stages_and_the_cells_sizes(tmp_path: Path) -> N
     assert 66 * more_cells <= extra <= 70 * more_cells
 
 
-def test_world_bench_command_writes_json(tmp_path: Path, capsys) -> None:
+def test_world_bench_command_writes_json_and_the_plot(tmp_path: Path, capsys) -> None:
     assert cli_main(["scale", "--agents", "4,8", "--world-bench", "--ticks", "3",
                      "--out", str(tmp_path), "--json"]) == 0
-    last = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    out = capsys.readouterr().out.strip().splitlines()
+    last = json.loads(out[-1])
     assert [r["agents"] for r in last["rows"]] == [4, 8]
-    assert (tmp_path / "world_bench.json").is_file()
+    assert json.loads((tmp_path / "world_bench.json").read_text())["rows"] == last["rows"]
+    assert (tmp_path / "world_bench.png").stat().st_size > 0
+    assert str(tmp_path / "world_bench.png") in out
+
+
+def world_row(n: int) -> dict:
+    """A world-bench row with made-up times (the plot reads only these columns)."""
+    return {"agents": n, "rx_bytes_per_robot_s": 20_000.0, "rx_msgs_per_robot_s": 75.0,
+            "tick_us_per_robot": 18.0, **{f"{k}_us_per_robot": 4.5 for k in WORLD_STAGES}}
+
+
+def test_world_bench_plot_has_a_panel_per_per_robot_quantity(tmp_path: Path) -> None:
+    from PIL import Image
+
+    for ns, name in (((64, 128, 1024), "many.png"), ((64,), "one.png")):
+        path = plot_world_bench([world_row(n) for n in ns], tmp_path / name)
+        with Image.open(path) as im:
+            assert im.format == "PNG" and im.size[0] >= 500
+    with pytest.raises(ValueError):
+        plot_world_bench([], tmp_path / "none.png")
+    assert not (tmp_path / "none.png").exists()
+
+
+def test_world_bench_per_second_columns_follow_the_pose_slot(tmp_path: Path) -> None:
+    """A robot takes one tick in five (its slot) at 50 Hz: 10 of its cells' ticks a second."""
+    row = world_tick_costs(16, 2, tmp_path / "16")
+    assert row["rx_bytes_per_robot_s"] == pytest.approx(10.0 * row["rx_bytes_per_robot"])
+    assert row["rx_msgs_per_robot_s"] == pytest.approx(10.0 * row["rx_msgs_per_robot"])
+    assert row["tick_us_per_robot"] == pytest.approx(row["tick_us_p50"] / 16)
+    assert set(row) >= {f"{k}_us_per_robot" for k in WORLD_STAGES}
+    assert {k for panel in WORLD_PLOTTED for k in panel.keys} <= set(row)  # no empty panel
+
+
+def test_every_plotted_scale_column_is_a_column() -> None:
+    assert {k for panel in PLOTTED for k in panel.keys} <= set(COLUMNS)
 
 
 @pytest.mark.parametrize("argv", [
