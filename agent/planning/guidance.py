@@ -48,6 +48,8 @@ class Guidance:
         strategy: GO, or YIELD (stand this cycle); REROUTE never leaves `RouteGuide`.
         squeeze: plan with the squeeze margin against still discs this cycle
             (`agent.planning.liveness`, rule 2).
+        stuck: the progress monitor found the robot stuck this cycle (a turn on the spot
+            may start, `agent.planning.turning`).
     """
 
     goal_m: np.ndarray
@@ -55,6 +57,7 @@ class Guidance:
     left_m: float
     strategy: Strategy = Strategy.GO
     squeeze: bool = False
+    stuck: bool = False
 
 
 class RouteGuide:
@@ -136,8 +139,9 @@ class RouteGuide:
         rest = follower.remaining_m
         tail = rest[1:] if rest.shape[0] > 1 else _NO_TAIL
         squeeze = self.liveness is not None and self.liveness.squeezing(now_s)
+        stuck = self.liveness is not None and self.liveness.stuck_now
         return Guidance(goal_m=target, tail_m=tail, left_m=follower.progress_left_m(here),
-                        strategy=strategy, squeeze=squeeze)
+                        strategy=strategy, squeeze=squeeze, stuck=stuck)
 
     def _reroute(self, here: np.ndarray, goal: np.ndarray, observation: Observation) -> bool:
         """Rule 1 of `agent.planning.liveness`: a route round the slow robots near, if one

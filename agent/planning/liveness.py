@@ -185,6 +185,7 @@ class Liveness:
         self._yield_until_s = -math.inf
         self._squeeze_until_s = -math.inf
         self._next = 0  # index into _ROTATION
+        self.stuck_now = False  # the monitor found the robot stuck this cycle
         self.reroutes = 0
         self.yields = 0
         self.squeezes = 0
@@ -215,7 +216,8 @@ class Liveness:
                 return Strategy.YIELD
             self._yield_until_s = -math.inf  # nobody left to give way to
             self.monitor.restart(now_s, left_m)
-        if not self.monitor.stuck(now_s, left_m):
+        self.stuck_now = self.monitor.stuck(now_s, left_m)
+        if not self.stuck_now:
             if self.monitor.progressed:
                 self._next = 0  # real progress: start the rules afresh
             return Strategy.GO

@@ -89,6 +89,10 @@ class Mechanisms:
         liveness: with thresholds (not None), the robot monitors its progress and, when
             stuck, re-routes round the knot or yields to lower ids
             (`agent.planning.liveness`).
+        turn_when_stuck: eIFP-MPC commits a stuck robot that stands facing away from its
+            reference to one bounded turn on the spot (`agent.planning.turning`): the
+            MPC, linearised about its prediction, finds no gain in turning a hemmed-in
+            robot. Needs `liveness` (its progress monitor says when).
         primary_hold_s: with `commitment`, how much later than the most imminent threat's
             the TCPA of last cycle's first threat may be for it to stay first [s].
     """
@@ -108,6 +112,7 @@ class Mechanisms:
     keep_plan: bool = False
     routing: bool = False
     liveness: LivenessConfig | None = None
+    turn_when_stuck: bool = False
     primary_hold_s: float = PRIMARY_HOLD_S
 
 
@@ -125,7 +130,7 @@ EIFP_MPC_MECHANISMS = dataclasses.replace(
     EIFP_MECHANISMS, inflated_threats=True, commitment=True, via_margin_m=ARC_VIA_MARGIN_M,
     escape_band_m=ESCAPE_BAND_M, escape_all=True, horizon_via_points=True,
     lines_arcs=True, clamp_heading=False, braking_guard=True, keep_plan=True, routing=True,
-    liveness=LivenessConfig())
+    liveness=LivenessConfig(), turn_when_stuck=True)
 """eifp-mpc in the default profile: every mechanism."""
 
 

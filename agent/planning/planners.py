@@ -56,6 +56,7 @@ from agent.planning.safety import (
     unseen_speed_up_mps,
     unseen_turn_closing_mps,
 )
+from agent.planning.turning import Turn
 
 if TYPE_CHECKING:  # imported on first use (osqp, scipy, pyrvo load slowly)
     from agent.planning.mpc import MpcTracker
@@ -204,6 +205,8 @@ class ViaPointPlanner:
         self._plan_ifp = plan_ifp
         self._trackers: dict[RobotLimits, MpcTracker] = {}
         self.guide: RouteGuide | None = None
+        self._turn: Turn | None = None  # a committed turn on the spot (`turning`)
+        self.turns = 0
         if self.mech.routing or self.mech.liveness is not None:
             self.guide = RouteGuide(
                 static_map if static_map is not None else StaticMap.empty(),
@@ -218,6 +221,7 @@ class ViaPointPlanner:
             self.guide.reset()
         for tracker in self._trackers.values():
             tracker.reset()
+        self._turn = None
 
     def _mpc(self, observation: Observation) -> MpcTracker:
         from agent.planning.mpc import MpcTracker
@@ -254,7 +258,7 @@ class ViaPointPlanner:
         guided = self._guide(observation, now_s)
         if guided is None:
             return _yield_result(observation, clock() - t0, self.control_period_s)
-        observation, tail = guided
+        observation, tail, stuck = guided
         if self._selector is None:
             via = self._plan_ifp(observation, cfg, clock)
         else:
@@ -288,6 +292,8 @@ class ViaPointPlanner:
             predicted = res
             if res.status != PlanStatus.OK:
                 status = res.status
+            if mech.turn_when_stuck:
+                v, omega = self._turning(sensed, ref.x_m, ref.y_m, v, omega, stuck, now_s)
             if mech.braking_guard and len(sensed.others):
                 v, omega = self._braking_guard(sensed, v, omega)
         else:
@@ -323,13 +329,14 @@ class ViaPointPlanner:
         )
 
     def _guide(self, observation: Observation, now_s: float
-               ) -> tuple[Observation, np.ndarray | None] | None:
+               ) -> tuple[Observation, np.ndarray | None, bool] | None:
         """Routes and liveness (`agent.planning.guidance`): None when the robot yields this
         cycle, else the observation eIFP plans on (heading for the route's intermediate
-        goal; still discs shrunk while squeezing, `liveness.squeezed`) and the route's
-        waypoints after that goal (None: the goal is the final one)."""
+        goal; still discs shrunk while squeezing, `liveness.squeezed`), the route's
+        waypoints after that goal (None: the goal is the final one), and whether the
+        progress monitor found the robot stuck this cycle."""
         if self.guide is None:
-            return observation, None
+            return observation, None, False
         cfg = self.config
         guided = self.guide.guide(observation, now_s)
         if guided.strategy is Strategy.YIELD and not _inside_any(observation, cfg):
@@ -343,7 +350,29 @@ class ViaPointPlanner:
             observation = observation.with_others(squeezed(
                 observation.others, cfg.safety.d_safety_m, live.squeeze_margin_m,
                 live.slow_mps))
-        return observation, tail
+        return observation, tail, guided.stuck
+
+    def _turning(self, observation: Observation, ref_x_m: np.ndarray, ref_y_m: np.ndarray,
+                 v_mps: float, omega_radps: float, stuck: bool, now_s: float
+                 ) -> tuple[float, float]:
+        """The tracker's (v, omega), or a committed turn on the spot
+        (`agent.planning.turning`): one starts when the robot is found stuck this cycle."""
+        from agent.planning.turning import start_turn, turn_command
+
+        ego = observation.ego
+        if stuck and self._turn is None:
+            self._turn = start_turn(ego.x_m, ego.y_m, ego.heading_rad, ego.v_mps,
+                                    ego.omega_radps, v_mps, ref_x_m, ref_y_m, now_s)
+            if self._turn is not None:
+                self.turns += 1
+        if self._turn is None:
+            return v_mps, omega_radps
+        command = turn_command(self._turn, ego.heading_rad, ego.omega_radps,
+                               observation.limits, self.control_period_s, now_s)
+        if command is None:
+            self._turn = None
+            return v_mps, omega_radps
+        return command
 
     def _braking_guard(self, observation: Observation, v_mps: float,
                        omega_radps: float) -> tuple[float, float]:

@@ -67,21 +67,22 @@ MAX_ROUTED_OBSTACLES = 128
 
 WAYPOINT_REACHED_M = 0.3
 """A route waypoint (not the goal) closer to the robot than this is reached
-(`RouteFollower.intermediate_goal`): the waypoints after it are looked at with this much
-less clearance, the most a line from anywhere that close can lose against the route's own
-leg. Without it a robot pushed a little off a corner of its route heads back to the corner,
-which may lie behind it; a unicycle standing there may not find its way to a point 0.2 m
-behind it at all (the MPC, linearised about standing, sees no gain in turning). eIFP's
-legs still keep every inflated disc, so the route's guidance is all that is relaxed."""
+(`RouteFollower.intermediate_goal`): the next waypoint after it is looked at with this
+much less clearance, the most a line from anywhere that close can lose against the
+route's own leg to it. Without it a robot pushed a little off a corner of its route heads
+back to the corner, which may lie behind it; a unicycle standing there may not find its
+way to a point 0.2 m behind it at all (the MPC, linearised about standing, sees no gain
+in turning). eIFP's legs still keep every inflated disc, so the route's guidance is all
+that is relaxed."""
 
 WAYPOINT_PASSED_M = 1.0
 """A route waypoint (not the goal) closer than this is also reached once the robot is past
 it along the route's next leg (on the far side of the line through it square to that leg),
 as a path follower switches waypoints: a robot pushed 0.37 m past a corner of its route,
 round a pillar, otherwise turned back for it and stood (`pillar_circle` 40, evaluation seed
-0, found while the evaluation ran). The waypoints after it are then looked at with as much
-less clearance as the robot is away from it, the most a line from there can lose against
-the route's leg. About a robot's diameter."""
+0, found while the evaluation ran). The next waypoint after it is then looked at with as
+much less clearance as the robot is away from it, the most a line from there can lose
+against the route's leg. About a robot's diameter."""
 
 LOOKAHEAD_TOLERANCE_M = 1.0e-6
 """A sight line clears a disc when it keeps the clearance less this (rounding) [m]."""
@@ -391,7 +392,7 @@ class RouteFollower:
     whose sight line from the robot keeps the route's clearance from every static disc
     (less what the robot already lacks of it, `_endpoint_keep`; past a waypoint within
     `WAYPOINT_REACHED_M`, or within `WAYPOINT_PASSED_M` and past it along the next leg,
-    less the distance to it too); waypoints before it are
+    the next waypoint's with the distance to it less too); waypoints before it are
     passed and never looked at again, so the goal moves only forward along the route.
     Cost per cycle: one sight-line check of the next few waypoints against the map.
 
@@ -441,10 +442,15 @@ class RouteFollower:
         if reached.size:
             last = int(reached[-1])
             seen[last] = True
+            # Only the next waypoint gets the slack: the line to it stays within `slack` of
+            # the route's own leg (which keeps the full clearance), and no line to one
+            # farther does (from 0.31 m off a corner beside a pillar the goal beyond it
+            # came "in sight" through the pillar, and a robot turned back and forth
+            # between that goal and the corner for 50 s: `pillar_circle` 24).
             slack = max(WAYPOINT_REACHED_M, float(away[last]))
-            beyond = segment_clears(starts[last + 1:], ahead[last + 1:], blocking.center_m,
-                                    np.maximum(need - slack, 0.0))
-            seen[last + 1:] |= beyond
+            nxt = slice(last + 1, last + 2)
+            seen[nxt] |= segment_clears(starts[nxt], ahead[nxt], blocking.center_m,
+                                        np.maximum(need - slack, 0.0))
         if not seen.any():
             return None
         self._next += int(np.flatnonzero(seen)[-1])

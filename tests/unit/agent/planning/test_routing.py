@@ -239,3 +239,26 @@ def test_a_waypoint_the_robot_is_past_along_the_next_leg_is_passed() -> None:
     assert np.dot(before - corner, along) < 0.0
     target = RouteFollower(route, static).intermediate_goal(before)
     assert target is not None and np.allclose(target, corner)
+
+
+def test_only_the_next_waypoint_after_a_reached_one_is_looked_at_with_less_clearance() -> None:
+    """From near a reached corner the goal two legs on is not "in sight" through the pillar
+    by the slack of the reached corner: the line to it is no route leg. (`pillar_circle` 24,
+    evaluation seed 0: 0.31 m from a corner west of the pillar, the goal far to the north-east
+    came in sight with the clearance less 0.31 m; the robot turned for it, lost sight of
+    it, was re-routed to the corner, and so on for 50 s.)"""
+    from agent.planning.routing import WAYPOINT_REACHED_M
+
+    static = StaticMap(np.array([[-0.05, -0.28]]), np.array([1.97]))
+    start, goal = np.array([-2.9, -3.2]), np.array([4.66, 17.39])
+    route = plan_route(start, goal, static, CLEARANCE_M)
+    assert route is not None and route.waypoints_m.shape[0] >= 4  # two corners
+    corner, second = route.waypoints_m[1], route.waypoints_m[2]
+    here = corner + np.array([0.23, -0.17])  # within the reach of the first corner
+    target = RouteFollower(route, static).intermediate_goal(here)
+    assert target is not None and np.allclose(target, second)
+    # the goal is out of sight from here with the full clearance, and in sight with the
+    # slack: the old rule took it
+    keep = static.radius_m + route.clearance_m
+    d = segment_disc_distance(here[None], goal[None], static.center_m)[0, 0]
+    assert keep[0] - WAYPOINT_REACHED_M < d < keep[0]
