@@ -56,7 +56,7 @@ from agent.planning.safety import (
     unseen_speed_up_mps,
     unseen_turn_closing_mps,
 )
-from agent.planning.turning import Turn
+from agent.planning.turning import Turn, start_turn, turn_command
 
 if TYPE_CHECKING:  # imported on first use (osqp, scipy, pyrvo load slowly)
     from agent.planning.mpc import MpcTracker
@@ -357,8 +357,6 @@ class ViaPointPlanner:
                  ) -> tuple[float, float]:
         """The tracker's (v, omega), or a committed turn on the spot
         (`agent.planning.turning`): one starts when the robot is found stuck this cycle."""
-        from agent.planning.turning import start_turn, turn_command
-
         ego = observation.ego
         if stuck and self._turn is None:
             self._turn = start_turn(ego.x_m, ego.y_m, ego.heading_rad, ego.v_mps,

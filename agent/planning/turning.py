@@ -11,8 +11,10 @@ as the robot turns, and robots spun back and forth (docs/method.md, "Tried and n
 So the turn is a decision taken once and kept: when the progress monitor finds the robot
 stuck (`agent.planning.liveness`), the tracker's command stands (below `STANDING_MPS`) and
 the reference leaves more than `TURN_FROM_RAD` off the heading, the robot fixes that
-direction (a world angle, `start_turn`) and turns on the spot towards it, the shorter way,
-until it faces it within `TURN_DONE_RAD` or `TURN_MAX_S` is over (`turn_command`). The turn
+direction (a world angle, `start_turn`) and turns on the spot towards it, one way round
+(the shorter, or the way it already turns when the direction is more than
+`EITHER_WAY_RAD` off), until it faces it within `TURN_DONE_RAD` or `TURN_MAX_S` is over
+(`turn_command`). The turn
 is bounded, so it ends; turning in place moves no part of a disc robot, so it cannot bring
 the robot closer to anyone. Pure: no clock, no I/O.
 """

@@ -13,6 +13,7 @@ from agent.core.scenario import ObstacleSpec
 from agent.planning.routing import (
     MAX_ROUTED_OBSTACLES,
     ROUTE_MARGIN_M,
+    Route,
     RouteFollower,
     StaticMap,
     VisibilityGraph,
@@ -190,6 +191,16 @@ def test_static_map_refuses_bad_discs() -> None:
         StaticMap(np.zeros((2, 2)), np.array([1.0]))
 
 
+def pillar_route() -> tuple[StaticMap, np.ndarray, np.ndarray, Route]:
+    """One pillar and a route past it from the east to the north-west, bending at one
+    corner south of it."""
+    static = StaticMap(np.array([[0.48, -0.01]]), np.array([1.59]))
+    start, goal = np.array([17.34, -4.77]), np.array([-17.39, 4.66])
+    route = plan_route(start, goal, static, CLEARANCE_M)
+    assert route is not None and route.waypoints_m.shape[0] == 3
+    return static, start, goal, route
+
+
 def test_a_waypoint_within_reach_is_reached_so_the_robot_is_not_sent_back_to_it() -> None:
     from agent.planning.routing import WAYPOINT_REACHED_M
 
@@ -198,10 +209,7 @@ def test_a_waypoint_within_reach_is_reached_so_the_robot_is_not_sent_back_to_it(
     # has the corner behind it: the corner counts as reached and the goal, in sight with
     # the clearance less WAYPOINT_REACHED_M, is the next goal (the pillar_circle robot
     # that stood for 100 s 0.26 m from such a corner).
-    static = StaticMap(np.array([[0.48, -0.01]]), np.array([1.59]))
-    start, goal = np.array([17.34, -4.77]), np.array([-17.39, 4.66])
-    route = plan_route(start, goal, static, CLEARANCE_M)
-    assert route is not None and route.waypoints_m.shape[0] == 3
+    static, start, goal, route = pillar_route()
     corner = route.waypoints_m[1]
     here = np.array([0.32, -2.51])
     assert 0.2 < math.dist(here, corner) < WAYPOINT_REACHED_M
@@ -222,10 +230,7 @@ def test_a_waypoint_the_robot_is_past_along_the_next_leg_is_passed() -> None:
     # past it along the next leg (0.5 m along it, 0.25 m in towards the pillar): the corner
     # is passed, and the goal, in sight with the clearance less that distance, is the next
     # goal; it was the corner behind the robot (`pillar_circle` 40: one stood for 80 s).
-    static = StaticMap(np.array([[0.48, -0.01]]), np.array([1.59]))
-    start, goal = np.array([17.34, -4.77]), np.array([-17.39, 4.66])
-    route = plan_route(start, goal, static, CLEARANCE_M)
-    assert route is not None and route.waypoints_m.shape[0] == 3
+    static, start, goal, route = pillar_route()
     corner = route.waypoints_m[1]
     along = (goal - corner) / math.dist(goal, corner)
     inward = np.array([along[1], -along[0]])  # towards the pillar
