@@ -48,8 +48,8 @@ class Guidance:
         strategy: GO, or YIELD (stand this cycle); REROUTE never leaves `RouteGuide`.
         squeeze: plan with the squeeze margin against still discs this cycle
             (`agent.planning.liveness`, rule 2).
-        stuck: the progress monitor found the robot stuck this cycle (a turn on the spot
-            may start, `agent.planning.turning`).
+        stuck: the progress monitor found the robot stuck this cycle, or it yields after
+            a stuck spell (a turn on the spot may start, `agent.planning.turning`).
     """
 
     goal_m: np.ndarray

@@ -185,7 +185,7 @@ class Liveness:
         self._yield_until_s = -math.inf
         self._squeeze_until_s = -math.inf
         self._next = 0  # index into _ROTATION
-        self.stuck_now = False  # the monitor found the robot stuck this cycle
+        self.stuck_now = False  # stuck this cycle, or yielding after a stuck spell
         self.reroutes = 0
         self.yields = 0
         self.squeezes = 0
@@ -210,9 +210,13 @@ class Liveness:
             others: the sensed others.
         """
         cfg = self.config
+        self.stuck_now = False
         if now_s < self._yield_until_s:
             if lower_id_moving_near(robot_id, position_m, others, cfg.yield_radius_m,
                                     cfg.slow_mps):
+                # a yield is a stuck spell that lasts: a robot that must escape instead of
+                # standing may commit to a turn on any cycle of it (`turning`)
+                self.stuck_now = True
                 return Strategy.YIELD
             self._yield_until_s = -math.inf  # nobody left to give way to
             self.monitor.restart(now_s, left_m)

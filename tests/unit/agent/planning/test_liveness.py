@@ -148,3 +148,22 @@ def test_config_refuses_non_positive_thresholds() -> None:
         LivenessConfig(stuck_after_s=float("nan"))
     with pytest.raises(ValueError, match="squeeze_margin_m"):
         LivenessConfig(squeeze_margin_m=-0.1)
+
+
+def test_stuck_now_marks_the_stuck_cycle_and_the_yield_it_began_only() -> None:
+    """What `turning` reads to start a committed turn: set on the cycle the monitor finds
+    the robot stuck and through a yield that cycle began (a robot that must escape instead
+    of standing may turn then), and clear again once the robot plans as usual."""
+    live = Liveness(CFG)
+    here = np.zeros(2)
+    mover = others([1], [(2.0, 0.0)], [(0.5, 0.0)])
+    live.decide(0.0, 4, here, 10.0, mover)
+    assert live.decide(4.0, 4, here, 10.0, mover) is Strategy.REROUTE and live.stuck_now
+    assert live.decide(4.1, 4, here, 10.0, mover) is Strategy.GO and not live.stuck_now
+    live.decide(8.0, 4, here, 10.0, mover)  # rule 2
+    assert live.decide(12.0, 4, here, 10.0, mover) is Strategy.YIELD and live.stuck_now
+    assert live.decide(12.1, 4, here, 10.0, mover) is Strategy.YIELD and live.stuck_now
+    # the lower id has gone: the yield ends and the robot plans as usual
+    assert live.decide(12.2, 4, here, 10.0, Others.empty()) is Strategy.GO
+    assert not live.stuck_now
+    assert live.decide(12.3, 4, here, 10.0, mover) is Strategy.GO and not live.stuck_now
