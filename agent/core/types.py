@@ -9,14 +9,16 @@ docstrings. Construction validates shapes and finiteness and raises `ValueError`
 
 from __future__ import annotations
 
-import copy
 import enum
 import math
 from dataclasses import dataclass, field
+from typing import TypeVar
 
 import numpy as np
 
 from agent.core.config import RobotLimits
+
+_T = TypeVar("_T")
 
 
 class Side(enum.IntEnum):
@@ -52,6 +54,14 @@ def _as_array(name: str, value: object, shape: tuple[int | None, ...]) -> np.nda
     if not math.isfinite(float(arr.sum())) and not np.isfinite(arr).all():
         raise ValueError(f"{name}: non-finite value")
     return arr
+
+
+def _shallow_copy(obj: _T) -> _T:
+    """`copy.copy` of a plain dataclass instance (fields in its `__dict__`), without the
+    generic copy protocol: the planners' per-cycle `with_*` copies."""
+    new = object.__new__(type(obj))
+    new.__dict__.update(obj.__dict__)
+    return new
 
 
 def _check_finite(name: str, value: float) -> float:
@@ -211,16 +221,12 @@ class Others:
                             ("linearity", linearity), ("track_start_m", track_start_m),
                             ("is_robot", is_robot)):
             object.__setattr__(obj, name, value)
-        if heading_rad is None:
-            heading_rad = np.full(ids.shape[0], np.nan)
-        object.__setattr__(obj, "heading_rad", heading_rad)
-        unknown = np.full(ids.shape[0], np.nan)
-        object.__setattr__(obj, "recent_speed_mps",
-                           unknown if recent_speed_mps is None else recent_speed_mps)
-        object.__setattr__(obj, "recent_interval_s",
-                           unknown if recent_interval_s is None else recent_interval_s)
-        object.__setattr__(obj, "recent_turn_rate_radps",
-                           unknown if recent_turn_rate_radps is None else recent_turn_rate_radps)
+        k = ids.shape[0]
+        # NaN (unknown) columns are made only when missing: the hot path passes them all.
+        for name, column in (("heading_rad", heading_rad), ("recent_speed_mps", recent_speed_mps),
+                             ("recent_interval_s", recent_interval_s),
+                             ("recent_turn_rate_radps", recent_turn_rate_radps)):
+            object.__setattr__(obj, name, np.full(k, np.nan) if column is None else column)
         return obj
 
     def with_radius(self, radius_m: np.ndarray) -> Others:
@@ -229,7 +235,7 @@ class Others:
         if radius.shape != self.radius_m.shape or not np.isfinite(radius).all() \
                 or (radius < 0.0).any():
             raise ValueError(f"radius_m: expected {len(self)} finite radii >= 0")
-        obj = copy.copy(self)
+        obj = _shallow_copy(self)
         object.__setattr__(obj, "radius_m", radius)
         return obj
 
@@ -301,7 +307,7 @@ class Observation:
         """The same observation heading for `goal_m` (a route's intermediate goal) with
         `goal_distance_m` still to go along the route, skipping validation: the planner
         computed both (a finite (2,) point and a finite distance)."""
-        obj = copy.copy(self)
+        obj = _shallow_copy(self)
         object.__setattr__(obj, "goal_m", goal_m)
         object.__setattr__(obj, "goal_distance_m", float(goal_distance_m))
         return obj
@@ -309,7 +315,7 @@ class Observation:
     def with_others(self, others: Others) -> Observation:
         """The same observation with `others` replaced, skipping validation: for the hot
         path, where `others` is a subset of this observation's (already validated) others."""
-        obj = copy.copy(self)
+        obj = _shallow_copy(self)
         object.__setattr__(obj, "others", others)
         return obj
 

@@ -180,4 +180,5 @@ def update_role_memory(others: Others, roles: np.ndarray, tcpa_s: np.ndarray,
     ids = others.ids.tolist()
     remembered = np.array([rid in memory for rid in ids], dtype=bool)
     keep = (tcpa_s > 0.0) & (threat | remembered)
-    return {ids[k]: Role(int(roles[k])) for k in keep.nonzero()[0].tolist()}
+    role = roles.tolist()
+    return {ids[k]: Role(role[k]) for k in keep.nonzero()[0].tolist()}

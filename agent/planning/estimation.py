@@ -179,7 +179,7 @@ class NeighborTracker:
         in_window = t_now - t <= self.window_s + 1e-9  # a suffix of `order` (t is sorted)
         cols = sel.nonzero()[0]
         rows = order[in_window]
-        window = np.ix_(rows, cols)
+        window = (rows[:, None], cols)  # `numpy.ix_(rows, cols)`, without its set-up
         seen = self._seen[window]  # (h, k)
         tt = t[in_window] - t_now
         pos = self._pos[window]  # (h, k, 2)

@@ -354,7 +354,7 @@ def plan_cycle(
     t_max_s = config.threats.t_max_s
     index = resolution_order(observation, assessment, decisions, mech, t_max_s)
     threats = threat_records(index.recorded, assessment.tcpa_s, assessment.dcpa_m, others)
-    direct = ViaPlan(status=PlanStatus.OK, waypoints_m=np.stack((p, goal)), threats=threats,
+    direct = ViaPlan(status=PlanStatus.OK, waypoints_m=np.array((p, goal)), threats=threats,
                      threats_s=threats_s)
     if len(others) == 0:
         return direct
@@ -607,12 +607,13 @@ def _with_committed(
     been passed (TCPA <= 0) or is far from imminent (TCPA >= `COMMIT_RELEASE_FACTOR` T_max;
     not T_max itself: the swerve lengthens TCPA, which would release it at once).
     """
+    # Plain Python over the (at most neighbour-cap) others: per-element numpy reads cost more.
+    ranked_now = set(index.tolist())
+    release_s = COMMIT_RELEASE_FACTOR * t_max_s
     extra = [
         k
-        for k in range(len(others))
-        if int(others.ids[k]) in committed_ids
-        and 0.0 < tcpa[k] < COMMIT_RELEASE_FACTOR * t_max_s
-        and k not in index
+        for k, (other_id, tcpa_k) in enumerate(zip(others.ids.tolist(), tcpa.tolist()))
+        if other_id in committed_ids and 0.0 < tcpa_k < release_s and k not in ranked_now
     ]
     if not extra:
         return index

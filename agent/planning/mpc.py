@@ -456,8 +456,10 @@ class MpcTracker:
             d = xb[1:, 0:2] - preds[:, 1:, :]  # (K, N, 2) from each predicted centre to pb_k
             dist = np.sqrt(np.einsum("knc,knc->kn", d, d))  # (K, N)
             if preds.shape[0] > n_used:
-                gap = (dist - clear[:, None]).min(axis=1)
-                sel = np.sort(np.argsort(gap, kind="stable")[:n_used])
+                gap = (dist - clear[:, None]).min(axis=1).tolist()
+                # A stable sort (ties keep input order), in plain Python: K is at most the
+                # neighbour cap, where numpy's argsort and sort cost more than they save.
+                sel = sorted(sorted(range(len(gap)), key=gap.__getitem__)[:n_used])
                 d, dist, clear = d[sel], dist[sel], clear[sel]
             tiny = dist < 1e-9
             if tiny.any():

@@ -56,7 +56,10 @@ from agent.planning.safety import (
     unseen_speed_up_mps,
     unseen_turn_closing_mps,
 )
+from agent.planning.spline import START_RADIUS_M, build_reference
+from agent.planning.threats import nearby_others
 from agent.planning.turning import Turn, start_turn, turn_command
+from agent.planning.unicycle import HEADING_GAIN, LOOKAHEAD_S, track_reference
 
 if TYPE_CHECKING:  # imported on first use (osqp, scipy, pyrvo load slowly)
     from agent.planning.mpc import MpcTracker
@@ -165,6 +168,15 @@ def _yield_result(observation: Observation, elapsed_s: float, period_s: float) -
                                       reference_m=here))
 
 
+def _xy(x_m: np.ndarray, y_m: np.ndarray) -> np.ndarray:
+    """(n, 2) [x, y] from two (n,) arrays: `numpy.column_stack`'s result, without its
+    generic set-up (a few us a cycle)."""
+    xy = np.empty((x_m.shape[0], 2))
+    xy[:, 0] = x_m
+    xy[:, 1] = y_m
+    return xy
+
+
 class ViaPointPlanner:
     """IFP, eIFP and eIFP-MPC: via-points -> cubic spline -> tracker.
 
@@ -235,16 +247,11 @@ class ViaPointPlanner:
 
     def plan(self, observation: Observation, now_s: float) -> PlanResult:
         """One cycle: threats and via-points, spline, then MPC or the tracking law."""
-        from agent.planning.spline import START_RADIUS_M, build_reference
-        from agent.planning.unicycle import HEADING_GAIN, LOOKAHEAD_S, track_reference
-
         clock = self._timer
         t0 = clock()
         done = arrived_result(observation, self.control_period_s)
         if done is not None:
             return replace(done, times=StageTimes(total_ms=(clock() - t0) * 1e3))
-        from agent.planning.threats import nearby_others
-
         cfg = self.config
         ego = observation.ego
         limits = observation.limits
@@ -317,7 +324,7 @@ class ViaPointPlanner:
             ego=np.array([ego.x_m, ego.y_m, ego.heading_rad]),
             threat_ids=tuple(t.other_id for t in via.threats),
             via_points_m=via.waypoints_m[1:-1],
-            reference_m=np.column_stack((ref.x_m, ref.y_m)),
+            reference_m=_xy(ref.x_m, ref.y_m),
             predicted_m=(predicted.predicted_states[:, :2] if predicted is not None
                          else np.zeros((0, 2))),
         )

@@ -113,9 +113,11 @@ def braking_speed_limit(
     rad = others_radius_m.tolist()
     if isinstance(unseen_dv_mps, float | int):  # the guard's first pass: no numpy here
         unseen = [float(unseen_dv_mps)] * len(pos)
+        checked = unseen[:1]  # one value for all: check it once
     else:
         unseen = np.broadcast_to(np.asarray(unseen_dv_mps, dtype=float), (len(pos),)).tolist()
-    if not all(0.0 <= u < math.inf for u in unseen):  # NaN fails this too
+        checked = unseen
+    if not all(0.0 <= u < math.inf for u in checked):  # NaN fails this too
         raise ValueError("unseen_dv_mps must be finite and >= 0")
     for j, (ox, oy) in enumerate(pos):
         dx, dy = ox - x, oy - y
