@@ -42,6 +42,11 @@ end of the trajectory if it never arrives):
   commands of one robot (by `seq`) that both resolve a threat (`resolved` present, `side`
   LEFT (+1) or RIGHT (-1)) with opposite sides. `side_flips_same_threat` additionally
   requires the same resolved id. Without the columns both are None.
+- **encounters** (crossing encounters, `orchestrator.analysis.encounters`): the other robots
+  that come closer than 2.5 m (centre to centre) to the robot at some sample, with headings
+  more than 45 degrees apart at the sample of their closest approach. Counted over the whole
+  trajectory, not only the robot's run. `reversals_per_encounter` = the run's oscillations /
+  its encounters (None without encounters).
 - **planning time**: `plan_ms` of the commands that planned, i.e. status neither
   `arrived` nor `stale`; p50 / p99 / max / mean pooled over robots.
 - **latency**: (t_applied - pose_stamp) in ms over all commands; p50 / p99.
@@ -50,9 +55,9 @@ end of the trajectory if it never arrives):
   such consecutive pairs ("cycles").
 
 Aggregate means (`path_ratio_mean`, `time_ratio_mean`, ...) are over the robots that
-arrived; `oscillations_per_robot` and `side_flips_per_robot` over all robots;
-`oscillations_max` is the largest count of one robot (0 without robots). Values that
-do not exist (no robot arrived, no commands) are None in JSON.
+arrived; `oscillations_per_robot`, `side_flips_per_robot` and `encounters_per_robot` over
+all robots; `oscillations_max` is the largest count of one robot (0 without robots).
+Values that do not exist (no robot arrived, no commands) are None in JSON.
 """
 
 from __future__ import annotations
@@ -65,6 +70,7 @@ from typing import Any, TypedDict
 import numpy as np
 
 from agent.core.scenario import Scenario
+from orchestrator.analysis.encounters import crossing_encounters
 from orchestrator.analysis.turns import (
     REVERSAL_CAUSES,
     PlanInForce,
@@ -220,6 +226,7 @@ class RobotMetrics:
     reversal_causes: dict[str, int]
     side_flips: int | None
     side_flips_same_threat: int | None
+    encounters: int
     contacts: int
     min_gap_m: float | None
     plan_ms_mean: float | None
@@ -252,6 +259,8 @@ class RunMetrics:
     oscillations_max: int
     reversal_causes_per_robot: dict[str, float]
     side_flips_per_robot: float | None
+    encounters_per_robot: float
+    reversals_per_encounter: float | None
     plan_ms_mean: float | None
     plan_ms_p50: float | None
     plan_ms_p99: float | None
@@ -455,10 +464,11 @@ def compute_metrics(traj: Trajectory, commands: Commands, spec: RunSpec, *,
         if not _confirmed(traj, spec, float(t_ev), int(a), int(b), world_dt_s):
             scan.episodes.append(ContactEpisode(float(t_ev), int(a), int(b), math.nan))
     planned = ~np.isin(commands.status, list(NOT_PLANNING_STATUSES))
+    encounters = crossing_encounters(traj.pose[:, :, :2], traj.pose[:, :, 2])
     per_robot = [
         _robot_metrics(traj, spec, k, scan,
                        _robot_commands(commands, int(rid), planned, control_period_s,
-                                       world_dt_s))
+                                       world_dt_s), int(encounters[k]))
         for k, rid in enumerate(spec.robot_ids.tolist())]
     return _run_metrics(per_robot, traj, commands, spec, scan, planned,
                         control_period_s=control_period_s, world_dt_s=world_dt_s)
@@ -516,8 +526,8 @@ def _robot_commands(commands: Commands, rid: int, planned: np.ndarray,
 
 
 def _robot_metrics(traj: Trajectory, spec: RunSpec, k: int, scan: ContactScan,
-                   mine: _RobotCommands) -> RobotMetrics:
-    """The metrics of robot column k."""
+                   mine: _RobotCommands, encounters: int) -> RobotMetrics:
+    """The metrics of robot column k, which had `encounters` crossing encounters."""
     rid = int(spec.robot_ids[k])
     t, xy, heading = _robot_run(traj, k, spec)
     idx = arrival_index(t, xy, spec.goal_m[k], spec.goal_tolerance_m, spec.time_limit_s)
@@ -541,6 +551,7 @@ def _robot_metrics(traj: Trajectory, spec: RunSpec, k: int, scan: ContactScan,
         reversal_causes=reversal_causes(t[:end], heading[:end], speed[:end], mine.in_force),
         side_flips=mine.flips[0],
         side_flips_same_threat=mine.flips[1],
+        encounters=encounters,
         contacts=sum(1 for e in scan.episodes if rid in (e.id_a, e.id_b)),
         min_gap_m=_finite(float(scan.robot_min_gap_m[k])),
         **_plan_ms(mine.plan_ms),
@@ -612,20 +623,23 @@ def _arrival_means(per_robot: list[RobotMetrics]) -> _ArrivalMeans:
 
 
 class _Turning(TypedDict):
-    """The oscillation and side-flip fields of `RunMetrics`."""
+    """The oscillation, side-flip and encounter fields of `RunMetrics`."""
 
     oscillations_per_robot: float
     oscillations_total: int
     oscillations_max: int
     reversal_causes_per_robot: dict[str, float]
     side_flips_per_robot: float | None
+    encounters_per_robot: float
+    reversals_per_encounter: float | None
 
 
 def _turning(per_robot: list[RobotMetrics], *, has_side: bool) -> _Turning:
-    """Oscillations (per robot, total, largest), their causes per robot and the side flips
-    per robot (None without the side columns)."""
+    """Oscillations (per robot, total, largest), their causes per robot, the side flips
+    per robot (None without the side columns) and the crossing encounters."""
     n = len(per_robot)
     counts = [r.oscillations for r in per_robot]
+    encounters = sum(r.encounters for r in per_robot)
     return {
         "oscillations_per_robot": float(np.mean(counts)) if n else 0.0,
         "oscillations_total": sum(counts),
@@ -635,6 +649,8 @@ def _turning(per_robot: list[RobotMetrics], *, has_side: bool) -> _Turning:
             for c in REVERSAL_CAUSES},
         "side_flips_per_robot": (float(np.mean([r.side_flips or 0 for r in per_robot]))
                                  if has_side and n else None),
+        "encounters_per_robot": encounters / n if n else 0.0,
+        "reversals_per_encounter": sum(counts) / encounters if encounters else None,
     }
 
 

@@ -261,11 +261,57 @@ def reversal_causes(records: Sequence[RunRecord]) -> dict[tuple[str, str], dict[
             for key in sorted(groups)}
 
 
-def reversal_table(causes: Mapping[tuple[str, str], Mapping[str, float]]) -> str:
-    """Oscillations per robot by cause, one row per setup and planner."""
-    header = ["setup", "planner", "osc/robot", *REVERSAL_CAUSES]
-    rows = [[setup, planner, _cell(sum(by.values())), *(_cell(by[c]) for c in REVERSAL_CAUSES)]
-            for (setup, planner), by in causes.items()]
+@dataclass(frozen=True)
+class EncounterRates:
+    """Crossing encounters of one setup and planner, pooled over its runs.
+
+    Args:
+        encounters_per_robot: mean over the runs of `encounters_per_robot`.
+        reversals_per_encounter: the runs' oscillations over their encounters, both summed
+            over the runs (NaN without encounters).
+        runs: the runs that have the fields.
+    """
+
+    encounters_per_robot: float
+    reversals_per_encounter: float
+    runs: int
+
+
+def encounter_rates(records: Sequence[RunRecord]) -> dict[tuple[str, str], EncounterRates]:
+    """(setup, planner) -> its crossing encounters, over the runs whose metrics.json has
+    `encounters_per_robot` (`orchestrator.analysis.encounters`; older runs have not)."""
+    groups: dict[tuple[str, str], list[Mapping[str, Any]]] = {}
+    for r in records:
+        if math.isfinite(_value(r.metrics, "encounters_per_robot")):
+            groups.setdefault((r.setup, r.planner), []).append(r.metrics)
+    out = {}
+    for key in sorted(groups):
+        runs = groups[key]
+        per_robot = np.array([_value(m, "encounters_per_robot") for m in runs])
+        robots = np.array([_value(m, "robots") for m in runs])
+        reversals = np.array([_value(m, "oscillations_total") for m in runs])
+        encounters = float(np.nansum(per_robot * robots))
+        out[key] = EncounterRates(
+            encounters_per_robot=float(per_robot.mean()),
+            reversals_per_encounter=(float(np.nansum(reversals)) / encounters
+                                     if encounters > 0 else math.nan),
+            runs=len(runs))
+    return out
+
+
+def reversal_table(causes: Mapping[tuple[str, str], Mapping[str, float]],
+                   encounters: Mapping[tuple[str, str], EncounterRates] | None = None) -> str:
+    """Oscillations per robot by cause, one row per setup and planner, with the crossing
+    encounters per robot and the oscillations per encounter ("-" where not recorded)."""
+    header = ["setup", "planner", "osc/robot", "encounters/robot", "osc/encounter",
+              *REVERSAL_CAUSES]
+    rows = []
+    for (setup, planner), by in causes.items():
+        enc = (encounters or {}).get((setup, planner))
+        rates = ([enc.encounters_per_robot, enc.reversals_per_encounter] if enc
+                 else [None, None])
+        rows.append([setup, planner, _cell(sum(by.values())), *(_cell(x) for x in rates),
+                     *(_cell(by[c]) for c in REVERSAL_CAUSES)])
     return format_table(header, rows)
 
 

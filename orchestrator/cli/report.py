@@ -16,7 +16,7 @@ from orchestrator.cli.common import (
 )
 
 if TYPE_CHECKING:
-    from orchestrator.analysis.report import RunRecord
+    from orchestrator.analysis.report import EncounterRates, RunRecord
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -38,6 +38,7 @@ def run(args: argparse.Namespace) -> int:
         ALL_METRICS,
         PAPER_METRICS,
         aggregate,
+        encounter_rates,
         identical_runs,
         paper_table,
         reversal_causes,
@@ -57,9 +58,10 @@ def run(args: argparse.Namespace) -> int:
               f"trajectories (byte-identical trajectory.csv): their seeds changed nothing, so "
               f"± is not a spread over seeds (give --start-jitter-m or link faults)")
     causes = reversal_causes(records)
+    encounters = encounter_rates(records)
     if causes:
         print("\noscillations per robot by cause (README, \"Metrics\"):")
-        print(reversal_table(causes))
+        print(reversal_table(causes, encounters))
     if args.paper:
         print()
         print(paper_table(stats))
@@ -68,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
     make_dir(out)
     bar_stats = {k: {m: (v[0], v[1]) for m, v in s.items()} for k, s in stats.items()}
     written = plot_report_bars(bar_stats, PAPER_METRICS, out)
-    _write_report_json(out / "report.json", records, partial, same, stats, causes)
+    _write_report_json(out / "report.json", records, partial, same, stats, causes, encounters)
     write_stats_csv(out / "report.csv", stats)
     print(f"\nplots: {', '.join(str(p) for p in written)}")
     print(f"tables: {out / 'report.csv'}, {out / 'report.json'}")
@@ -101,8 +103,10 @@ def _complete_runs(paths: list[Path], *, by_dir: bool
 def _write_report_json(path: Path, records: list[RunRecord], partial: list[RunRecord],
                        same: dict[tuple[str, str], tuple[int, int]],
                        stats: dict[tuple[str, str], dict[str, tuple[float, float, int]]],
-                       causes: dict[tuple[str, str], dict[str, float]]) -> None:
-    """report.json: the runs, the partial ones, the identical ones and every group's stats."""
+                       causes: dict[tuple[str, str], dict[str, float]],
+                       encounters: dict[tuple[str, str], EncounterRates]) -> None:
+    """report.json: the runs, the partial ones, the identical ones and every group's stats,
+    reversal causes and crossing encounters."""
     from orchestrator.analysis.rundir import write_json
 
     write_json(path, {
@@ -113,8 +117,17 @@ def _write_report_json(path: Path, records: list[RunRecord], partial: list[RunRe
         "groups": [{"setup": k[0], "planner": k[1],
                     **{m: {"mean": _finite(v[0]), "std": _finite(v[1]), "n": v[2]}
                        for m, v in s.items()},
-                    "reversal_causes_per_robot": causes.get(k)} for k, s in stats.items()],
+                    "reversal_causes_per_robot": causes.get(k),
+                    **_encounter_json(encounters.get(k))} for k, s in stats.items()],
     })
+
+
+def _encounter_json(rates: EncounterRates | None) -> dict[str, float | None]:
+    """A group's `encounters_per_robot` and `reversals_per_encounter` (None if unknown)."""
+    if rates is None:
+        return {"encounters_per_robot": None, "reversals_per_encounter": None}
+    return {"encounters_per_robot": _finite(rates.encounters_per_robot),
+            "reversals_per_encounter": _finite(rates.reversals_per_encounter)}
 
 
 def default_report_dir() -> Path:

@@ -402,10 +402,38 @@ def test_json_has_the_documented_keys_and_no_nan():
                 "min_gap_obstacles_m", "path_ratio_mean",
                 "time_ratio_mean", "oscillations_per_robot", "side_flips_per_robot",
                 "plan_ms_p50", "plan_ms_p99", "sim_latency_ms_p50", "sim_latency_ms_p99",
-                "deadline_miss_rate", "per_robot", "reversal_causes_per_robot"):
+                "deadline_miss_rate", "per_robot", "reversal_causes_per_robot",
+                "encounters_per_robot", "reversals_per_encounter"):
         assert key in content, key
     assert isinstance(content["per_robot"], list) and content["per_robot"][0]["id"] == 0
+    assert content["per_robot"][0]["encounters"] == 0
     assert content["path_ratio_mean"] is None and "NaN" not in text
+    assert content["encounters_per_robot"] == 0.0 and content["reversals_per_encounter"] is None
+
+
+def test_encounters_counted_over_the_whole_trajectory_and_reversals_per_encounter():
+    # Robot 0 zig-zags along y = 0 (two reversals) and meets robot 1 head-on at t = 1.5 s;
+    # robot 2 drives beside robot 1, 3 m away (no encounter between them), and passes robot 0
+    # 3.5 m away. Robot 1 arrives before t = 1 s; its encounter comes later.
+    rates = hold(0.5, 1.0) + hold(-0.5, 1.0) + hold(0.5, 1.0)
+    t, heading = heading_from_rates(rates)
+    x0 = np.linspace(0.0, 3.0, t.size)
+    x1 = 3.0 - x0
+    xy = np.stack([np.stack([x0, np.zeros_like(x0)], axis=1),
+                   np.stack([x1, np.full_like(x1, 0.5)], axis=1),
+                   np.stack([x1, np.full_like(x1, 3.5)], axis=1)], axis=1)
+    h = np.stack([heading, np.full_like(heading, math.pi), np.full_like(heading, math.pi)],
+                 axis=1)
+    m = metrics(trajectory(t, xy, h),
+                spec([(0, 0), (3, 0.5), (3, 3.5)], [(50, 0), (2, 0.5), (-50, 3.5)]))
+    assert [r.encounters for r in m.per_robot] == [1, 1, 0]
+    assert m.per_robot[1].time_to_goal_s == pytest.approx(0.8)  # within 0.25 m
+    assert m.oscillations_total == 2
+    assert m.encounters_per_robot == pytest.approx(2 / 3)
+    assert m.reversals_per_encounter == pytest.approx(2 / 2)
+    content = m.to_json_dict()
+    assert [r["encounters"] for r in content["per_robot"]] == [1, 1, 0]
+    assert content["reversals_per_encounter"] == pytest.approx(1.0)
 
 
 # --- the run-directory reader ------------------------------------------------------
@@ -441,7 +469,11 @@ def test_metrics_from_a_recorded_run_directory(tmp_path):
     assert m.deadline_misses == 0
     assert [r.side_flips for r in m.per_robot] == [0, 30]
     path = write_metrics(tmp_path, m)
-    assert json.loads(path.read_text())["arrived"] == 2
+    written = json.loads(path.read_text())
+    assert written["arrived"] == 2
+    # Side by side, 3 m apart: no crossing encounter.
+    assert written["encounters_per_robot"] == 0.0 and written["reversals_per_encounter"] is None
+    assert [r["encounters"] for r in written["per_robot"]] == [0, 0]
 
 
 def test_metrics_of_a_run_with_a_relay_split_the_wall_latency_by_router(tmp_path):

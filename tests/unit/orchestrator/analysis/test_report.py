@@ -13,6 +13,7 @@ from orchestrator.analysis.report import (
     RunRecord,
     aggregate,
     collect,
+    encounter_rates,
     reversal_causes,
     reversal_table,
 )
@@ -41,8 +42,41 @@ def test_causes_are_averaged_per_setup_and_old_runs_are_left_out():
     assert by["same_via_point"] == 0.0
     table = reversal_table(causes)
     header, _rule, row = table.splitlines()
-    assert header.split()[3:] == list(REVERSAL_CAUSES)
-    assert row.split()[:4] == ["setup_f", "eifp-mpc", "2", "0.5"]
+    assert header.split()[2:5] == ["osc/robot", "encounters/robot", "osc/encounter"]
+    assert header.split()[5:] == list(REVERSAL_CAUSES)
+    assert row.split()[:6] == ["setup_f", "eifp-mpc", "2", "-", "-", "0.5"]
+
+
+def encounter_record(setup: str, robots: int, osc_total: int,
+                     encounters_per_robot: float | None) -> RunRecord:
+    metrics: dict[str, object] = {"robots": robots, "oscillations_total": osc_total,
+                                  "reversal_causes_per_robot": dict.fromkeys(
+                                      REVERSAL_CAUSES, osc_total / robots)}
+    if encounters_per_robot is not None:
+        metrics["encounters_per_robot"] = encounters_per_robot
+        metrics["reversals_per_encounter"] = (osc_total / (encounters_per_robot * robots)
+                                              if encounters_per_robot else None)
+    return RunRecord(Path(setup), setup, "orca", 0, "lockstep", metrics)
+
+
+def test_encounter_columns_pool_oscillations_over_encounters_across_runs():
+    runs = [
+        encounter_record("crowd", 4, 6, 2.0),  # 6 reversals, 8 encounters
+        encounter_record("crowd", 2, 0, 1.0),  # 0 reversals, 2 encounters
+        encounter_record("crowd", 4, 9, None),  # written before the fields existed
+        encounter_record("open", 2, 3, 0.0),  # no encounter at all
+    ]
+    rates = encounter_rates(runs)
+    assert list(rates) == [("crowd", "orca"), ("open", "orca")]
+    crowd = rates[("crowd", "orca")]
+    assert crowd.runs == 2 and crowd.encounters_per_robot == pytest.approx(1.5)
+    assert crowd.reversals_per_encounter == pytest.approx(6 / 10)
+    assert math.isnan(rates[("open", "orca")].reversals_per_encounter)
+    header, _rule, *rows = reversal_table(reversal_causes(runs), rates).splitlines()
+    cells = header.split()
+    at = cells.index("encounters/robot")
+    assert cells[at + 1] == "osc/encounter"
+    assert [r.split()[at:at + 2] for r in rows] == [["1.5", "0.6"], ["0", "-"]]
 
 
 def write_run(path: Path, osc: float) -> None:
