@@ -33,17 +33,6 @@ Two robots can both find the other on their left only on nearly reciprocal cours
 head-on rule takes those) or when already close and diverging; the safety net covers the
 rest. Both-RIGHT is always consistent: each turns clockwise about the line of sight.
 
-**Reciprocal share** (`reciprocal_radii`, `Mechanisms.reciprocal_share`): the paper's
-via-point clears the other's inflated disc as if the other held its course, and so does the
-other's, so two robots that both avoid open twice the separation they need. Their threat
-is then gone, both turn back for their goals, the threat comes back, and they swerve
-again: reversals, not progress. As in reciprocal velocity obstacles (RVO, ORCA), a moving
-robot is expected to do its share: the via-points round it are built on a disc that leaves
-it `share` of the missing separation L - DCPA. The threat test is unchanged (DCPA < L' iff
-DCPA < L). Against an other that does not avoid, each cycle measures the DCPA anew and
-plans for a share of what is still missing, so the pass still converges to L. The
-tracker's half-planes and the braking guard keep their margins from the true radii.
-
 The role of each other is remembered from the first cycle it is a threat, while it stays
 sensed and is still approaching (TCPA > 0), so the manoeuvre itself does not reclassify the
 encounter (`update_role_memory`).
@@ -193,26 +182,3 @@ def update_role_memory(others: Others, roles: np.ndarray, tcpa_s: np.ndarray,
     keep = (tcpa_s > 0.0) & (threat | remembered)
     role = roles.tolist()
     return {ids[k]: Role(role[k]) for k in keep.nonzero()[0].tolist()}
-
-
-def reciprocal_radii(radius_m: np.ndarray, dcpa_m: np.ndarray, others: Others,
-                     share: float) -> np.ndarray:
-    """The discs the via-points are built on, with each moving robot's share left to it
-    (module docstring, "Reciprocal share").
-
-    Args:
-        radius_m: (K,) inflated radii L (Eq. 8) [m].
-        dcpa_m: (K,) DCPA at the measured velocities (Eq. 5) [m].
-        others: the K others; robots faster than `MOVING_MPS` are expected to do a share.
-        share: the fraction of L - DCPA left to the other, in [0, 1); 0: the paper's L.
-
-    Returns:
-        (K,) L - share x (L - DCPA) for moving robots whose DCPA is below L, else L.
-    """
-    if not 0.0 <= share < 1.0:
-        raise ValueError(f"share must be in [0, 1), got {share!r}")
-    if share == 0.0 or len(others) == 0:
-        return radius_m
-    speed = np.hypot(others.velocity_mps[:, 0], others.velocity_mps[:, 1])
-    reciprocal = others.is_robot & (speed >= MOVING_MPS) & (dcpa_m < radius_m)
-    return np.where(reciprocal, radius_m - share * (radius_m - dcpa_m), radius_m)

@@ -66,7 +66,6 @@ import numpy as np
 
 from agent.core.config import PlannerConfig
 from agent.core.types import Observation, Others, PlanStatus, Side, Threat
-from agent.planning.encounters import reciprocal_radii
 from agent.planning.kept_plan import kept_waypoints
 from agent.planning.mechanisms import PAPER_MECHANISMS, Mechanisms, mechanisms
 from agent.planning.threats import (
@@ -261,8 +260,7 @@ class Assessment:
     Args:
         position_m: (2,) the robot's position P [m].
         others: the neighbours (sensing radius and cap applied), K of them.
-        radius_m: (K,) their inflated radii L (Eq. 8), less the share a moving robot is left
-            with `Mechanisms.reciprocal_share` (`encounters.reciprocal_radii`) [m].
+        radius_m: (K,) their inflated radii L (Eq. 8) [m].
         index: indices of Eq. (6)'s threats, ranked by TCPA (Eq. 7).
         tcpa_s, dcpa_m: (K,) Eqs. (4)-(5) at the measured velocity.
         speed_mps: the robot's top speed, the speed of the velocity cone [m/s].
@@ -296,9 +294,6 @@ def assess_threats(observation: Observation, config: PlannerConfig,
     if mech.inflated_threats:
         d_thresh = radius
     index, tcpa, dcpa = rank_threats(p, v_r, others, d_thresh, threats_cfg.t_max_s)
-    if mech.reciprocal_share > 0.0:
-        # after the threat test, which the smaller discs would not change
-        radius = reciprocal_radii(radius, dcpa, others, mech.reciprocal_share)
     return Assessment(position_m=p, others=others, radius_m=radius,
                       index=index, tcpa_s=tcpa, dcpa_m=dcpa,
                       speed_mps=float(observation.limits.v_max_mps))

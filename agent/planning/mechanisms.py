@@ -35,12 +35,6 @@ PRIMARY_HOLD_S = 3.0
 the most imminent one's (`Mechanisms.commitment`): the order of two nearly simultaneous
 threats otherwise flips with small changes of TCPA, and the first via-point with it."""
 
-RECIPROCAL_SHARE = 0.5
-"""eIFP-MPC's `Mechanisms.reciprocal_share`: half, as in reciprocal velocity obstacles, for
-a fleet whose robots all avoid (chosen on the tuning seeds 100-105 of the liveness
-families against none: all arrive either way; reversals per robot, the sum of the ten
-medians, 94 against 102.5; mean time ratio 1.77 against 1.87)."""
-
 
 @dataclass(frozen=True)
 class Mechanisms:
@@ -99,11 +93,6 @@ class Mechanisms:
             reference to one bounded turn on the spot (`agent.planning.turning`): the
             MPC, linearised about its prediction, finds no gain in turning a hemmed-in
             robot. Needs `liveness` (its progress monitor says when).
-        reciprocal_share: the share of the missing separation (L - DCPA) a moving robot
-            is left to open itself: via-points round it are built on a disc that much
-            smaller (`agent.planning.encounters.reciprocal_radii`); 0: the paper's L. Two
-            robots that both avoid in full open twice the separation they need, lose the
-            threat, turn back and swerve again.
         primary_hold_s: with `commitment`, how much later than the most imminent threat's
             the TCPA of last cycle's first threat may be for it to stay first [s].
     """
@@ -124,7 +113,6 @@ class Mechanisms:
     routing: bool = False
     liveness: LivenessConfig | None = None
     turn_when_stuck: bool = False
-    reciprocal_share: float = 0.0
     primary_hold_s: float = PRIMARY_HOLD_S
 
 
@@ -142,7 +130,7 @@ EIFP_MPC_MECHANISMS = dataclasses.replace(
     EIFP_MECHANISMS, inflated_threats=True, commitment=True, via_margin_m=ARC_VIA_MARGIN_M,
     escape_band_m=ESCAPE_BAND_M, escape_all=True, horizon_via_points=True,
     lines_arcs=True, clamp_heading=False, braking_guard=True, keep_plan=True, routing=True,
-    liveness=LivenessConfig(), turn_when_stuck=True, reciprocal_share=RECIPROCAL_SHARE)
+    liveness=LivenessConfig(), turn_when_stuck=True)
 """eifp-mpc in the default profile: every mechanism."""
 
 

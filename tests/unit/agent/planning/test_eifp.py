@@ -1,6 +1,5 @@
 """eIFP: the cost of Eqs. (15)-(17), ghost-path discarding, hysteresis and tie-breaking."""
 
-import dataclasses
 import math
 
 import numpy as np
@@ -20,7 +19,7 @@ from agent.planning.eifp import (
     update_side_memory,
 )
 from agent.planning.ifp import ESCAPE_STANDING_MPS, ViaPlan
-from agent.planning.mechanisms import EIFP_MECHANISMS, EIFP_MPC_MECHANISMS
+from agent.planning.mechanisms import EIFP_MECHANISMS
 from agent.planning.threats import as_complex
 from tests.examples import examples
 
@@ -379,22 +378,3 @@ def test_each_planner_runs_its_mechanisms():
     assert make_planner("eifp-mpc", CFG)._selector.mech == EIFP_MPC_MECHANISMS
     assert make_planner("eifp", CFG)._selector.mech == EIFP_MECHANISMS
     assert make_planner("eifp-mpc", paper_config())._selector.mech == PAPER_MECHANISMS
-
-
-def test_reciprocal_share_halves_the_swerve_of_a_head_on_pair_and_still_separates_it():
-    # Both robots avoid: with the share each plans its half of the missing separation, so
-    # they swerve less, on the same sides, and their via-points (passed at about the same
-    # time) are still more than L apart.
-    def plans(share):
-        mech = dataclasses.replace(EIFP_MPC_MECHANISMS, reciprocal_share=share)
-        a = observe(others([[8, 0.2]], [[-1, 0]], ids=[2]), robot_id=1, goal=(10, 0))
-        b = observe(others([[0, 0]], [[1, 0]], ids=[1]), x=8.0, y=0.2, heading=math.pi,
-                    robot_id=2, goal=(-2, 0.2))
-        return plan_eifp(a, CFG, None, mech=mech), plan_eifp(b, CFG, None, mech=mech)
-
-    (full_a, full_b), (half_a, half_b) = plans(0.0), plans(0.5)
-    assert {full_a.side, full_b.side, half_a.side, half_b.side} == {Side.RIGHT}
-    assert abs(half_a.via_point_m[1]) < abs(full_a.via_point_m[1])
-    assert abs(half_b.via_point_m[1] - 0.2) < abs(full_b.via_point_m[1] - 0.2)
-    inflated = 2 * R + CFG.safety.d_safety_m
-    assert np.hypot(*(half_a.via_point_m - half_b.via_point_m)) > inflated

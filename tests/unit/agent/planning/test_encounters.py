@@ -11,7 +11,6 @@ from agent.planning.encounters import (
     Role,
     classify,
     encounter_roles,
-    reciprocal_radii,
     update_role_memory,
 )
 
@@ -133,25 +132,3 @@ def test_a_denormal_speed_is_a_parked_robot_without_overflow():
     roles, overtaken = classify(0.0, V, np.zeros(2), two)
     assert [Role(int(r)) for r in roles] == [Role.GIVE_WAY, Role.RESOLVE]
     assert not overtaken.any()
-
-
-# --- the reciprocal share ------------------------------------------------------------
-
-
-def test_reciprocal_radii_leave_a_moving_robot_its_share_of_the_missing_separation():
-    o = Others(ids=np.array([1, 2, 3, 4]), position_m=np.array([[5.0, 0], [5, 1], [5, 2], [5, 3]]),
-               velocity_mps=np.array([[-1.0, 0], [-1.0, 0], [0.05, 0], [-1.0, 0]]),
-               radius_m=np.full(4, 0.5), linearity=np.ones(4),
-               track_start_m=np.zeros((4, 2)), is_robot=np.array([True, False, True, True]))
-    radius = np.full(4, 1.3)
-    dcpa = np.array([0.3, 0.3, 0.3, 1.5])
-    out = reciprocal_radii(radius, dcpa, o, 0.5)
-    # a moving robot on a collision course: L - 0.5 (L - DCPA), still above its DCPA
-    assert out[0] == pytest.approx(1.3 - 0.5 * 1.0)
-    assert dcpa[0] < out[0] < radius[0]
-    # an obstacle, a robot slower than MOVING_MPS and a robot that passes clear keep L
-    assert out[1:].tolist() == [1.3, 1.3, 1.3]
-    assert reciprocal_radii(radius, dcpa, o, 0.0) is radius
-    for bad in (-0.1, 1.0, math.nan):
-        with pytest.raises(ValueError, match="share"):
-            reciprocal_radii(radius, dcpa, o, bad)
