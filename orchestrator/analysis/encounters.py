@@ -42,6 +42,9 @@ def closest_approach(xy_m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarr
     for t0 in range(0, xy.shape[0], block):
         rel = xy[t0:t0 + block, j] - xy[t0:t0 + block, i]  # (t, P, 2)
         dist = np.hypot(rel[..., 0], rel[..., 1])
+        # A sample without a pose (NaN) is no approach; left NaN, argmin would pick it and
+        # hide the pair's real closest approach in the whole block.
+        np.nan_to_num(dist, copy=False, nan=np.inf)
         k = np.argmin(dist, axis=0)
         d = dist[k, np.arange(i.size)]
         # Strictly closer only: a tie keeps the earlier sample.

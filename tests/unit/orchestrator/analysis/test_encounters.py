@@ -147,3 +147,11 @@ def test_matches_the_pair_by_pair_reference(seed, n, samples, block):
         encounters._BLOCK_PAIR_SAMPLES = original
     assert counts.tolist() == reference_encounters(xy, heading)
     assert counts.sum() % 2 == 0  # each crossing counts for both robots
+
+
+def test_a_sample_without_a_pose_does_not_hide_the_encounter():
+    # One NaN pose early in the run, in the same block as the closest approach: the
+    # head-on pass still counts for both.
+    xy, h = robots(straight((-5.0, 0.0), 0.0), straight((5.0, 0.5), math.pi))
+    xy[3, 1] = np.nan
+    assert crossing_encounters(xy, h).tolist() == [1, 1]
