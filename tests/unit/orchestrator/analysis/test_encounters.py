@@ -16,6 +16,7 @@ from orchestrator.analysis.encounters import (
     ENCOUNTER_HEADING_RAD,
     closest_approach,
     crossing_encounters,
+    near_pairs,
 )
 
 DT = 0.1
@@ -155,3 +156,43 @@ def test_a_sample_without_a_pose_does_not_hide_the_encounter():
     xy, h = robots(straight((-5.0, 0.0), 0.0), straight((5.0, 0.5), math.pi))
     xy[3, 1] = np.nan
     assert crossing_encounters(xy, h).tolist() == [1, 1]
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(2, 9), samples=st.integers(1, 80),
+       stride=st.sampled_from([1, 3, 25, 100]), holes=st.booleans())
+def test_near_pairs_keeps_every_pair_that_comes_close(seed, n, samples, stride, holes):
+    rng = np.random.default_rng(seed)
+    # Fast random walks in a 30 m square: most pairs stay apart, some meet.
+    xy = rng.uniform(0.0, 30.0, (1, n, 2)) + np.cumsum(rng.normal(0.0, 0.8, (samples, n, 2)),
+                                                       axis=0)
+    if holes:
+        xy[rng.random((samples, n)) < 0.1] = np.nan
+    kept = set(zip(*(a.tolist() for a in near_pairs(xy, ENCOUNTER_DISTANCE_M, stride))))
+    i, j, dist, _ = closest_approach(xy)
+    close = {(a, b) for a, b, d in zip(i.tolist(), j.tolist(), dist.tolist())
+             if d < ENCOUNTER_DISTANCE_M}
+    assert close <= kept
+    # and the pairs come back in the order of np.triu_indices
+    pairs = list(zip(*(a.tolist() for a in near_pairs(xy, ENCOUNTER_DISTANCE_M, stride))))
+    assert pairs == sorted(pairs)
+
+
+def test_near_pairs_drops_pairs_that_stay_apart_and_keeps_a_fast_one():
+    # Robots 0 and 1 drive side by side 10 m apart; robot 2 starts 20 m from robot 0 and
+    # drives at it at 4 m/s, reaching it within one window of 25 samples (2.5 s).
+    xy, h = robots(straight((0.0, 0.0), 0.0), straight((0.0, 10.0), 0.0),
+                   straight((20.0, 0.0), math.pi, speed=3.0))
+    kept = list(zip(*(a.tolist() for a in near_pairs(xy, ENCOUNTER_DISTANCE_M, 25))))
+    assert (0, 1) not in kept
+    assert (0, 2) in kept
+    assert crossing_encounters(xy, h).tolist() == [1, 0, 1]
+
+
+def test_near_pairs_with_a_missing_anchor_pose_keeps_the_pair():
+    xy, _ = robots(straight((0.0, 0.0), 0.0), straight((0.0, 10.0), 0.0))
+    xy[0, 1] = np.nan  # no pose at the first window's first sample
+    kept = list(zip(*(a.tolist() for a in near_pairs(xy, ENCOUNTER_DISTANCE_M, 25))))
+    assert kept == [(0, 1)]
+    # the exact pass still finds them 10 m apart: no encounter
+    assert crossing_encounters(xy, np.zeros(xy.shape[:2])).tolist() == [0, 0]
