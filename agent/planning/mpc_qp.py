@@ -363,6 +363,10 @@ def _ruiz(P: sp.csc_matrix, A: sp.csc_matrix, iterations: int = 10
     """Ruiz equilibration of the KKT matrix [[P, A'], [A, 0]], as OSQP's `scaling` does.
 
     The cost scaling c uses P only (OSQP also uses q, which here changes every cycle).
+    Works on the nonzeros of P and A directly (numpy, no sparse matrix products: about
+    70 ms less per tracker set up, i.e. per robot start); each scaled entry is computed as
+    (d_i x_ij) d_j, in the order of the sparse products diag(d) X diag(d) it replaces, so
+    the scaling is bit for bit the same (tests/unit/agent/planning/test_mpc_qp.py).
 
     Args:
         P: (n, n) upper triangle of the cost matrix; A: (m, n) constraint matrix.
@@ -372,18 +376,32 @@ def _ruiz(P: sp.csc_matrix, A: sp.csc_matrix, iterations: int = 10
     """
     p_full = (P + sp.triu(P, 1).T).tocsc()
     a = A.tocsc()
-    d = np.ones(P.shape[0])
-    e = np.ones(A.shape[0])
+    n, m = P.shape[0], A.shape[0]
+    p_abs, p_row, p_col = _entries(p_full)
+    a_abs, a_row, a_col = _entries(a)
+    d = np.ones(n)
+    e = np.ones(m)
     for _ in range(iterations):
-        col = np.maximum(
-            abs(p_full).max(axis=0).toarray().ravel(), abs(a).max(axis=0).toarray().ravel()
-        )
-        row = abs(a).max(axis=1).toarray().ravel()
+        col = np.maximum(_max_at(p_abs, p_col, n), _max_at(a_abs, a_col, n))
+        row = _max_at(a_abs, a_row, m)
         d_step = 1.0 / np.sqrt(np.clip(col, 1e-4, 1e4))
         e_step = 1.0 / np.sqrt(np.clip(row, 1e-4, 1e4))
         d *= d_step
         e *= e_step
-        p_full = sp.diags(d_step) @ p_full @ sp.diags(d_step)
-        a = sp.diags(e_step) @ a @ sp.diags(d_step)
-    c = 1.0 / float(np.clip(np.mean(abs(p_full).max(axis=0).toarray()), 1e-4, 1e4))
+        p_abs = (d_step[p_row] * p_abs) * d_step[p_col]
+        a_abs = (e_step[a_row] * a_abs) * d_step[a_col]
+    c = 1.0 / float(np.clip(np.mean(_max_at(p_abs, p_col, n)), 1e-4, 1e4))
     return d, e, c
+
+
+def _entries(matrix: sp.csc_matrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """|values|, rows and columns of a CSC matrix's stored entries."""
+    cols = np.repeat(np.arange(matrix.shape[1]), np.diff(matrix.indptr))
+    return np.abs(matrix.data), matrix.indices.astype(np.int64), cols
+
+
+def _max_at(values: np.ndarray, index: np.ndarray, size: int) -> np.ndarray:
+    """The largest of `values` per index (0 where an index has none; values >= 0)."""
+    out = np.zeros(size)
+    np.maximum.at(out, index, values)
+    return out
