@@ -16,6 +16,7 @@ from orchestrator.cli.common import (
 )
 
 if TYPE_CHECKING:
+    from orchestrator.analysis.compare import Difference
     from orchestrator.analysis.report import EncounterRates, RunRecord
 
 
@@ -29,10 +30,17 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                    help="one row per setup, planner and DIR (compare variants of one setup "
                         "kept in different directories); default: runs are pooled by setup "
                         "and planner")
+    p.add_argument("--compare", action="store_true",
+                   help="exactly two DIRs, BASE VARIANT: pair their runs by case, planner and "
+                        "seed and print each metric's mean difference (VARIANT - BASE) with "
+                        "a 95 %% bootstrap interval, per case and overall "
+                        "(orchestrator.analysis.compare)")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.compare:
+        return run_compare(args)
     from orchestrator.analysis.plots import plot_report_bars
     from orchestrator.analysis.report import (
         ALL_METRICS,
@@ -75,6 +83,49 @@ def run(args: argparse.Namespace) -> int:
     print(f"\nplots: {', '.join(str(p) for p in written)}")
     print(f"tables: {out / 'report.csv'}, {out / 'report.json'}")
     return ExitCode.OK
+
+
+def run_compare(args: argparse.Namespace) -> int:
+    """`report --compare BASE VARIANT`: paired differences per case and overall."""
+    from orchestrator.analysis.compare import (
+        COMPARE_METRICS,
+        compare,
+        pair_runs,
+    )
+    from orchestrator.analysis.report import format_table
+
+    if len(args.dirs) != 2 or args.paper or args.by_dir:
+        raise BadInput("report --compare: give exactly two directories, BASE VARIANT "
+                       "(without --paper or --by-dir)")
+    sides = []
+    for path in map(Path, args.dirs):
+        records, _ = _complete_runs([path], by_dir=False)
+        sides.append([((r.setup, r.planner, r.seed), r.metrics) for r in records])
+    pairs, unmatched = pair_runs(sides[0], sides[1])
+    if not pairs:
+        raise BadInput(f"report --compare: no run of {args.dirs[1]} has a partner in "
+                       f"{args.dirs[0]} (same case, planner and seed)")
+    result = compare(pairs, unmatched)
+    header = ["case", "planner", "pairs", *COMPARE_METRICS]
+    rows = [[case, planner, diffs[COMPARE_METRICS[0]].pairs,
+             *(_cell(diffs[m]) for m in COMPARE_METRICS)]
+            for (case, planner), diffs in sorted(result.cases.items())]
+    rows.append(["overall (cases weighted equally)", "", result.overall[COMPARE_METRICS[0]].pairs,
+                 *(_cell(result.overall[m]) for m in COMPARE_METRICS)])
+    print(f"{args.dirs[0]} -> {args.dirs[1]}: {sum(len(v) for v in pairs.values())} paired "
+          f"runs, {unmatched} without a partner")
+    print(format_table(header, rows))
+    print("\nEach cell: BASE mean -> VARIANT mean (mean paired difference [95 % bootstrap "
+          "interval]) and the verdict: lower / higher when the interval excludes 0, else "
+          "within noise; too few below 3 pairs.")
+    return ExitCode.OK
+
+
+def _cell(d: Difference) -> str:
+    """A difference and its verdict, for the table."""
+    from orchestrator.analysis.compare import format_difference
+
+    return f"{format_difference(d)} {d.verdict}" if d.pairs else "-"
 
 
 def _complete_runs(paths: list[Path], *, by_dir: bool
