@@ -10,6 +10,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import platform
 import re
 from collections.abc import Iterable
 from dataclasses import dataclass, replace
@@ -255,6 +256,26 @@ def read_timing_by_robot(run_dir: Path) -> tuple[np.ndarray, np.ndarray]:
 def read_timing(run_dir: Path) -> np.ndarray:
     """timing.csv's stamps as (K, 9) int64 (`eifp_wire.messages.TIMING_COLUMNS`); (0, 9) if none."""
     return read_timing_by_robot(run_dir)[1]
+
+
+NUMERICS_PACKAGES = ("numpy", "scipy", "osqp", "pyrvo")
+"""The libraries a lockstep run's numbers depend on: the same code and seed give the same
+trajectory only with the same versions of these (and of Python)."""
+
+
+def numerics_versions() -> dict[str, str | None]:
+    """The installed versions of Python and of `NUMERICS_PACKAGES` (None if not installed),
+    for run.json: a crowd run is chaotic, so another numpy or OSQP release can move its
+    later decisions (docs/results.md)."""
+    from importlib import metadata
+
+    versions: dict[str, str | None] = {"python": platform.python_version()}
+    for name in NUMERICS_PACKAGES:
+        try:
+            versions[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            versions[name] = None
+    return versions
 
 
 def write_json(path: Path, content: Any) -> Path:

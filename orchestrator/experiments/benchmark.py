@@ -35,7 +35,13 @@ from typing import TYPE_CHECKING, Any, SupportsFloat, TypeGuard
 import numpy as np
 
 from agent.core.scenario import Scenario
-from orchestrator.analysis.rundir import end_event, run_ending, safe_name, write_json
+from orchestrator.analysis.rundir import (
+    end_event,
+    numerics_versions,
+    run_ending,
+    safe_name,
+    write_json,
+)
 from orchestrator.experiments.families import SETUPS, resolve
 from orchestrator.experiments.scenario_blocks import ideal_time_s
 from orchestrator.experiments.seeds import EVALUATION_SEEDS as EVALUATION_SEEDS
@@ -242,6 +248,7 @@ def run_job(job: Job) -> dict[str, Any]:
             "start_jitter_m": START_JITTER_M, "benchmark_family": job.case.family,
             "time_scale": job.time_scale if job.mode == "distributed" else None,
             "started": dt.datetime.now().isoformat(timespec="seconds"),
+            "versions": numerics_versions(),
         })
         status = None
         metrics: RunMetrics | None

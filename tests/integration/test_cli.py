@@ -82,6 +82,12 @@ def test_lockstep_run_of_setup_a_writes_everything(two_runs, capsys):
     assert metrics["robots"] == 2 and len(metrics["per_robot"]) == 2
     info = json.loads((run / "run.json").read_text())
     assert info["scenario"] == "setup_a" and info["planner"] == "ifp" and info["seed"] == 0
+    # the numerics' versions, which a lockstep run's numbers depend on
+    import numpy
+    import osqp
+    assert info["versions"]["numpy"] == numpy.__version__
+    assert info["versions"]["osqp"] == osqp.__version__
+    assert set(info["versions"]) == {"python", "numpy", "scipy", "osqp", "pyrvo"}
 
 
 def test_run_exit_status_follows_success_and_prints_summary(tmp_path, capsys):
@@ -400,4 +406,5 @@ def test_benchmark_distributed_mode_takes_the_path_of_orchestrator_run(tmp_path,
     assert saved["suite"]["mode"] == "distributed"
     (run,) = saved["runs"]
     assert run["mode"] == "distributed" and run["world_status"] == 0 and run["robots"] == 2
-    assert json.loads((Path(run["dir"]) / "run.json").read_text())["mode"] == "distributed"
+    info = json.loads((Path(run["dir"]) / "run.json").read_text())
+    assert info["mode"] == "distributed" and info["versions"]["osqp"]
