@@ -15,7 +15,9 @@ bootstrap interval over the pairs:
 
 A difference whose interval excludes 0 is `lower` or `higher`; otherwise `within noise`.
 With fewer than `MIN_PAIRS` pairs no interval is given (`too few`). Runs without a partner
-(a seed one side lacks, a partial run) are counted and left out.
+(a seed the other side lacks, a seedless run, a key twice on one side) are counted and left
+out; `report --compare` drops partial (interrupted) runs before pairing, so a partial run's
+partner counts as unpaired and the partial run itself does not.
 """
 
 from __future__ import annotations
