@@ -93,6 +93,10 @@ class Mechanisms:
             reference to one bounded turn on the spot (`agent.planning.turning`): the
             MPC, linearised about its prediction, finds no gain in turning a hemmed-in
             robot. Needs `liveness` (its progress monitor says when).
+        goal_guard: a robot parked at its goal keeps watch on the moving obstacles it
+            senses and steps aside to a refuge beside the track of one that would pass
+            within the inflated radius L, returning once it has passed
+            (`agent.planning.goal_guard`): a blind obstacle otherwise runs it down.
         primary_hold_s: with `commitment`, how much later than the most imminent threat's
             the TCPA of last cycle's first threat may be for it to stay first [s].
     """
@@ -113,13 +117,15 @@ class Mechanisms:
     routing: bool = False
     liveness: LivenessConfig | None = None
     turn_when_stuck: bool = False
+    goal_guard: bool = False
     primary_hold_s: float = PRIMARY_HOLD_S
 
 
 PAPER_MECHANISMS = Mechanisms()
 """The paper's cycle (the ``paper`` profile, every planner)."""
 
-IFP_MECHANISMS = Mechanisms(direct_leg_check=True, goal_tcpa_filter=True, clamp_heading=True)
+IFP_MECHANISMS = Mechanisms(direct_leg_check=True, goal_tcpa_filter=True, clamp_heading=True,
+                            goal_guard=True)
 """ifp in the default profile."""
 
 EIFP_MECHANISMS = dataclasses.replace(IFP_MECHANISMS, encounter_rules=True)

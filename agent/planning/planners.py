@@ -44,6 +44,7 @@ import numpy as np
 from agent.core.config import PLANNER_NAMES, PlannerConfig, RobotLimits
 from agent.core.types import Observation, PlanDebug, PlanResult, PlanStatus, Side, StageTimes
 from agent.planning.estimation import ESTIMATION_WINDOW_S
+from agent.planning.goal_guard import WATCH_FROM_M, refuge_point
 from agent.planning.guidance import RouteGuide
 from agent.planning.liveness import Strategy, squeezed
 from agent.planning.mechanisms import Mechanisms
@@ -219,6 +220,8 @@ class ViaPointPlanner:
         self.guide: RouteGuide | None = None
         self._turn: Turn | None = None  # a committed turn on the spot (`turning`)
         self.turns = 0
+        self._static = static_map
+        self._parked = False  # reached its goal once: `goal_guard` watches it from then
         if self.mech.routing or self.mech.liveness is not None:
             self.guide = RouteGuide(
                 static_map if static_map is not None else StaticMap.empty(),
@@ -234,6 +237,7 @@ class ViaPointPlanner:
         for tracker in self._trackers.values():
             tracker.reset()
         self._turn = None
+        self._parked = False
 
     def _mpc(self, observation: Observation) -> MpcTracker:
         from agent.planning.mpc import MpcTracker
@@ -249,10 +253,17 @@ class ViaPointPlanner:
         """One cycle: threats and via-points, spline, then MPC or the tracking law."""
         clock = self._timer
         t0 = clock()
+        cfg = self.config
         done = arrived_result(observation, self.control_period_s)
+        self._parked |= done is not None
+        refuge = self._refuge(observation)
+        if refuge is not None:  # step aside from a moving obstacle (`goal_guard`)
+            observation = replace(observation, goal_m=refuge, goal_distance_m=None)
+            done = arrived_result(observation, self.control_period_s)
+            if done is not None:
+                done = replace(done, status=PlanStatus.STAND_CLEAR)
         if done is not None:
             return replace(done, times=StageTimes(total_ms=(clock() - t0) * 1e3))
-        cfg = self.config
         ego = observation.ego
         limits = observation.limits
         # Bound the work: the others within the sensing radius, at most max_neighbors,
@@ -310,6 +321,8 @@ class ViaPointPlanner:
                 max(LOOKAHEAD_S * limits.v_max_mps, 0.3), limits, HEADING_GAIN,
                 last_command=last, dt_s=self.control_period_s,
             )
+        if refuge is not None and status == PlanStatus.OK:
+            status = PlanStatus.STAND_CLEAR
         t3 = clock()
         times = StageTimes(
             threats_ms=via.threats_s * 1e3,
@@ -334,6 +347,19 @@ class ViaPointPlanner:
             resolved_id=via.resolved_id, threats=via.threats, times=times,
             solver_iterations=int(iterations), debug=debug,
         )
+
+    def _refuge(self, observation: Observation) -> np.ndarray | None:
+        """Where a robot that has arrived, or is about to, stands clear of a moving
+        obstacle (`Mechanisms.goal_guard`, `agent.planning.goal_guard`); None: at its goal."""
+        if not (self.mech.goal_guard and len(observation.others)):
+            return None
+        ego, goal = observation.ego, observation.goal_m
+        if not (self._parked or math.hypot(ego.x_m - goal[0], ego.y_m - goal[1])
+                <= WATCH_FROM_M):
+            return None
+        cfg = self.config
+        return refuge_point(observation.goal_m, observation.radius_m, observation.others,
+                            cfg.safety.d_safety_m, cfg.threats.t_max_s, self._static)
 
     def _guide(self, observation: Observation, now_s: float
                ) -> tuple[Observation, np.ndarray | None, bool] | None:

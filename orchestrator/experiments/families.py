@@ -374,6 +374,42 @@ def random_density(n: int, rng: np.random.Generator, density: str) -> Scenario:
                            name=f"random_{density}_{n}")
 
 
+MOVERS = 4
+"""Moving obstacles of the `movers` family."""
+MOVER_SPEEDS_MPS = (0.4, 1.0)
+"""Range of the `movers` obstacles' speeds [m/s]."""
+MOVER_RADIUS_M = 0.6
+"""Radius of the `movers` obstacles [m]."""
+
+
+def movers(n: int, rng: np.random.Generator) -> Scenario:
+    """`random_medium`'s robots, with `MOVERS` blind obstacles crossing their square.
+
+    The obstacles keep a constant velocity whatever happens (a scenario obstacle does
+    not plan): each enters from a side edge (alternately left and right) at the start,
+    on a lane across the square (lanes at 1/8, 3/8, 5/8 and 7/8 of the side, moved by up
+    to an eighth of it), at a seeded speed in 0.4-1.0 m/s and a heading within 0.15 rad
+    of straight across. They cross the goals of robots that have arrived: the scene for
+    `agent.planning.goal_guard`.
+    """
+    base = random_density(n, rng, "medium")
+    half_m = max(max(abs(c) for r in base.robots for c in (*r.start[:2], *r.goal)), 1.0)
+    obstacles = []
+    for k in range(MOVERS):
+        direction = 1.0 if k % 2 else -1.0
+        lane = half_m * (-1.0 + (2 * k + 1) / MOVERS + float(rng.uniform(-0.25, 0.25)) / 2.0)
+        speed = float(rng.uniform(*MOVER_SPEEDS_MPS))
+        angle = float(rng.uniform(-0.15, 0.15))
+        obstacles.append(ObstacleSpec(
+            id=-(k + 1), center=(round(-direction * (half_m + 1.0), 3), round(lane, 3)),
+            radius_m=MOVER_RADIUS_M,
+            velocity=(round(direction * speed * math.cos(angle), 3),
+                      round(speed * math.sin(angle), 3))))
+    return make_scenario(f"movers_{n}", f"{base.description}, {MOVERS} obstacles crossing "
+                         f"it at 0.4-1.0 m/s", base.robots, obstacles=obstacles,
+                         time_limit_s=base.time_limit_s)
+
+
 OBSTACLE_RADII_M = (1.0, 2.0)
 """Range of the static obstacles' radii in `obstacles_circle`."""
 OBSTACLE_GAP_M = 2.5
@@ -434,6 +470,7 @@ FAMILIES: dict[str, tuple[int, str]] = {
     "random_medium": (20, "N seeded random starts and goals, 2.5 robots per 100 m^2"),
     "random_dense": (20, "N seeded random starts and goals, 5 robots per 100 m^2"),
     "obstacles_circle": (12, "antipodal circle (radius >= 12 m) around 3-5 static obstacles"),
+    "movers": (20, "random_medium's N robots, 4 blind obstacles crossing at 0.4-1.0 m/s"),
     # The liveness families (issue 39); generators: `liveness_families.GENERATORS`.
     "wall_door": (12, "two groups of N/2 swap sides through one 4.4 m doorway in a disc wall"),
     "wall_doors": (16, "two groups of N/2 swap sides of a disc wall with two doorways"),
@@ -461,6 +498,8 @@ def _family(name: str, n: int, rng: np.random.Generator) -> Scenario:
         return circle_mixed(n, rng)
     if name.startswith("crossing_"):
         return crossing(n, rng, flows=2, angle_deg=float(name.removeprefix("crossing_")))
+    if name == "movers":
+        return movers(n, rng)
     if name == "swap_pairs":
         return swap_pairs(n, rng)
     if name == "swap_grid":

@@ -80,3 +80,36 @@ def test_dense_circle_with_a_small_neighbour_cap_has_no_contact(tmp_path):
     dist = np.linalg.norm(xy[:, :, None, :] - xy[:, None, :, :], axis=-1)
     in_range = (dist <= scenario.planner_config.threats.sensing_radius_m).sum(axis=2) - 1
     assert in_range.max() > cap
+
+
+@pytest.mark.parametrize("planner", ["eifp", "eifp-mpc"])
+def test_a_parked_robot_steps_aside_from_a_moving_obstacle_and_returns(tmp_path, planner):
+    """`goal_guard`: robot 0 parks at the origin after 6 m; a blind obstacle crosses the
+    origin at 0.6 m/s about 20 s later, while robot 1 is still on its way far off. Without
+    the guard the obstacle runs robot 0 down where it stands; with it robot 0 steps aside
+    and is back at its goal when the run ends."""
+    from dataclasses import replace
+
+    import numpy as np
+
+    from orchestrator.analysis.rundir import read_run_dir
+    from world.scenario_file import scenario_from_dict
+
+    scenario = scenario_from_dict({
+        "name": "mover_through_a_goal", "time_limit": 70.0, "goal_tolerance": 0.25,
+        "defaults": {"radius": 0.5, "v_max": 1.1, "planner": planner},
+        "robots": [{"id": 0, "start": [-6.0, 0.0, 0.0], "goal": [0.0, 0.0]},
+                   {"id": 1, "start": [-20.0, 20.0, 0.0], "goal": [25.0, 20.0]}],
+        "obstacles": [{"center": [0.1, -14.0], "radius": 0.6, "velocity": [0.0, 0.6]}],
+    }, "test")
+    on = run_lockstep(scenario, tmp_path / "on").metrics
+    ablated = replace(scenario, planner_config=scenario.planner_config.with_settings(
+        without="goal_guard"))
+    off = run_lockstep(ablated, tmp_path / "off").metrics
+    assert off.contacts >= 1  # the scene does run the parked robot down without the guard
+    assert on.success and on.contacts == 0 and on.min_gap_m > 0.0, on
+    traj = read_run_dir(tmp_path / "on").trajectory
+    last = traj.pose[-1, list(traj.robot_ids).index(0), :2]
+    assert np.hypot(*last) < 0.25  # back at its goal
+    stepped = traj.pose[:, list(traj.robot_ids).index(0), :2]
+    assert np.abs(stepped[:, 0]).max() > 1.0  # and it did leave it, sideways of the track

@@ -284,6 +284,27 @@ def test_a_robot_at_its_goal_stops_without_estimating_the_others(planner: str) -
     assert len(ctrl.last_observation.others) == 0
 
 
+def test_a_parked_robot_watches_the_others_only_while_a_moving_obstacle_is_in_view() -> None:
+    """Obstacle ids the static map does not list move (`goal_guard`): with one in the
+    poses a parked robot estimates the others; with only mapped obstacles it does not."""
+    from agent.planning.routing import StaticMap
+
+    static = StaticMap(np.array([[30.0, 5.0]]), np.array([RADIUS_M]), np.array([-1]))
+    ctrl = RobotController(spec("eifp-mpc", start=(20.0, 0.0, 0.0)), PlannerConfig(), TOL_M,
+                           static_map=static)
+    ctrl.observe(snap(0.0, 0, {0: (20.0, 0.0, 0.0), -1: (30.0, 5.0, 0.0)}))
+    assert not ctrl.movers_in_view
+    ctrl.plan(0.0)
+    assert len(ctrl.last_observation.others) == 0
+    for k in range(1, 4):  # obstacle -2 crosses the goal from below at 1 m/s
+        ctrl.observe(snap(0.1 * k, 5 * k, {0: (20.0, 0.0, 0.0), -1: (30.0, 5.0, 0.0),
+                                          -2: (20.0, -4.0 + 0.1 * k, 0.0)}))
+    assert ctrl.movers_in_view
+    result = ctrl.plan(0.3)
+    assert -2 in ctrl.last_observation.others.ids.tolist()
+    assert result.status == PlanStatus.STAND_CLEAR
+
+
 @pytest.mark.parametrize("planner", PLANNER_NAMES)
 def test_a_robot_away_from_its_goal_plans_on_the_full_observation(planner: str) -> None:
     ctrl = RobotController(spec(planner), PlannerConfig(), TOL_M)

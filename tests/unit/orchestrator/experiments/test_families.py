@@ -399,3 +399,25 @@ def test_obstacles_circle_obstacles_are_inside_and_clear_of_starts_and_goals(see
     np.testing.assert_allclose(goals(s), -starts(s), atol=1e-3)
     dump_scenario(s, tmp_path / "s.yaml")  # the obstacles survive the file format
     assert load_scenario(tmp_path / "s.yaml") == s
+
+
+def test_movers_obstacles_enter_from_the_sides_and_cross_the_robots_square():
+    from agent.planning.routing import StaticMap
+
+    a = families.movers(20, np.random.default_rng(3))
+    b = families.movers(20, np.random.default_rng(3))
+    assert a == b  # seeded
+    half = max(abs(c) for r in a.robots for c in (*r.start[:2], *r.goal))
+    assert len(a.obstacles) == families.MOVERS
+    lanes = []
+    for o in a.obstacles:
+        vx, vy = o.velocity
+        speed = math.hypot(vx, vy)
+        assert families.MOVER_SPEEDS_MPS[0] <= speed <= families.MOVER_SPEEDS_MPS[1] + 1e-3
+        assert abs(o.center[0]) > half  # outside the square at the start
+        assert vx * o.center[0] < 0.0  # heading across it
+        assert abs(o.center[1]) < half
+        lanes.append(o.center[1])
+    assert sorted(lanes) == lanes  # one lane per quarter, bottom to top
+    # the planners see them as moving: not on the static map every robot is given
+    assert len(StaticMap.of_obstacles(a.obstacles).radius_m) == 0
