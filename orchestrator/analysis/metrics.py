@@ -6,7 +6,11 @@ obstacles). Definitions (SI units; "run" of a robot = from t = 0 to its arrival,
 end of the trajectory if it never arrives):
 
 - **arrival**: the first sample at which the robot's centre is within the goal tolerance
-  of its goal, at t <= time limit (the world's rule). `time_to_goal_s` is that t.
+  of its goal, at t <= time limit (the world's rule). `time_to_goal_s` is that t. The
+  tolerance is widened by `ARRIVAL_RECORD_EPS_M`: positions are recorded to 10 um, and a
+  robot the world found exactly at the tolerance (arriving on the last tick of a run that
+  ended as all arrived) was otherwise 7 um outside it in the record, a success counted as
+  a miss.
 - **contact**: two discs (robot-robot or robot-obstacle) overlapping by more than 1 mm
   (distance < r_i + r_j - 1 mm) at a sample. `contacts` counts contact *episodes*: a pair
   that comes into contact and stays in contact over consecutive samples counts once.
@@ -81,6 +85,9 @@ from orchestrator.analysis.turns import (
 CONTACT_OVERLAP_M = 1.0e-3
 NOT_PLANNING_STATUSES = frozenset({"arrived", "stale"})
 _TIME_EPS_S = 1.0e-6
+ARRIVAL_RECORD_EPS_M = 1.0e-5
+"""Widening of the goal tolerance for arrival in a recorded trajectory [m]: more than the
+rounding of a recorded position (half of 1e-5 m per axis, 7.1 um in all)."""
 _CHUNK_TICKS = 2048
 
 
@@ -305,7 +312,8 @@ def arrival_index(t_s: np.ndarray, xy_m: np.ndarray, goal_m: np.ndarray, toleran
         t_s: (T,); xy_m: (T, 2); goal_m: (2,).
     """
     dist = np.hypot(*(np.asarray(xy_m) - np.asarray(goal_m)).T)
-    hit = np.flatnonzero((dist <= tolerance_m) & (np.asarray(t_s) <= time_limit_s + _TIME_EPS_S))
+    hit = np.flatnonzero((dist <= tolerance_m + ARRIVAL_RECORD_EPS_M)
+                         & (np.asarray(t_s) <= time_limit_s + _TIME_EPS_S))
     return int(hit[0]) if hit.size else None
 
 

@@ -12,9 +12,11 @@ import pytest
 from agent.core.config import PlannerConfig, RobotLimits
 from agent.core.scenario import ObstacleSpec, RobotSpec, Scenario
 from orchestrator.analysis.metrics import (
+    ARRIVAL_RECORD_EPS_M,
     Commands,
     RunSpec,
     Trajectory,
+    arrival_index,
     compute_metrics,
     deadline_misses,
     side_flips,
@@ -327,6 +329,19 @@ def test_arrival_after_the_time_limit_is_a_time_out():
     assert m.arrived == 0 and not m.success
     assert m.per_robot[0].time_to_goal_s is None and m.time_ratio_mean is None
     assert m.per_robot[0].path_length_m == pytest.approx(12.0)  # the whole run
+
+
+def test_a_robot_the_world_found_at_the_tolerance_has_arrived_in_the_record():
+    """The world stopped a run as all arrived with robot 2 at 0.25 m of its goal (16.2, 0)
+    on the last tick; recorded to 10 um, its position lies 7 um outside the tolerance."""
+    recorded = np.array([[15.5, -0.3], [15.99686, -0.14572]])
+    assert math.hypot(15.99686 - 16.2, -0.14572) > 0.25  # the rounding's doing
+    t = np.array([74.08, 74.10])
+    assert arrival_index(t, recorded, np.array([16.2, 0.0]), 0.25, 150.0) == 1
+    # A millimetre out is still out.
+    outside = recorded + [[0.0, 0.0], [-0.001, 0.0]]
+    assert arrival_index(t, outside, np.array([16.2, 0.0]), 0.25, 150.0) is None
+    assert ARRIVAL_RECORD_EPS_M < 1e-4
 
 
 def test_oscillations_counted_per_robot_until_arrival():
