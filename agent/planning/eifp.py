@@ -48,7 +48,6 @@ Choices the paper leaves open:
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -57,7 +56,7 @@ import numpy as np
 
 from agent.core.config import PlannerConfig
 from agent.core.types import Observation, Others, PlanStatus, Side
-from agent.planning.encounters import Role, encounter_roles, follow_cap_mps, update_role_memory
+from agent.planning.encounters import Role, encounter_roles, update_role_memory
 from agent.planning.ifp import (
     Assessment,
     CandidateSelector,
@@ -356,10 +355,10 @@ def _plan_eifp(
     encounters = None
     decisions = Decisions(primary_id=primary_id, escape_id=escape_id, previous=previous)
     if role_memory is not None and len(assessment.others):
-        encounters = assess_encounters(observation, assessment, role_memory, mech.follow)
+        encounters = assess_encounters(observation, assessment, role_memory)
         # A give-way manoeuvre is kept until the other is passed, or it would be undone as
         # soon as it works (the swerve pushes DCPA past D_thresh).
-        decisions = Decisions(ignored_ids=encounters.stand_on_ids | encounters.follow_ids,
+        decisions = Decisions(ignored_ids=encounters.stand_on_ids,
                               committed_ids=encounters.give_way_ids & frozenset(memory),
                               primary_id=primary_id, escape_id=escape_id, previous=previous)
     select = cost_selector(observation, config, assessment.others, memory,
@@ -367,11 +366,6 @@ def _plan_eifp(
                            RIGHT_HAND_MARGIN if mech.encounter_rules else 0.0)
     threats_s = timer() - t_start if timer is not None else 0.0
     plan = plan_cycle(observation, config, assessment, select, decisions, mech, threats_s)
-    if encounters is not None and encounters.follow_ids and plan.status == PlanStatus.OK:
-        leaders = np.isin(assessment.others.ids, list(encounters.follow_ids))
-        cap = follow_cap_mps(observation.ego.heading_rad, assessment.position_m,
-                             assessment.others, assessment.radius_m, leaders)
-        plan = dataclasses.replace(plan, speed_cap_mps=cap)
     if role_memory is None:
         return plan, None
     return plan, (encounters.memory if encounters is not None else {})
@@ -385,20 +379,17 @@ class Encounters:
         give_way_ids: others resolved on their RIGHT tangent.
         stand_on_ids: others left to give way themselves.
         memory: the role memory to carry to the next cycle.
-        follow_ids: leaders followed, not resolved (`Mechanisms.follow`).
     """
 
     give_way_ids: frozenset[int]
     stand_on_ids: frozenset[int]
     memory: dict[int, Role]
-    follow_ids: frozenset[int] = frozenset()
 
 
 def assess_encounters(
     observation: Observation,
     assessment: Assessment,
     memory: Mapping[int, Role],
-    follow: bool = False,
 ) -> Encounters:
     """Classify the encounters of this cycle (see `agent.planning.encounters`).
 
@@ -411,8 +402,7 @@ def assess_encounters(
     ego = observation.ego
     others = assessment.others
     roles = encounter_roles(ego.heading_rad, ego.v_mps, assessment.position_m, others,
-                            assessment.tcpa_s, assessment.dcpa_m, assessment.radius_m, memory,
-                            follow=follow)
+                            assessment.tcpa_s, assessment.dcpa_m, assessment.radius_m, memory)
     threat = np.zeros(len(others), dtype=bool)
     threat[assessment.index] = True
     ids = others.ids
@@ -420,7 +410,6 @@ def assess_encounters(
         give_way_ids=frozenset(ids[roles == int(Role.GIVE_WAY)].tolist()),
         stand_on_ids=frozenset(ids[roles == int(Role.STAND_ON)].tolist()),
         memory=update_role_memory(others, roles, assessment.tcpa_s, threat, memory),
-        follow_ids=frozenset(ids[roles == int(Role.FOLLOW)].tolist()),
     )
 
 

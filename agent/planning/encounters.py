@@ -70,22 +70,6 @@ class Role(enum.IntEnum):
     RESOLVE = 0  # an obstacle, a slow robot, or one we overtake: the ordinary eIFP choice
     GIVE_WAY = 1  # resolve it, on the RIGHT tangent
     STAND_ON = 2  # leave it to the other (not a threat) unless imminent
-    FOLLOW = 3  # a leader on our course: not resolved, followed at its speed (`follow_cap`)
-
-
-FOLLOW_MIN_MPS = 0.4
-"""With `Mechanisms.follow`, a robot ahead on our course moving at least this fast along
-it is followed, not overtaken; a slower one is passed like an obstacle [m/s]."""
-
-FOLLOW_COURSE_RAD = math.radians(40.0)
-"""With `Mechanisms.follow`, only a leader whose course is within this of ours is
-followed; one converging more steeply is overtaken (or crossed) as before."""
-
-FOLLOW_GAP_M = 0.3
-"""A follower keeps this much beyond the inflated radius L behind its leader [m]."""
-
-FOLLOW_HEADWAY_S = 1.0
-"""A follower closes a gap larger than `FOLLOW_GAP_M` over this time [s]."""
 
 
 def classify(
@@ -151,7 +135,6 @@ def encounter_roles(
     inflated_m: np.ndarray,
     memory: Mapping[int, Role],
     emergency_s: float = STAND_ON_EMERGENCY_S,
-    follow: bool = False,
 ) -> np.ndarray:
     """Roles for this cycle: remembered ones kept, new ones classified, the safety net applied.
 
@@ -162,8 +145,6 @@ def encounter_roles(
         inflated_m: (K,) inflated radii L of each pair (Eq. 8).
         memory: id -> role from earlier cycles (see `update_role_memory`).
         emergency_s: a stand-on other with TCPA below this and DCPA < L is given way to.
-        follow: a moving robot ahead on our course that would come inside L is followed
-            (`Role.FOLLOW`, never remembered) instead of overtaken (`Mechanisms.follow`).
 
     Returns:
         (K,) `Role` values (int).
@@ -176,12 +157,6 @@ def encounter_roles(
         kept = memory.get(rid)
         if kept is not None:
             roles[k] = int(kept)
-    if follow:
-        along = others.velocity_mps @ np.array([math.cos(heading_rad), math.sin(heading_rad)])
-        speed = np.hypot(*others.velocity_mps.T)
-        lead = overtaken & (dcpa_m < inflated_m) & (along >= FOLLOW_MIN_MPS) & (
-            along >= speed * math.cos(FOLLOW_COURSE_RAD))
-        roles[lead & (roles == int(Role.RESOLVE))] = int(Role.FOLLOW)
     imminent = (tcpa_s > 0.0) & (tcpa_s < emergency_s) & (dcpa_m < inflated_m)
     roles[(roles == int(Role.STAND_ON)) & imminent] = int(Role.GIVE_WAY)
     return roles
@@ -204,24 +179,6 @@ def update_role_memory(others: Others, roles: np.ndarray, tcpa_s: np.ndarray,
     """
     ids = others.ids.tolist()
     remembered = np.array([rid in memory for rid in ids], dtype=bool)
-    keep = (tcpa_s > 0.0) & (threat | remembered) & (roles != int(Role.FOLLOW))
+    keep = (tcpa_s > 0.0) & (threat | remembered)
     role = roles.tolist()
     return {ids[k]: Role(role[k]) for k in keep.nonzero()[0].tolist()}
-
-
-def follow_cap_mps(heading_rad: float, position_m: np.ndarray, others: Others,
-                   inflated_m: np.ndarray, leaders: np.ndarray) -> float:
-    """The cruise speed that keeps `FOLLOW_GAP_M` beyond L behind every leader: each
-    leader's speed along our heading plus the gap in excess of that, closed over
-    `FOLLOW_HEADWAY_S`; inf without leaders.
-
-    Args:
-        heading_rad, position_m: own heading and position.
-        others: the K others; inflated_m: (K,) their L; leaders: (K,) bool, followed.
-    """
-    if not leaders.any():
-        return math.inf
-    u = np.array([math.cos(heading_rad), math.sin(heading_rad)])
-    along = others.velocity_mps[leaders] @ u
-    gap = np.hypot(*(others.position_m[leaders] - position_m).T) - inflated_m[leaders]
-    return float(np.maximum(along + (gap - FOLLOW_GAP_M) / FOLLOW_HEADWAY_S, 0.0).min())

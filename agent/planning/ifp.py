@@ -147,8 +147,6 @@ class ViaPlan:
         threats: the threats of Eq. (6) at the measured velocity, ranked by TCPA.
         resolved_sides: (other id, side) for every via-point, in travel order.
         threats_s: wall time of the threat assessment, when a timer was given (else 0).
-        speed_cap_mps: the reference's cruise speed may not exceed this (eIFP's following
-            of a leader, `Mechanisms.follow`); inf: the robot's top speed.
     """
 
     status: PlanStatus
@@ -159,7 +157,6 @@ class ViaPlan:
     threats: tuple[Threat, ...] = ()
     resolved_sides: tuple[tuple[int, Side], ...] = ()
     threats_s: float = 0.0
-    speed_cap_mps: float = math.inf
 
 
 def select_earliest(

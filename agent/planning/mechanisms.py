@@ -97,9 +97,6 @@ class Mechanisms:
             senses and steps aside to a refuge beside the track of one that would pass
             within the inflated radius L, returning once it has passed
             (`agent.planning.goal_guard`): a blind obstacle otherwise runs it down.
-        follow: with `encounter_rules`, a moving robot ahead on the robot's course that
-            would come inside L is followed at its speed (the reference's cruise speed
-            capped, `encounters.follow_cap_mps`) instead of overtaken by a swerve.
         primary_hold_s: with `commitment`, how much later than the most imminent threat's
             the TCPA of last cycle's first threat may be for it to stay first [s].
     """
@@ -121,7 +118,6 @@ class Mechanisms:
     liveness: LivenessConfig | None = None
     turn_when_stuck: bool = False
     goal_guard: bool = False
-    follow: bool = False
     primary_hold_s: float = PRIMARY_HOLD_S
 
 
@@ -140,7 +136,7 @@ EIFP_MPC_MECHANISMS = dataclasses.replace(
     EIFP_MECHANISMS, inflated_threats=True, commitment=True, via_margin_m=ARC_VIA_MARGIN_M,
     escape_band_m=ESCAPE_BAND_M, escape_all=True, horizon_via_points=True,
     lines_arcs=True, clamp_heading=False, braking_guard=True, keep_plan=True, routing=True,
-    liveness=LivenessConfig(), turn_when_stuck=True, follow=True)
+    liveness=LivenessConfig(), turn_when_stuck=True)
 """eifp-mpc in the default profile: every mechanism."""
 
 

@@ -178,10 +178,6 @@ def _xy(x_m: np.ndarray, y_m: np.ndarray) -> np.ndarray:
     return xy
 
 
-MIN_CRUISE_MPS = 0.01
-"""The reference's cruise speed is at least this (`build_reference` needs one > 0) [m/s]."""
-
-
 class ViaPointPlanner:
     """IFP, eIFP and eIFP-MPC: via-points -> cubic spline -> tracker.
 
@@ -292,8 +288,7 @@ class ViaPointPlanner:
         mpc_cfg, mech = cfg.mpc, self.mech
         moving = ego.v_mps >= CLAMP_MIN_SPEED_MPS
         ref = build_reference(
-            via.waypoints_m, ego.heading_rad,
-            min(limits.v_max_mps, max(via.speed_cap_mps, MIN_CRUISE_MPS)), limits.accel_max_mps2,
+            via.waypoints_m, ego.heading_rad, limits.v_max_mps, limits.accel_max_mps2,
             mpc_cfg.dt_s, mpc_cfg.horizon_steps, v_start_mps=ego.v_mps,
             clamp_heading=mech.clamp_heading and moving,
             lines_arcs=mech.lines_arcs,

@@ -378,26 +378,3 @@ def test_each_planner_runs_its_mechanisms():
     assert make_planner("eifp-mpc", CFG)._selector.mech == EIFP_MPC_MECHANISMS
     assert make_planner("eifp", CFG)._selector.mech == EIFP_MECHANISMS
     assert make_planner("eifp-mpc", paper_config())._selector.mech == PAPER_MECHANISMS
-
-
-def test_a_slower_leader_on_the_course_is_followed_not_overtaken_with_follow():
-    """`Mechanisms.follow`: a robot 3 m ahead on our line at 0.6 m/s (we at 1.0 m/s) is not
-    resolved by a via-point; the plan goes straight on and caps the cruise speed behind it.
-    Without it the leader is overtaken round a tangent."""
-    from dataclasses import replace
-
-    from agent.planning.eifp import EifpSelector
-    from agent.planning.encounters import FOLLOW_GAP_M, FOLLOW_HEADWAY_S
-    from agent.planning.mechanisms import EIFP_MPC_MECHANISMS
-
-    leader = others([(3.0, 0.05)], vel=[(0.6, 0.0)])
-    plans = {}
-    for follow in (True, False):
-        selector = EifpSelector(CFG, replace(EIFP_MPC_MECHANISMS, follow=follow))
-        plans[follow] = selector.select(observe(leader))
-    followed, overtaken = plans[True], plans[False]
-    assert followed.status is PlanStatus.OK and followed.waypoints_m.shape[0] == 2
-    gap = math.hypot(3.0, 0.05) - (2 * R + CFG.safety.d_safety_m)
-    assert followed.speed_cap_mps == pytest.approx(0.6 + (gap - FOLLOW_GAP_M)
-                                                   / FOLLOW_HEADWAY_S)
-    assert overtaken.waypoints_m.shape[0] >= 3 and overtaken.speed_cap_mps == math.inf

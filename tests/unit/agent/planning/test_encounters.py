@@ -7,14 +7,10 @@ import pytest
 
 from agent.core.types import Others
 from agent.planning.encounters import (
-    FOLLOW_GAP_M,
-    FOLLOW_HEADWAY_S,
-    FOLLOW_MIN_MPS,
     MOVING_MPS,
     Role,
     classify,
     encounter_roles,
-    follow_cap_mps,
     update_role_memory,
 )
 
@@ -136,38 +132,3 @@ def test_a_denormal_speed_is_a_parked_robot_without_overflow():
     roles, overtaken = classify(0.0, V, np.zeros(2), two)
     assert [Role(int(r)) for r in roles] == [Role.GIVE_WAY, Role.RESOLVE]
     assert not overtaken.any()
-
-
-def test_a_leader_on_our_course_that_would_come_inside_l_is_followed_when_asked():
-    def followed(vel, dcpa, memory=None, follow=True):
-        o = one((3.0, 0.3), vel)
-        return Role(int(encounter_roles(0.0, V, np.zeros(2), o, np.array([4.0]),
-                                        np.array([dcpa]), np.array([1.3]), memory or {},
-                                        follow=follow)[0]))
-
-    slower = heading_vel(0.1, 0.7)
-    assert followed(slower, 0.5) is Role.FOLLOW
-    assert followed(slower, 0.5, follow=False) is Role.RESOLVE  # overtaken, the default
-    assert followed(slower, 2.0) is Role.STAND_ON  # a stream neighbour clear of L
-    crawling = heading_vel(0.0, FOLLOW_MIN_MPS - 0.05)
-    assert followed(crawling, 0.5) is Role.RESOLVE  # too slow to follow: passed
-    # A role decided earlier (a give-way) is not overridden by following.
-    assert followed(slower, 0.5, memory={7: Role.GIVE_WAY}) is Role.GIVE_WAY
-    # Following is decided afresh every cycle: never remembered.
-    roles = np.array([int(Role.FOLLOW)])
-    assert update_role_memory(one((3.0, 0.3), slower), roles, np.array([4.0]),
-                              np.array([True]), {}) == {}
-
-
-def test_follow_cap_keeps_the_gap_behind_the_leader():
-    leader = one((4.0, 0.0), (0.6, 0.0))
-    inflated = np.array([1.3])
-    # Gap 4 - 1.3 = 2.7 m, FOLLOW_GAP_M short of it closed over the headway.
-    want = 0.6 + (2.7 - FOLLOW_GAP_M) / FOLLOW_HEADWAY_S
-    assert follow_cap_mps(0.0, np.zeros(2), leader, inflated, np.array([True])) == \
-        pytest.approx(want)
-    close = one((1.5, 0.0), (0.6, 0.0))  # inside the gap: slower than the leader
-    assert follow_cap_mps(0.0, np.zeros(2), close, inflated, np.array([True])) < 0.6
-    touching = one((1.0, 0.0), (0.1, 0.0))
-    assert follow_cap_mps(0.0, np.zeros(2), touching, inflated, np.array([True])) == 0.0
-    assert follow_cap_mps(0.0, np.zeros(2), leader, inflated, np.array([False])) == math.inf
