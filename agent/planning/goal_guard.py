@@ -41,31 +41,30 @@ import numpy as np
 from agent.core.types import Others
 from agent.planning.encounters import MOVING_MPS
 from agent.planning.routing import StaticMap
+from agent.planning.threats import tcpa_dcpa
 
 WATCH_FROM_M = 3.0
 """A robot watches its goal from this far out, not only once parked [m]: one that arrives
 just before an obstacle crosses its goal cannot step aside in time (a robot arriving 0.06 s
 before a 1 m/s obstacle reached it, on the scenes above)."""
 
+_AT_REST = np.zeros(2)
+
 REFUGE_MARGIN_M = 0.2
 """How far beyond the inflated radius L from an obstacle's track the refuge lies, and how
 far beyond L the obstacle must be from the goal before the robot returns [m]."""
 
 
-def _threat_time_s(point: np.ndarray, position: np.ndarray, velocity: np.ndarray,
-                   reach_m: float, horizon_s: float) -> float | None:
-    """When an obstacle on a straight course threatens `point`: 0 when it is within
-    `reach_m` now, its time of closest approach when that is within `horizon_s` and it
-    passes within `reach_m`, else None."""
-    rel = point - position
-    if math.hypot(rel[0], rel[1]) < reach_m:
-        return 0.0
-    speed2 = float(velocity @ velocity)
-    t_cpa = float(rel @ velocity) / speed2
-    if not 0.0 < t_cpa <= horizon_s:
-        return None
-    miss = rel - velocity * t_cpa
-    return t_cpa if math.hypot(miss[0], miss[1]) < reach_m else None
+def _threat_times_s(point: np.ndarray, others: Others, movers: np.ndarray,
+                    reach_m: np.ndarray, horizon_s: float) -> np.ndarray:
+    """When each of the moving obstacles `movers` threatens `point`, on a straight course:
+    0 when it is within `reach_m` now, its TCPA (Eqs. 3-5, `threats.tcpa_dcpa` against a
+    point at rest) when that is in (0, horizon_s] with DCPA < `reach_m`, else inf."""
+    position, reach = others.position_m[movers], reach_m[movers]
+    tcpa, dcpa = tcpa_dcpa(point, _AT_REST, position, others.velocity_mps[movers])
+    now = np.hypot(*(position - point).T) < reach
+    later = (tcpa > 0.0) & (tcpa <= horizon_s) & (dcpa < reach)
+    return np.where(now, 0.0, np.where(later, tcpa, math.inf))
 
 
 def refuge_point(goal_m: np.ndarray, radius_m: float, others: Others, d_safety_m: float,
@@ -89,14 +88,11 @@ def refuge_point(goal_m: np.ndarray, radius_m: float, others: Others, d_safety_m
         return None
     goal = np.asarray(goal_m, dtype=float)
     reach = radius_m + others.radius_m + d_safety_m + REFUGE_MARGIN_M
-    first, first_t = -1, math.inf
-    for k in movers.tolist():
-        t = _threat_time_s(goal, others.position_m[k], others.velocity_mps[k], reach[k],
-                           horizon_s)
-        if t is not None and t < first_t:
-            first, first_t = k, t
-    if first < 0:
+    times = _threat_times_s(goal, others, movers, reach, horizon_s)
+    if not np.isfinite(times).any():
         return None
+    pick = int(np.argmin(times))  # the most imminent (the first of equals)
+    first = int(movers[pick])
     o, u = others.position_m[first], others.velocity_mps[first]
     foot = o + u * (float((goal - o) @ u) / float(u @ u))
     off = goal - foot
@@ -104,23 +100,21 @@ def refuge_point(goal_m: np.ndarray, radius_m: float, others: Others, d_safety_m
     normal = off / gap if gap > 1e-9 else np.array([u[1], -u[0]]) / speed[first]
     near: np.ndarray = foot + normal * reach[first]
     far: np.ndarray = foot - normal * reach[first]
+    rest = np.delete(movers, pick)
     for candidate in (near, far):
-        if _clear(candidate, first, movers, others, reach, horizon_s, radius_m, d_safety_m,
-                  static):
+        if _clear(candidate, rest, others, reach, horizon_s, radius_m, d_safety_m, static):
             return candidate
     return near
 
 
-def _clear(point: np.ndarray, first: int, movers: np.ndarray, others: Others,
-           reach: np.ndarray, horizon_s: float, radius_m: float, d_safety_m: float,
+def _clear(point: np.ndarray, movers: np.ndarray, others: Others, reach: np.ndarray,
+           horizon_s: float, radius_m: float, d_safety_m: float,
            static: StaticMap | None) -> bool:
     """Whether a refuge is outside every static disc's inflated radius and out of reach
-    of every moving obstacle but the one it is for."""
+    of every moving obstacle in `movers` (all but the one it is for)."""
     if static is not None and len(static.radius_m):
         gaps = np.hypot(*(static.center_m - point).T) - static.radius_m
         if (gaps < radius_m + d_safety_m).any():
             return False
-    return all(
-        _threat_time_s(point, others.position_m[k], others.velocity_mps[k], reach[k],
-                       horizon_s) is None
-        for k in movers.tolist() if k != first)
+    return bool(movers.size == 0 or np.isinf(
+        _threat_times_s(point, others, movers, reach, horizon_s)).all())
