@@ -431,8 +431,6 @@ def test_horizon_via_points_drop_far_candidates_and_resolve_the_next_threat():
 
 
 def test_mechanisms_follow_the_planner_and_the_profile():
-    from dataclasses import replace
-
     from agent.core.config import paper_config
     from agent.planning.mechanisms import PAPER_MECHANISMS, Mechanisms, mechanisms
 
@@ -442,11 +440,9 @@ def test_mechanisms_follow_the_planner_and_the_profile():
     mpc = mechanisms("eifp-mpc", CFG)
     assert mpc.inflated_threats and mpc.commitment and mpc.horizon_via_points
     assert mpc.lines_arcs and mpc.encounter_rules and mpc.escape_band_m > 0.0
-    assert mpc.keep_plan and mpc.hold_course
+    assert mpc.keep_plan
     eifp = mechanisms("eifp", CFG)
     assert eifp.encounter_rules and not eifp.lines_arcs and not eifp.commitment
-    assert not eifp.hold_course
-    assert not mechanisms("eifp-mpc", replace(CFG, without="hold_course")).hold_course
     ifp_ = mechanisms("ifp", CFG)
     assert ifp_.direct_leg_check and ifp_.goal_tcpa_filter and not ifp_.encounter_rules
 
