@@ -66,8 +66,6 @@ import numpy as np
 
 from agent.core.config import PlannerConfig
 from agent.core.types import Observation, Others, PlanStatus, Side, Threat
-from agent.planning.course_hold import MIN_SPEED_MPS as COURSE_HOLD_MIN_SPEED_MPS
-from agent.planning.course_hold import held_waypoints
 from agent.planning.kept_plan import kept_waypoints
 from agent.planning.mechanisms import PAPER_MECHANISMS, Mechanisms, mechanisms
 from agent.planning.threats import (
@@ -380,35 +378,12 @@ def plan_cycle(
         # The paper declares threats by Eq. (6) alone: none, so the plan is [P, goal].
         return direct
     iterate_legs(world, legs, assessment, clearance, t_max_s, config.reference.max_depth)
-    plan = None
     if mech.keep_plan:
-        plan = keep_previous(decisions.previous, legs.points, assessment, clearance, t_max_s,
+        kept = keep_previous(decisions.previous, legs.points, assessment, clearance, t_max_s,
                              threats, threats_s)
-    if plan is None:
-        plan = legs.plan(others.ids, threats, threats_s)
-    if mech.hold_course:
-        plan = hold_course(plan, observation, assessment, clearance, t_max_s)
-    return plan
-
-
-def hold_course(plan: ViaPlan, observation: Observation, assessment: Assessment,
-                clearance: np.ndarray, t_max_s: float) -> ViaPlan:
-    """`Mechanisms.hold_course`: the plan with its first via-point on the robot's heading
-    when that only forgoes a small turn towards the threat it resolves
-    (`course_hold.held_waypoints`); else the plan unchanged."""
-    ego = observation.ego
-    if (plan.status != PlanStatus.OK or len(plan.waypoints_m) < 3
-            or ego.v_mps < COURSE_HOLD_MIN_SPEED_MPS):
-        return plan
-    others = assessment.others
-    wps = [complex(x, y) for x, y in plan.waypoints_m.tolist()]
-    held = held_waypoints(wps, plan.side, ego.heading_rad, ego.v_mps, assessment.speed_mps,
-                          as_complex(others.position_m), as_complex(others.velocity_mps),
-                          clearance, t_max_s)
-    if held is None:
-        return plan
-    held_m = np.array([(z.real, z.imag) for z in held])
-    return dataclasses.replace(plan, waypoints_m=held_m, via_point_m=held_m[1].copy())
+        if kept is not None:
+            return kept
+    return legs.plan(others.ids, threats, threats_s)
 
 
 @dataclass(frozen=True)

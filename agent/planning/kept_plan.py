@@ -64,22 +64,13 @@ def kept_waypoints(previous_m: np.ndarray, previous_sides: tuple[tuple[int, Side
     if not vias or any(i not in sensed for i, _ in sides) :
         return None
     wps = [p, *vias, goal]
-    if not plan_holds(wps, new_wps, speed, position, velocity, clearance, t_max_s):
-        return None
-    return np.array([(z.real, z.imag) for z in wps]), tuple(sides)
-
-
-def plan_holds(wps: list[complex], new_wps: list[complex], speed: float,
-               position: np.ndarray, velocity: np.ndarray, clearance: np.ndarray,
-               t_max_s: float) -> bool:
-    """Whether the plan `wps` may stand in for the cycle's `new_wps`: its path is at most
-    `KEEP_PLAN_RATIO` longer, and every leg is clear of every disc within T_max at top speed
-    (`threats.legs_threats`). Arguments as in `kept_waypoints`."""
     length = sum(abs(b - a) for a, b in zip(wps, wps[1:]))
     new_length = sum(abs(b - a) for a, b in zip(new_wps, new_wps[1:]))
     if length > (1.0 + KEEP_PLAN_RATIO) * new_length:
-        return False
+        return None
     arrival = [0.0, *itertools.accumulate(abs(b - a) / speed for a, b in zip(wps, wps[1:]))]
     hit, _ = legs_threats(wps[:-1], wps[1:], arrival[:-1], speed, position, velocity,
                           clearance, t_max_s)
-    return not bool(hit.any())
+    if hit.any():
+        return None
+    return np.array([(z.real, z.imag) for z in wps]), tuple(sides)

@@ -97,12 +97,6 @@ class Mechanisms:
             senses and steps aside to a refuge beside the track of one that would pass
             within the inflated radius L, returning once it has passed
             (`agent.planning.goal_guard`): a blind obstacle otherwise runs it down.
-        hold_course: a moving robot whose first via-point lies a small turn (at most
-            `course_hold.MAX_HOLD_RAD`) towards the threat it resolves keeps its heading
-            instead, the via-point moved onto it, while that plan still holds by the kept
-            plan's test (`agent.planning.course_hold`): the point moves by tenths of a
-            metre from cycle to cycle, and turning back towards the threat each time only
-            spends the margin the robot already has, in a weave.
         primary_hold_s: with `commitment`, how much later than the most imminent threat's
             the TCPA of last cycle's first threat may be for it to stay first [s].
     """
@@ -124,7 +118,6 @@ class Mechanisms:
     liveness: LivenessConfig | None = None
     turn_when_stuck: bool = False
     goal_guard: bool = False
-    hold_course: bool = False
     primary_hold_s: float = PRIMARY_HOLD_S
 
 
@@ -143,7 +136,7 @@ EIFP_MPC_MECHANISMS = dataclasses.replace(
     EIFP_MECHANISMS, inflated_threats=True, commitment=True, via_margin_m=ARC_VIA_MARGIN_M,
     escape_band_m=ESCAPE_BAND_M, escape_all=True, horizon_via_points=True,
     lines_arcs=True, clamp_heading=False, braking_guard=True, keep_plan=True, routing=True,
-    liveness=LivenessConfig(), turn_when_stuck=True, hold_course=True)
+    liveness=LivenessConfig(), turn_when_stuck=True)
 """eifp-mpc in the default profile: every mechanism."""
 
 
