@@ -196,15 +196,27 @@ def zid(text: str) -> str:
         raise argparse.ArgumentTypeError(str(exc)) from exc
 
 
-def robot_counts(text: str) -> list[int]:
-    """A comma-separated list of robot counts, each >= 2 (bench, scale)."""
+def count_list(text: str, minimum: int, what: str, example: str) -> list[int]:
+    """A comma-separated list of whole numbers, each >= `minimum`, named `what` in the
+    error (e.g. "robot counts", with `example` "2,8,16")."""
     try:
         counts = [int(x) for x in text.split(",") if x.strip()]
     except ValueError:
         counts = []
-    if not counts or min(counts) < 2:
-        raise argparse.ArgumentTypeError(f"expected robot counts >= 2 (e.g. 2,8,16), got {text!r}")
+    if not counts or min(counts) < minimum:
+        raise argparse.ArgumentTypeError(f"expected {what} >= {minimum} (e.g. {example}), "
+                                         f"got {text!r}")
     return counts
+
+
+def robot_counts(text: str) -> list[int]:
+    """A comma-separated list of robot counts, each >= 2 (bench, scale)."""
+    return count_list(text, 2, "robot counts", "2,8,16")
+
+
+def shelf_rows(text: str) -> list[int]:
+    """A comma-separated list of shelf row counts, each >= 1 (bench --routes)."""
+    return count_list(text, 1, "shelf row counts", "2,8,14")
 
 
 def add_link_fault_flags(parser: argparse.ArgumentParser, what: str) -> argparse._ArgumentGroup:

@@ -24,12 +24,14 @@ import numpy as np
 from agent.core.types import Observation
 from agent.planning.liveness import Liveness, LivenessConfig, Strategy, knot
 from agent.planning.routing import (
+    MAX_ROUTED_OBSTACLES,
     ROUTE_MARGIN_M,
     Route,
     RouteFollower,
     StaticMap,
     plan_route,
     route_or_tight,
+    shared_graph,
 )
 
 _NO_TAIL = np.zeros((0, 2))
@@ -152,9 +154,12 @@ class RouteGuide:
         near = knot(here, others, math.inf, cfg.slow_mps)
         if near.size == 0:
             return False
-        static = self.static.with_discs(others.position_m[near], others.radius_m[near])
+        if len(self.static) > MAX_ROUTED_OBSTACLES:
+            return False  # a map too large to route (`StaticMap.routable`)
         clearance = observation.radius_m + self.d_safety_m + ROUTE_MARGIN_M
-        route = plan_route(here, goal, static, clearance)
+        graph = shared_graph(self.static, clearance).with_discs(others.position_m[near],
+                                                                 others.radius_m[near])
+        route = plan_route(here, goal, graph.static, clearance, graph)
         straight = float(math.hypot(*(goal - here)))
         if route is None or route.waypoints_m.shape[0] <= 2 or \
                 route.length_m > cfg.detour_ratio * max(straight, 1e-9):

@@ -29,15 +29,24 @@ way round is much longer (`TIGHT_DETOUR_RATIO`): the robot is then routed throug
 eIFP's via-points and the MPC keep what clearance the passage has. A goal that no route
 reaches even then is unreachable (`unreachable_reason`; scenario validation refuses it).
 
-Cost: the graph has n = 2 + RING_NODES x M nodes for M static discs and checks n^2/2
-segments against M discs, vectorised in chunks; M = 30 takes a few milliseconds. Maps of
-more than `MAX_ROUTED_OBSTACLES` discs are not routed (`StaticMap.routable`): robots
-then plan locally, as without a map, and validation does not check reachability.
+Cost: the graph has n = 2 + RING_NODES x M nodes for M static discs and n^2/2 candidate
+segments. Checking each against all M discs is O(n^2 M) (a 414-disc map of walls: about
+9 s), so `clear_pairs` checks in stages, each exact for the discs it looks at: first
+against the `NEAR_DISCS` discs nearest each end (most segments between ring nodes run
+into a disc next to one of their ends), then against those nearest the segment's middle,
+and only the few segments still clear against every disc that can reach them (a k-d tree
+query round the middle, radius half the length plus the largest clearance). The result is
+the same edge set as the full check (tests/unit/agent/planning/test_routing.py compares
+them); the 414-disc map takes about 2 s. A re-route round a knot of robots
+(`VisibilityGraph.with_discs`) re-checks the map's edges against the new discs only.
+Maps of more than `MAX_ROUTED_OBSTACLES` discs are not routed (`StaticMap.routable`):
+robots then plan locally, as without a map, and validation does not check reachability.
 """
 
 from __future__ import annotations
 
 import functools
+import itertools
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -45,6 +54,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
+from scipy.spatial import cKDTree
 
 from agent.core.scenario import ObstacleSpec
 
@@ -62,8 +72,13 @@ TIGHT_DETOUR_RATIO = 1.5
 """A tight passage is taken when the way round with full clearance is more than this
 many times longer (`route_or_tight`)."""
 
-MAX_ROUTED_OBSTACLES = 128
-"""Maps with more static discs than this are not routed (cost grows as M^3)."""
+MAX_ROUTED_OBSTACLES = 512
+"""Maps with more static discs than this are not routed (the graph's build grows with the
+number of ring nodes squared: 512 discs of walls take a few seconds, once per process)."""
+
+NEAR_DISCS = 8
+"""Discs nearest each end (and the middle) of a candidate segment checked first
+(`clear_pairs`)."""
 
 WAYPOINT_REACHED_M = 0.3
 """A route waypoint (not the goal) closer to the robot than this is reached
@@ -235,18 +250,98 @@ def _endpoint_keep(point_m: np.ndarray, center_m: np.ndarray, keep_m: np.ndarray
     return keep
 
 
-def _ring_nodes(static: StaticMap, keep_m: np.ndarray) -> np.ndarray:
-    """(n, 2) ring points round every disc, outside every inflated disc."""
-    if len(static) == 0:
+def _ring_nodes(static: StaticMap, keep_m: np.ndarray, of: slice = slice(None)
+                ) -> np.ndarray:
+    """(n, 2) ring points round the discs `of` (every disc by default), outside every
+    inflated disc of the map."""
+    centers = static.center_m[of]
+    if centers.shape[0] == 0:
         return np.zeros((0, 2))
     angle = 2.0 * math.pi * np.arange(RING_NODES) / RING_NODES
-    ring = keep_m / math.cos(math.pi / RING_NODES)
-    pts = (static.center_m[:, None, :]
+    ring = keep_m[of] / math.cos(math.pi / RING_NODES)
+    pts = (centers[:, None, :]
            + ring[:, None, None] * np.stack((np.cos(angle), np.sin(angle)), axis=1)[None])
     pts = pts.reshape(-1, 2)
     d = np.hypot(*(pts[:, None, :] - static.center_m[None, :, :]).transpose(2, 0, 1))
     outside: np.ndarray = pts[(d >= keep_m[None, :] - LOOKAHEAD_TOLERANCE_M).all(axis=1)]
     return outside
+
+
+def _hits(a_m: np.ndarray, b_m: np.ndarray, center_m: np.ndarray, keep_m: np.ndarray
+          ) -> np.ndarray:
+    """(S, K) whether segment s comes closer than keep_m[s, k] to centre center_m[s, k]:
+    `segment_disc_distance`'s arithmetic on a candidate disc per segment and column, so
+    that a disc found here is one the full check finds too."""
+    ax, ay = a_m[:, 0:1], a_m[:, 1:2]
+    sx, sy = b_m[:, 0:1] - ax, b_m[:, 1:2] - ay
+    seg_sq = sx * sx + sy * sy
+    rx, ry = center_m[..., 0] - ax, center_m[..., 1] - ay
+    t = np.clip(np.divide(rx * sx + ry * sy, seg_sq, out=np.zeros_like(rx),
+                          where=seg_sq > 0.0), 0.0, 1.0)
+    hit: np.ndarray = np.hypot(rx - t * sx, ry - t * sy) < keep_m - LOOKAHEAD_TOLERANCE_M
+    return hit
+
+
+def clear_pairs(nodes_m: np.ndarray, i: np.ndarray, j: np.ndarray, static: StaticMap,
+                keep_m: np.ndarray) -> np.ndarray:
+    """Whether each segment nodes_m[i[s]] -> nodes_m[j[s]] keeps keep_m[m] from every disc
+    m of the map: the same answer as `segment_clears`, found in stages (module docstring,
+    "Cost").
+
+    Args:
+        nodes_m: (n, 2) points [m].
+        i, j: (S,) indices into nodes_m, the ends of each segment.
+        static: the map (M discs).
+        keep_m: (M,) required distance from each centre [m].
+
+    Returns:
+        (S,) bool.
+    """
+    n_seg, n_disc = i.shape[0], len(static)
+    if n_disc == 0 or n_seg == 0:
+        return np.ones(n_seg, dtype=bool)
+    centers = static.center_m
+    tree = cKDTree(centers)
+    k = min(NEAR_DISCS, n_disc)
+
+    def nearest(points: np.ndarray) -> np.ndarray:
+        idx = np.asarray(tree.query(points, k=k)[1], dtype=np.intp)
+        return idx.reshape(points.shape[0], k)
+
+    near = nearest(nodes_m)
+    own = near[:, :1]  # stage 0: the disc nearest each end alone (a ring node's own disc)
+    blocked = np.zeros(n_seg, dtype=bool)
+    for lo in range(0, n_seg, 4 * _EDGE_CHUNK):
+        ii, jj = i[lo:lo + 4 * _EDGE_CHUNK], j[lo:lo + 4 * _EDGE_CHUNK]
+        cand = np.concatenate((own[ii], own[jj]), axis=1)
+        blocked[lo:lo + 4 * _EDGE_CHUNK] = _hits(nodes_m[ii], nodes_m[jj], centers[cand],
+                                                 keep_m[cand]).any(axis=1)
+    rest = np.flatnonzero(~blocked)
+    for lo in range(0, rest.size, _EDGE_CHUNK):  # stage 1: the discs nearest either end
+        sel = rest[lo:lo + _EDGE_CHUNK]
+        ii, jj = i[sel], j[sel]
+        cand = np.concatenate((near[ii], near[jj]), axis=1)
+        blocked[sel] = _hits(nodes_m[ii], nodes_m[jj], centers[cand],
+                             keep_m[cand]).any(axis=1)
+    alive = np.flatnonzero(~blocked)
+    if alive.size:  # stage 2: the discs nearest the middle
+        a, b = nodes_m[i[alive]], nodes_m[j[alive]]
+        cand = nearest(0.5 * (a + b))
+        alive = alive[~_hits(a, b, centers[cand], keep_m[cand]).any(axis=1)]
+    clear = np.zeros(n_seg, dtype=bool)
+    if alive.size:  # stage 3: every disc that can reach the segment
+        a, b = nodes_m[i[alive]], nodes_m[j[alive]]
+        reach = 0.5 * np.hypot(*(b - a).T) + float(keep_m.max())
+        lists = tree.query_ball_point(0.5 * (a + b), reach)
+        counts = np.fromiter(map(len, lists), dtype=np.intp, count=len(lists))
+        disc = np.fromiter(itertools.chain.from_iterable(lists), dtype=np.intp,
+                           count=int(counts.sum()))
+        seg = np.repeat(np.arange(alive.size), counts)
+        hit = _hits(a[seg], b[seg], centers[disc][:, None, :], keep_m[disc][:, None])[:, 0]
+        blocked = np.zeros(alive.size, dtype=bool)
+        np.logical_or.at(blocked, seg, hit)
+        clear[alive[~blocked]] = True
+    return clear
 
 
 @dataclass(frozen=True)
@@ -258,7 +353,8 @@ class VisibilityGraph:
         static: the map.
         clearance_m: distance kept from each disc's edge [m].
         nodes_m: (n, 2) ring nodes [m].
-        edges: (E, 2) node index pairs whose segment clears every inflated disc.
+        edges: (E, 2) node index pairs (i < j, in `np.triu_indices` order) whose segment
+            clears every inflated disc.
     """
 
     static: StaticMap
@@ -268,17 +364,39 @@ class VisibilityGraph:
 
     @staticmethod
     def build(static: StaticMap, clearance_m: float) -> VisibilityGraph:
-        """Ring nodes and the clear segments between them (n^2/2 segments x M discs)."""
+        """Ring nodes and the clear segments between them (`clear_pairs`)."""
         keep = static.radius_m + clearance_m
         nodes = _ring_nodes(static, keep)
         i, j = np.triu_indices(nodes.shape[0], k=1)
-        ok = np.zeros(i.shape[0], dtype=bool)
-        for lo in range(0, i.shape[0], _EDGE_CHUNK):
-            ii, jj = i[lo:lo + _EDGE_CHUNK], j[lo:lo + _EDGE_CHUNK]
-            ok[lo:lo + _EDGE_CHUNK] = segment_clears(nodes[ii], nodes[jj], static.center_m,
-                                                     keep)
+        ok = clear_pairs(nodes, i, j, static, keep)
         return VisibilityGraph(static, float(clearance_m), nodes,
                                np.column_stack((i[ok], j[ok])))
+
+    def with_discs(self, center_m: np.ndarray, radius_m: np.ndarray) -> VisibilityGraph:
+        """This graph on the map plus more discs, as `build` makes it on that map (the
+        same nodes, edges and order), without re-checking the map's edges against the map:
+        nodes inside a new disc go, edges that a new disc blocks go, and the new discs'
+        ring nodes are joined to every node."""
+        static = self.static.with_discs(center_m, radius_m)
+        keep = static.radius_m + self.clearance_m
+        new = slice(len(self.static), None)
+        added_center, added_keep = static.center_m[new], keep[new]
+        kept = np.flatnonzero(segment_clears(self.nodes_m, self.nodes_m, added_center,
+                                             added_keep))
+        nodes = np.concatenate((self.nodes_m[kept], _ring_nodes(static, keep, new)))
+        index = np.full(self.nodes_m.shape[0], -1)
+        index[kept] = np.arange(kept.size)
+        old = index[self.edges].reshape(-1, 2)
+        old = old[(old >= 0).all(axis=1)]
+        old = old[segment_clears(nodes[old[:, 0]], nodes[old[:, 1]], added_center,
+                                 added_keep)]
+        i, j = np.triu_indices(nodes.shape[0], k=1)
+        joins = j >= kept.size  # pairs with a new node
+        i, j = i[joins], j[joins]
+        ok = clear_pairs(nodes, i, j, static, keep)
+        edges = np.concatenate((old, np.column_stack((i[ok], j[ok]))))
+        edges = edges[np.lexsort((edges[:, 1], edges[:, 0]))]
+        return VisibilityGraph(static, self.clearance_m, nodes, edges)
 
 
 def plan_route(start_m: np.ndarray, goal_m: np.ndarray, static: StaticMap,

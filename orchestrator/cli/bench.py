@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from agent.core.config import PLANNER_NAMES
-from agent.flags import non_negative_int, positive, positive_int, robot_counts
+from agent.flags import non_negative_int, positive, positive_int, robot_counts, shelf_rows
 from orchestrator.cli.common import BadInput, make_dir
 from orchestrator.experiments.bench import (
     DEFAULT_CYCLES,
@@ -21,6 +21,7 @@ from orchestrator.experiments.bench import (
     run_bench,
     summarize,
 )
+from orchestrator.experiments.route_bench import format_route_rows, time_route_graphs
 
 
 def _planners(text: str) -> list[str]:
@@ -46,8 +47,13 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     parser.add_argument("--planner", type=_planners, default=None,
                         help="a planner, a comma-separated list, or 'all' (required unless "
                              "--process)")
-    parser.add_argument("--robots", type=robot_counts, required=True,
-                        help="robot count, or a comma-separated list (e.g. 2,8,16,32,64)")
+    parser.add_argument("--robots", type=robot_counts, default=None,
+                        help="robot count, or a comma-separated list (e.g. 2,8,16,32,64); "
+                             "required unless --routes")
+    parser.add_argument("--routes", type=shelf_rows, default=None, metavar="ROWS",
+                        help="instead: the time to build the route graph of a walled hall "
+                             "with this many shelf rows (a comma-separated list; 2 rows: "
+                             "about 100 discs, 26: about 500)")
     parser.add_argument("--process", action="store_true",
                         help="run N robot processes and a world for real (orchestrator scale "
                              "--no-plan) and print the CPU a robot process spends per cycle")
@@ -78,6 +84,14 @@ def _json_safe(row: dict[str, Any]) -> dict[str, Any]:
 
 def run(args: argparse.Namespace) -> int:
     """Entry point of `orchestrator bench`; returns the exit status."""
+    if args.routes is not None:
+        rows = time_route_graphs(args.routes)
+        print(format_route_rows(rows))
+        if args.json:
+            print(json.dumps({"rows": rows}))
+        return 0
+    if args.robots is None:
+        raise BadInput("orchestrator bench: --robots is required (or --routes)")
     if args.floor:
         return run_floor_bench(args)
     if args.process:

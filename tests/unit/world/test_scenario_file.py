@@ -4,6 +4,7 @@ the key <-> field mapping, and the dump/load round trip."""
 from __future__ import annotations
 
 import dataclasses
+import math
 import textwrap
 from pathlib import Path
 
@@ -472,3 +473,19 @@ def test_a_goal_no_route_reaches_is_refused_naming_the_file_and_robot(tmp_path):
     path.write_text(yaml.safe_dump({"name": "ring", "time_limit": 60, "robots": robots,
                                     "obstacles": ring(0.2)}))
     assert len(load_scenario(path).robots) == 2
+
+
+def test_a_goal_enclosed_in_a_map_of_several_hundred_discs_is_refused(tmp_path: Path) -> None:
+    # a ring of 160 touching discs (more than the 128 that were routed before), one robot
+    # inside it going out; and the walled hall of docs/examples with 138 discs loads
+    ring = [{"center": [30.0 * math.cos(2 * math.pi * k / 160),
+                        30.0 * math.sin(2 * math.pi * k / 160)], "radius": 0.6}
+            for k in range(160)]
+    robots = [{"id": 0, "start": [0.0, 0.0, 0.0], "goal": [40.0, 0.0]}]
+    path = tmp_path / "big_ring.yaml"
+    path.write_text(yaml.safe_dump({"name": "big_ring", "time_limit": 60, "robots": robots,
+                                    "obstacles": ring}))
+    with pytest.raises(ScenarioError, match=r"robots\[0\]\.goal: robot 0 cannot reach"):
+        load_scenario(path)
+    hall = load_scenario(Path(__file__).parents[3] / "docs" / "examples" / "warehouse.yaml")
+    assert len(hall.obstacles) == 138 and len(hall.robots) == 12

@@ -19,9 +19,11 @@ from agent.planning.routing import (
     VisibilityGraph,
     plan_route,
     route_or_tight,
+    segment_clears,
     segment_disc_distance,
     unreachable_reason,
 )
+from orchestrator.experiments.route_bench import halls
 
 ROBOT_M = 0.5
 D_SAFETY_M = 0.3
@@ -267,3 +269,50 @@ def test_only_the_next_waypoint_after_a_reached_one_is_looked_at_with_less_clear
     keep = static.radius_m + route.clearance_m
     d = segment_disc_distance(here[None], goal[None], static.center_m)[0, 0]
     assert keep[0] - WAYPOINT_REACHED_M < d < keep[0]
+
+
+def _all_pairs_full_check(static: StaticMap, clearance_m: float) -> np.ndarray:
+    """The visibility graph's edges by the plain check: every ring-node pair against every
+    disc (`segment_clears`), which the staged `clear_pairs` must reproduce exactly."""
+    graph = VisibilityGraph.build(static, clearance_m)
+    nodes = graph.nodes_m
+    i, j = np.triu_indices(nodes.shape[0], k=1)
+    ok = segment_clears(nodes[i], nodes[j], static.center_m, static.radius_m + clearance_m)
+    return np.column_stack((i[ok], j[ok]))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_staged_check_finds_exactly_the_edges_of_the_full_check(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    count = int(rng.integers(20, 70))
+    spread_m = float(rng.uniform(6.0, 25.0))
+    random_map = StaticMap(rng.uniform(-spread_m, spread_m, (count, 2)),
+                           rng.uniform(0.2, 1.5, count))
+    for static in (random_map, halls(2)):
+        for clearance_m in (ROBOT_M + 0.02, CLEARANCE_M):
+            graph = VisibilityGraph.build(static, clearance_m)
+            assert graph.edges.shape[0] > 0
+            assert np.array_equal(graph.edges, _all_pairs_full_check(static, clearance_m))
+
+
+def test_a_graph_extended_by_discs_equals_one_built_on_the_larger_map() -> None:
+    static = halls(2)
+    graph = VisibilityGraph.build(static, CLEARANCE_M)
+    # robots standing in a shelf row's gap, and one in the open
+    extra = np.array([[0.0, 5.0], [-1.0, 4.2], [6.0, 8.0]])
+    grown = graph.with_discs(extra, np.full(3, ROBOT_M))
+    fresh = VisibilityGraph.build(static.with_discs(extra, np.full(3, ROBOT_M)), CLEARANCE_M)
+    assert np.array_equal(grown.nodes_m, fresh.nodes_m)
+    assert np.array_equal(grown.edges, fresh.edges)
+    assert grown.edges.shape[0] != graph.edges.shape[0]  # the discs changed the graph
+
+
+def test_a_map_of_several_hundred_discs_is_routed_round_its_walls() -> None:
+    static = halls(14)  # 75 m deep, 14 shelf rows: 426 discs
+    assert MAX_ROUTED_OBSTACLES >= len(static) > 128 and static.routable
+    start, goal = np.array([-13.0, 2.5]), np.array([-6.0, 72.5])  # under the first row's
+    route = route_or_tight(start, goal, static, ROBOT_M, D_SAFETY_M)  # left half, to the top
+    assert route is not None and not route.tight
+    assert route.length_m > 1.05 * float(np.hypot(*(goal - start)))
+    a, b = route.waypoints_m[:-1], route.waypoints_m[1:]
+    assert segment_clears(a, b, static.center_m, static.radius_m + CLEARANCE_M).all()
