@@ -489,3 +489,10 @@ def test_a_goal_enclosed_in_a_map_of_several_hundred_discs_is_refused(tmp_path: 
         load_scenario(path)
     hall = load_scenario(Path(__file__).parents[3] / "docs" / "examples" / "warehouse.yaml")
     assert len(hall.obstacles) == 138 and len(hall.robots) == 12
+
+
+@pytest.mark.parametrize("path", sorted((Path(__file__).parents[3] / "docs" / "examples"
+                                         / "probes").glob("*.yaml")), ids=lambda p: p.stem)
+def test_every_probe_scene_of_the_docs_loads(path: Path) -> None:
+    scenario = load_scenario(path)
+    assert scenario.name == path.stem and len(scenario.robots) >= 2
