@@ -83,6 +83,9 @@ class RobotController:
         self.planner = make_planner(spec.planner, config, control_period_s=self.control_period_s,
                                     static_map=static_map, mechanisms=mechanisms,
                                     tuning=tuning, estimation_window_s=ESTIMATION_WINDOW_S)
+        guide = getattr(self.planner, "guide", None)
+        if guide is not None:  # route graphs built before the run, not on its first cycle
+            guide.prepare(spec.radius_m)
         self.tracker = NeighborTracker(spec.id, ESTIMATION_WINDOW_S)
         self.snapshot: PoseSnapshot | None = None
         self.command = (0.0, 0.0)

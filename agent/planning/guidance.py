@@ -26,6 +26,7 @@ from agent.planning.liveness import Liveness, LivenessConfig, Strategy, knot
 from agent.planning.routing import (
     MAX_ROUTED_OBSTACLES,
     ROUTE_MARGIN_M,
+    TIGHT_MARGIN_M,
     Route,
     RouteFollower,
     StaticMap,
@@ -83,6 +84,15 @@ class RouteGuide:
         self._goal: tuple[float, float] | None = None
         self._round_knot = False  # the route goes round a knot of slow robots
         self.replans = 0
+
+    def prepare(self, radius_m: float) -> None:
+        """Build the map's route graphs for a robot of `radius_m` now (both clearances of
+        `route_or_tight`) instead of on the first cycle: on a map of hundreds of discs that
+        takes seconds (docs/method.md, "Routes over large maps"), which a robot process
+        spends at start-up rather than standing in a running world."""
+        if self.routes:
+            shared_graph(self.static, radius_m + self.d_safety_m + ROUTE_MARGIN_M)
+            shared_graph(self.static, radius_m + TIGHT_MARGIN_M)
 
     def reset(self) -> None:
         """Forget the route and the liveness state."""

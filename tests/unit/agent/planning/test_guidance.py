@@ -197,3 +197,23 @@ def test_a_robot_in_a_cell_of_parked_robots_2L_apart_squeezes_out_to_its_goal() 
     assert gap >= 0.05
     path, _ = drive_among(LivenessConfig(squeeze_margin_m=0.3), others, goal, 40.0)
     assert (np.abs(path) < 1.3).all()  # never out of the cell
+
+
+def test_a_controller_builds_its_route_graphs_before_its_first_cycle() -> None:
+    from agent.core.scenario import RobotSpec
+    from agent.planning import routing
+    from agent.planning.controller import RobotController
+
+    # a map of its own (the graph memo is per map): the cup, moved
+    static = StaticMap(cup().center_m + np.array([123.0, 45.0]), cup().radius_m)
+    spec = RobotSpec(id=0, start=(120.0, 45.0, 0.0), goal=(130.0, 45.0), planner="eifp-mpc")
+    before = routing._shared_graph.cache_info()
+    controller = RobotController(spec, PlannerConfig(), 0.25, static_map=static)
+    built = routing._shared_graph.cache_info()
+    assert built.misses == before.misses + 2  # the full and the tight clearance
+    guide = getattr(controller.planner, "guide", None)
+    assert guide is not None
+    route = routing.route_or_tight(np.array([120.0, 45.0]), np.array([130.0, 45.0]), static,
+                                   spec.radius_m, PlannerConfig().safety.d_safety_m)
+    assert route is not None and route.waypoints_m.shape[0] > 2  # round the cup
+    assert routing._shared_graph.cache_info().misses == built.misses  # nothing new to build
