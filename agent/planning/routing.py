@@ -30,14 +30,15 @@ eIFP's via-points and the MPC keep what clearance the passage has. A goal that n
 reaches even then is unreachable (`unreachable_reason`; scenario validation refuses it).
 
 Cost: the graph has n = 2 + RING_NODES x M nodes for M static discs and n^2/2 candidate
-segments. Checking each against all M discs is O(n^2 M) (a 414-disc map of walls: about
-9 s), so `clear_pairs` checks in stages, each exact for the discs it looks at: first
-against the `NEAR_DISCS` discs nearest each end (most segments between ring nodes run
-into a disc next to one of their ends), then against those nearest the segment's middle,
-and only the few segments still clear against every disc that can reach them (a k-d tree
-query round the middle, radius half the length plus the largest clearance). The result is
-the same edge set as the full check (tests/unit/agent/planning/test_routing.py compares
-them); the 414-disc map takes about 2 s. A re-route round a knot of robots
+segments. Checking each against all M discs is O(n^2 M) (a walled hall of 426 discs:
+8.2 s before this was staged), so `clear_pairs` checks in stages, each exact for the
+discs it looks at: first against the `NEAR_DISCS` discs nearest each end (most segments
+between ring nodes run into a disc next to one of their ends), then against those nearest
+the segment's middle, and only the few segments still clear against every disc that can
+reach them (a k-d tree query round the middle, radius half the length plus the largest
+clearance). The result is the same edge set as the full check
+(tests/unit/agent/planning/test_routing.py compares them); the same hall takes 1.2 s
+(`orchestrator bench --routes 14`). A re-route round a knot of robots
 (`VisibilityGraph.with_discs`) re-checks the map's edges against the new discs only.
 Maps of more than `MAX_ROUTED_OBSTACLES` discs are not routed (`StaticMap.routable`):
 robots then plan locally, as without a map, and validation does not check reachability.
