@@ -21,8 +21,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agent.core.types import Observation
+from agent.core.types import Observation, Others
 from agent.planning.liveness import Liveness, LivenessConfig, Strategy, knot
+from agent.planning.passages import (
+    HOLD_M,
+    NEAR_M,
+    HoldState,
+    Passage,
+    centre_route,
+    distance_along,
+    must_hold,
+    on_track,
+)
 from agent.planning.routing import (
     MAX_ROUTED_OBSTACLES,
     ROUTE_MARGIN_M,
@@ -53,6 +63,11 @@ class Guidance:
             (`agent.planning.liveness`, rule 2).
         stuck: the progress monitor found the robot stuck this cycle, or it yields after
             a stuck spell (a turn on the spot may start, `agent.planning.turning`).
+        passage_ids: obstacle ids of the discs bounding a narrow passage the robot is
+            near (`agent.planning.passages`); planned against with `passage_margin_m`.
+        passage_margin_m: the margin against those discs [m] (inf: none).
+        hold: the YIELD is a robot giving way before a one-lane passage: it stands even
+            inside a wall's inflated disc (a yield by id does not).
     """
 
     goal_m: np.ndarray
@@ -61,6 +76,9 @@ class Guidance:
     strategy: Strategy = Strategy.GO
     squeeze: bool = False
     stuck: bool = False
+    passage_ids: frozenset[int] = frozenset()
+    passage_margin_m: float = math.inf
+    hold: bool = False
 
 
 class RouteGuide:
@@ -72,14 +90,24 @@ class RouteGuide:
         routes: plan routes over the map (`Mechanisms.routing`).
         liveness: monitor progress and change strategy when stuck (`Mechanisms.liveness`),
             with these thresholds; None: never.
+        passages: centre tight routes in their narrow passages, plan against a passage's
+            discs with the margin it leaves, and take one-lane passages one way at a time
+            (`Mechanisms.passages`, `agent.planning.passages`).
     """
 
     def __init__(self, static: StaticMap, d_safety_m: float, *, routes: bool = True,
-                 liveness: LivenessConfig | None = None) -> None:
+                 liveness: LivenessConfig | None = None, passages: bool = False) -> None:
         self.static = static
         self.d_safety_m = float(d_safety_m)
         self.routes = routes and static.routable
         self.liveness = Liveness(liveness) if liveness is not None else None
+        self.passages_on = passages
+        self._passages: tuple[Passage, ...] = ()
+        self._passage_ends: tuple[int, ...] = ()  # route index of each passage's far mouth
+        self._passage_starts: tuple[int, ...] = ()  # and of its first point (lead-in)
+        self._left = 0  # passages the robot has left by their far mouth
+        self._hold = HoldState()
+        self.holds = 0  # cycles spent giving way at a one-lane passage
         self._follower: RouteFollower | None = None
         self._goal: tuple[float, float] | None = None
         self._round_knot = False  # the route goes round a knot of slow robots
@@ -99,6 +127,9 @@ class RouteGuide:
         self._follower = None
         self._goal = None
         self._round_knot = False
+        self._passages, self._passage_ends, self._passage_starts = (), (), ()
+        self._left = 0
+        self._hold = HoldState()
         if self.liveness is not None:
             self.liveness.reset()
 
@@ -109,15 +140,45 @@ class RouteGuide:
 
     def _plan(self, here: np.ndarray, goal: np.ndarray, radius_m: float) -> RouteFollower:
         route = None
+        self._passages, self._passage_ends, self._passage_starts = (), (), ()
+        self._left = 0
         if self.routes:
             route = route_or_tight(here, goal, self.static, radius_m, self.d_safety_m)
         if route is None:  # no map, or no route from here (validation saw one from the start)
             route = Route(np.stack((here, goal)), 0.0)
             return RouteFollower(route, StaticMap.empty())
+        if self.passages_on and route.tight:
+            full = radius_m + self.d_safety_m + ROUTE_MARGIN_M
+            route, self._passages = centre_route(route, self.static, radius_m,
+                                                 self.d_safety_m, full)
+            wps = route.waypoints_m
+            self._passage_ends = tuple(
+                int(np.flatnonzero((wps == p.far_mouth_m).all(axis=1))[0])
+                for p in self._passages)
+            self._passage_starts = tuple(end - (p.line_m.shape[0] - 1)
+                                         for p, end in zip(self._passages,
+                                                           self._passage_ends))
         return RouteFollower(route, self.static)
 
-    def guide(self, observation: Observation, now_s: float) -> Guidance:
-        """This cycle's goal, route tail and strategy."""
+    def _passage_ahead(self, here: np.ndarray) -> int | None:
+        """Index of the first passage on the route the robot has not yet left by its far
+        mouth (None: none left). The route follower may aim past a passage it can see
+        through, so leaving is told by where the robot is, not by the follower."""
+        while self._left < len(self._passages):
+            line = self._passages[self._left].line_m
+            s, _ = distance_along(line, here)
+            if s < float(np.hypot(*np.diff(line, axis=0).T).sum()) - 1e-6:
+                return self._left
+            if self._follower is not None:  # aim on from the far mouth
+                self._follower.skip_to(self._passage_ends[self._left])
+            self._left += 1
+            self._hold = HoldState()
+        return None
+
+    def guide(self, observation: Observation, now_s: float,
+              everyone: Others | None = None) -> Guidance:
+        """This cycle's goal, route tail and strategy; `everyone`: all the sensed others
+        (the one-lane rule looks past the nearest few; default `observation.others`)."""
         ego = observation.ego
         here = np.array([ego.x_m, ego.y_m])
         goal = observation.goal_m
@@ -127,6 +188,15 @@ class RouteGuide:
             self._goal = key
             self._round_knot = False
         strategy = Strategy.GO
+        ahead = self._passage_ahead(here)
+        if ahead is not None and self._holds(self._passages[ahead], observation, here, now_s,
+                                             everyone):
+            self.holds += 1
+            left = self._follower.progress_left_m(here)
+            if self.liveness is not None:  # waiting is not being stuck
+                self.liveness.monitor.restart(now_s, left)
+            return Guidance(goal_m=self._follower.remaining_m[0], tail_m=_NO_TAIL,
+                            left_m=left, strategy=Strategy.YIELD, hold=True)
         if self.liveness is not None:
             left = self._follower.progress_left_m(here)
             strategy = self.liveness.decide(now_s, observation.robot_id, here, left,
@@ -139,7 +209,17 @@ class RouteGuide:
             slow = knot(here, observation.others, math.inf, self.liveness.config.slow_mps)
             also = StaticMap(observation.others.position_m[slow],
                              observation.others.radius_m[slow])
+        ahead = self._passage_ahead(here)  # a re-route round a knot drops the passages
+        tracked = self._track(ahead, here)
+        if tracked is not None:
+            return self._guidance(tracked[0], tracked[1], here, strategy, now_s)
         target = self._follower.intermediate_goal(here, also)
+        if ahead is not None and target is not None:  # never past the passage's lead-in
+            start = self._passage_starts[ahead]
+            if self._follower.next_index > start:
+                target = self._follower.route.waypoints_m[start]
+                return self._guidance(target, self._follower.route.waypoints_m[start + 1:],
+                                      here, strategy, now_s)
         if target is None:  # pushed off the route: a new one from here
             self._follower = self._plan(here, goal, observation.radius_m)
             self._round_knot = False
@@ -147,13 +227,70 @@ class RouteGuide:
             target = self._follower.intermediate_goal(here)
             if target is None:  # nothing in sight even so (squeezed into the margin)
                 target = self._follower.remaining_m[0]
-        follower = self._follower
-        rest = follower.remaining_m
+        rest = self._follower.remaining_m
         tail = rest[1:] if rest.shape[0] > 1 else _NO_TAIL
+        return self._guidance(target, tail, here, strategy, now_s)
+
+    def _guidance(self, target: np.ndarray, tail: np.ndarray, here: np.ndarray,
+                  strategy: Strategy, now_s: float) -> Guidance:
+        assert self._follower is not None
         squeeze = self.liveness is not None and self.liveness.squeezing(now_s)
         stuck = self.liveness is not None and self.liveness.stuck_now
-        return Guidance(goal_m=target, tail_m=tail, left_m=follower.progress_left_m(here),
-                        strategy=strategy, squeeze=squeeze, stuck=stuck)
+        ahead = self._passage_ahead(here)
+        ids, margin = self._passage_discs(None if ahead is None else self._passages[ahead],
+                                          here)
+        if tail.shape[0] == 0:
+            tail = _NO_TAIL
+        return Guidance(goal_m=target, tail_m=tail,
+                        left_m=self._follower.progress_left_m(here), strategy=strategy,
+                        squeeze=squeeze, stuck=stuck, passage_ids=ids,
+                        passage_margin_m=margin)
+
+    def _track(self, ahead: int | None, here: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray] | None:
+        """In a passage: its line's aim point and the rest of the route after it
+        (`passages.on_track`); None elsewhere. Leaving it at the far mouth moves the route
+        follower on to the far mouth."""
+        if ahead is None:
+            return None
+        passage, end = self._passages[ahead], self._passage_ends[ahead]
+        assert self._follower is not None
+        wps = self._follower.route.waypoints_m
+        aim = on_track(passage, here)
+        if aim is None:
+            return None
+        carrot, rest = aim
+        return carrot, np.concatenate((rest, wps[end + 1:]))
+
+    def _holds(self, passage: Passage, observation: Observation, here: np.ndarray,
+               now_s: float, everyone: Others | None) -> bool:
+        """Whether the robot gives way before a one-lane passage this cycle: it has not
+        entered it, stands within `passages.HOLD_M` of its mouth, and `must_hold` says so."""
+        if not passage.one_lane or passage.entered:
+            return False
+        mouth = passage.mouth_m
+        ego, limits = observation.ego, observation.limits
+        stopping = ego.v_mps * ego.v_mps / (2.0 * limits.accel_max_mps2)
+        if math.hypot(*(here - mouth)) - stopping > HOLD_M:
+            self._hold = HoldState()
+            return False
+        s, off = distance_along(passage.line_m[passage.mouth_index:], here)
+        if s > 0.0 and off <= passage.width_m / 2.0:
+            return False  # in it: go on
+        others = everyone if everyone is not None else observation.others
+        return must_hold(passage, observation.robot_id, here, others, now_s, self._hold)
+
+    def _passage_discs(self, passage: Passage | None, here: np.ndarray
+                       ) -> tuple[frozenset[int], float]:
+        """The obstacle ids bounding the passage ahead and its margin, when the robot is
+        within `passages.NEAR_M` of it."""
+        if passage is None or self.static.ids is None:
+            return frozenset(), math.inf
+        _, off = distance_along(passage.line_m, here)
+        if off > NEAR_M:
+            return frozenset(), math.inf
+        ids = frozenset(int(i) for i in self.static.ids[passage.disc_index])
+        return ids, passage.margin_m
 
     def _reroute(self, here: np.ndarray, goal: np.ndarray, observation: Observation) -> bool:
         """Rule 1 of `agent.planning.liveness`: a route round the slow robots near, if one
@@ -179,4 +316,5 @@ class RouteGuide:
         # must not hide the route's next waypoint.
         self._follower = RouteFollower(route, self.static)
         self._round_knot = True
+        self._passages, self._passage_ends, self._passage_starts = (), (), ()
         return True

@@ -93,6 +93,10 @@ class Mechanisms:
             reference to one bounded turn on the spot (`agent.planning.turning`): the
             MPC, linearised about its prediction, finds no gain in turning a hemmed-in
             robot. Needs `liveness` (its progress monitor says when).
+        passages: a tight route is centred in its narrow passages, the discs bounding a
+            passage the robot is near are planned against with the margin the passage
+            leaves, and a passage one robot wide is taken one way at a time
+            (`agent.planning.passages`). Needs `routing`.
         goal_guard: a robot parked at its goal keeps watch on the moving obstacles it
             senses and steps aside to a refuge beside the track of one that would pass
             within the inflated radius L, returning once it has passed
@@ -118,6 +122,7 @@ class Mechanisms:
     liveness: LivenessConfig | None = None
     turn_when_stuck: bool = False
     goal_guard: bool = False
+    passages: bool = False
     primary_hold_s: float = PRIMARY_HOLD_S
 
 
@@ -136,7 +141,7 @@ EIFP_MPC_MECHANISMS = dataclasses.replace(
     EIFP_MECHANISMS, inflated_threats=True, commitment=True, via_margin_m=ARC_VIA_MARGIN_M,
     escape_band_m=ESCAPE_BAND_M, escape_all=True, horizon_via_points=True,
     lines_arcs=True, clamp_heading=False, braking_guard=True, keep_plan=True, routing=True,
-    liveness=LivenessConfig(), turn_when_stuck=True)
+    liveness=LivenessConfig(), turn_when_stuck=True, passages=True)
 """eifp-mpc in the default profile: every mechanism."""
 
 

@@ -42,7 +42,15 @@ from typing import TYPE_CHECKING, Protocol
 import numpy as np
 
 from agent.core.config import PLANNER_NAMES, PlannerConfig, RobotLimits
-from agent.core.types import Observation, PlanDebug, PlanResult, PlanStatus, Side, StageTimes
+from agent.core.types import (
+    Observation,
+    Others,
+    PlanDebug,
+    PlanResult,
+    PlanStatus,
+    Side,
+    StageTimes,
+)
 from agent.planning.estimation import ESTIMATION_WINDOW_S
 from agent.planning.goal_guard import WATCH_FROM_M, refuge_point
 from agent.planning.guidance import RouteGuide
@@ -78,6 +86,17 @@ its heading would send it the wrong way."""
 
 CONTROL_PERIOD_S = 0.1
 """Default command period: the rate limits of the tracking laws use it."""
+
+PASSAGE_GUARD_ROOM_M = 0.03
+"""Against a passage's discs the MPC keeps at least the braking guard's gap plus this [m]:
+a plan that runs along a wall exactly at the guard's gap is one the guard stops, since
+any heading a little towards the wall closes a gap that is already spent (`rooms_lane_4`,
+seed 1: a robot stood in the corridor 0.05 m from a corner disc for the rest of the run)."""
+PASSAGE_SLACK_M = 0.0
+"""Against a passage's discs the MPC asks at most the robot's present distance less this
+[m] (`_predictions`): with nothing less, a robot at the guard's gap from a corner plans a
+way that does not close on it (5 mm less let it plan along the corner, which the guard
+then stopped: `lane_bend`, seed 2)."""
 
 LATENCY_CLEARANCE_FACTOR = 2.0
 """eIFP-MPC's half-planes keep this many pose ages of relative motion on top of their
@@ -157,6 +176,18 @@ def _inside_any(observation: Observation, config: PlannerConfig) -> bool:
                  + config.safety.d_safety_m).any())
 
 
+def _shrunk(others: Others, ids: frozenset[int], shrink_m: float) -> Others:
+    """`others` with the discs of `ids` smaller by `shrink_m` (not below 0): a planner
+    that inflates them by d_safety (Eq. 8) keeps d_safety - shrink_m from them."""
+    if shrink_m <= 0.0 or len(others) == 0:
+        return others
+    bound = np.fromiter((int(i) in ids for i in others.ids), bool, len(others))
+    if not bound.any():
+        return others
+    return others.with_radius(np.where(bound, np.maximum(others.radius_m - shrink_m, 0.0),
+                                       others.radius_m))
+
+
 def _yield_result(observation: Observation, elapsed_s: float, period_s: float) -> PlanResult:
     """A stop while yielding (`agent.planning.liveness`, rule 2), braking at the robot's
     limit (`braking_speed_mps`)."""
@@ -226,7 +257,8 @@ class ViaPointPlanner:
             self.guide = RouteGuide(
                 static_map if static_map is not None else StaticMap.empty(),
                 config.safety.d_safety_m, routes=self.mech.routing,
-                liveness=self.mech.liveness)
+                liveness=self.mech.liveness, passages=self.mech.passages)
+        self._passage: tuple[frozenset[int], float] = (frozenset(), math.inf)
 
     def reset(self) -> None:
         """Forget side memory, MPC warm starts, the route and the liveness state."""
@@ -268,12 +300,13 @@ class ViaPointPlanner:
         limits = observation.limits
         # Bound the work: the others within the sensing radius, at most max_neighbors,
         # selected once per cycle for the via-points and the MPC alike.
-        near = nearby_others(np.array([ego.x_m, ego.y_m]), observation.others,
+        everyone = observation.others
+        near = nearby_others(np.array([ego.x_m, ego.y_m]), everyone,
                              cfg.threats.sensing_radius_m, cfg.threats.max_neighbors)
         if near is not observation.others:
             observation = observation.with_others(near)
         sensed = observation  # true radii, for the tracker and the braking guard
-        guided = self._guide(observation, now_s)
+        guided = self._guide(observation, now_s, everyone)
         if guided is None:
             return _yield_result(observation, clock() - t0, self.control_period_s)
         observation, tail, stuck = guided
@@ -361,18 +394,22 @@ class ViaPointPlanner:
         return refuge_point(observation.goal_m, observation.radius_m, observation.others,
                             cfg.safety.d_safety_m, cfg.threats.t_max_s, self._static)
 
-    def _guide(self, observation: Observation, now_s: float
+    def _guide(self, observation: Observation, now_s: float, everyone: Others
                ) -> tuple[Observation, np.ndarray | None, bool] | None:
         """Routes and liveness (`agent.planning.guidance`): None when the robot yields this
         cycle, else the observation eIFP plans on (heading for the route's intermediate
         goal; still discs shrunk while squeezing, `liveness.squeezed`), the route's
         waypoints after that goal (None: the goal is the final one), and whether the
-        progress monitor found the robot stuck this cycle."""
+        progress monitor found the robot stuck this cycle. Near a narrow passage its
+        discs are shrunk to the passage's margin (`agent.planning.passages`); the MPC
+        keeps that margin from them too (`_predictions`)."""
+        self._passage = (frozenset(), math.inf)
         if self.guide is None:
             return observation, None, False
         cfg = self.config
-        guided = self.guide.guide(observation, now_s)
-        if guided.strategy is Strategy.YIELD and not _inside_any(observation, cfg):
+        guided = self.guide.guide(observation, now_s, everyone)
+        if guided.strategy is Strategy.YIELD and (guided.hold
+                                                   or not _inside_any(observation, cfg)):
             return None
         tail = None
         if guided.tail_m.shape[0]:
@@ -383,6 +420,11 @@ class ViaPointPlanner:
             observation = observation.with_others(squeezed(
                 observation.others, cfg.safety.d_safety_m, live.squeeze_margin_m,
                 live.slow_mps))
+        if guided.passage_ids:
+            self._passage = (guided.passage_ids, guided.passage_margin_m)
+            observation = observation.with_others(_shrunk(
+                observation.others, guided.passage_ids,
+                cfg.safety.d_safety_m - guided.passage_margin_m))
         return observation, tail, guided.stuck
 
     def _turning(self, observation: Observation, ref_x_m: np.ndarray, ref_y_m: np.ndarray,
@@ -500,6 +542,20 @@ class ViaPointPlanner:
         near = observation.others
         preds = near.position_m[:, None, :] + near.velocity_mps[:, None, :] * t_s[None, :, None]
         clearance = observation.radius_m + near.radius_m + cfg.mpc.clearance_margin_m
+        ids, margin = self._passage
+        if ids and len(near):
+            # a narrow passage's walls: the margin it leaves, at least the guard's gap
+            # and some room, and never more than the robot has now (from a corner it
+            # brushed, the QP then plans away from it instead of finding its own start
+            # infeasible)
+            bound = np.fromiter((int(i) in ids for i in near.ids), bool, len(near))
+            ego = observation.ego
+            now = np.hypot(near.position_m[:, 0] - ego.x_m, near.position_m[:, 1] - ego.y_m)
+            keep = np.minimum(observation.radius_m + near.radius_m
+                              + max(min(margin, cfg.mpc.clearance_margin_m),
+                                    cfg.safety.braking_margin_m + PASSAGE_GUARD_ROOM_M),
+                              now - PASSAGE_SLACK_M)
+            clearance = np.where(bound, keep, clearance)
         if observation.pose_age_s > 0.0 and len(near):
             # Loop delay: the poses are pose_age_s old and the command reaches the wheels
             # about as late again (links are assumed symmetric), so the pair can close by

@@ -526,6 +526,16 @@ class RouteFollower:
         self._next = 1  # index of the first waypoint not yet reached
 
     @property
+    def next_index(self) -> int:
+        """Index in the route of the first waypoint not yet passed (the one aimed at)."""
+        return self._next
+
+    def skip_to(self, index: int) -> None:
+        """Aim at waypoint `index` from now on (a robot that left a narrow passage at its
+        far mouth, `agent.planning.guidance`); never backwards."""
+        self._next = max(self._next, min(int(index), self.route.waypoints_m.shape[0] - 1))
+
+    @property
     def remaining_m(self) -> np.ndarray:
         """(k, 2) the route waypoints not yet passed (goal last)."""
         return self.route.waypoints_m[self._next:]

@@ -495,4 +495,4 @@ def test_a_goal_enclosed_in_a_map_of_several_hundred_discs_is_refused(tmp_path: 
                                          / "probes").glob("*.yaml")), ids=lambda p: p.stem)
 def test_every_probe_scene_of_the_docs_loads(path: Path) -> None:
     scenario = load_scenario(path)
-    assert scenario.name == path.stem and len(scenario.robots) >= 2
+    assert scenario.name == path.stem and len(scenario.robots) >= 1

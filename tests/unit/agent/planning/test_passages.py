@@ -1,0 +1,202 @@
+"""Narrow passages: centring, tracking the centre line, and one way at a time
+(`agent.planning.passages`, and its use by `agent.planning.guidance`)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+from hypothesis import given
+from hypothesis import strategies as st
+
+from agent.core.config import PlannerConfig
+from agent.core.types import Others
+from agent.planning import passages as P
+from agent.planning.guidance import RouteGuide
+from agent.planning.liveness import LivenessConfig
+from agent.planning.mechanisms import EIFP_MPC_MECHANISMS
+from agent.planning.planners import make_planner
+from agent.planning.routing import (
+    ROUTE_MARGIN_M,
+    StaticMap,
+    route_or_tight,
+    segment_disc_distance,
+)
+from tests.unit.agent.planning.test_guidance import as_others, closed_loop, observation
+
+RADIUS, D_SAFETY = 0.5, 0.3
+FULL = RADIUS + D_SAFETY + ROUTE_MARGIN_M
+
+
+def walled_corridor(half_clear_m: float = 0.65) -> StaticMap:
+    """A wall across x in [-4, 4] pierced by a corridor along y = 0, `2 half_clear_m`
+    clear between its disc walls (0.6 m discs), closed to y = +-8 (the way round is long:
+    the route is tight)."""
+    y_wall = half_clear_m + 0.6
+    pts = [(x, s * y_wall) for x in np.linspace(-4.0, 4.0, 8) for s in (-1.0, 1.0)]
+    pts += [(x, s * y) for x in (-4.0, 4.0) for s in (-1.0, 1.0)
+            for y in np.arange(y_wall + 1.2, 8.0, 1.2)]
+    centers = np.array(pts)
+    return StaticMap(centers, np.full(len(pts), 0.6), -(np.arange(len(pts)) + 1))
+
+
+def corridor_passage(start: tuple[float, float] = (-9.0, 0.4)
+                     ) -> tuple[StaticMap, P.Passage, np.ndarray]:
+    static = walled_corridor()
+    route = route_or_tight(np.array(start), np.array([9.0, 0.0]), static, RADIUS, D_SAFETY)
+    assert route is not None and route.tight
+    centred, found = P.centre_route(route, static, RADIUS, D_SAFETY, FULL)
+    assert len(found) == 1
+    return static, found[0], centred.waypoints_m
+
+
+def test_a_tight_route_is_centred_in_its_gap_with_a_lead_in_on_the_centre_line() -> None:
+    static, passage, wps = corridor_passage()
+    inside = passage.line_m[passage.mouth_index:]
+    assert np.abs(inside[:, 1]).max() <= P.THIN_TOLERANCE_M + 1e-9  # on the axis (y = 0)
+    assert inside[0, 0] < -4.0 < 4.0 < inside[-1, 0]  # mouth to far mouth
+    assert passage.mouth_index == 1  # a lead-in, LEAD_IN_M before the mouth, on the axis
+    assert math.isclose(inside[0, 0] - passage.line_m[0, 0], P.LEAD_IN_M, abs_tol=0.05)
+    assert abs(passage.line_m[0, 1]) <= P.THIN_TOLERANCE_M
+    assert math.isclose(passage.width_m, 1.3, abs_tol=0.02)
+    assert passage.one_lane  # 1.3 m: one 1 m robot at a time
+    # the margin it leaves: half the width, less the radius and the tracking tube
+    assert math.isclose(passage.margin_m, 0.65 - RADIUS - P.TRACKING_TUBE_M, abs_tol=0.02)
+    # the discs that bound it are the corridor's walls, not the far ends of the wall
+    bound = static.center_m[passage.disc_index]
+    assert (np.abs(bound[:, 1]) < 2.0).all() and len(bound) >= 16
+    # the centred route still keeps its clearance, and starts and ends where it did
+    assert np.allclose(wps[0], (-9.0, 0.4)) and np.allclose(wps[-1], (9.0, 0.0))
+    d = segment_disc_distance(wps[:-1], wps[1:], static.center_m) - static.radius_m
+    assert d.min() >= RADIUS - 1e-6
+
+
+def test_a_route_with_full_clearance_is_left_alone() -> None:
+    static = walled_corridor(half_clear_m=1.5)  # 3 m clear: the full clearance fits
+    route = route_or_tight(np.array([-9.0, 0.4]), np.array([9.0, 0.0]), static, RADIUS,
+                           D_SAFETY)
+    assert route is not None and not route.tight
+    centred, found = P.centre_route(route, static, RADIUS, D_SAFETY, FULL)
+    assert centred is route and found == ()
+
+
+def test_on_track_aims_along_the_line_and_joins_it_short_of_the_mouth() -> None:
+    _, passage, _ = corridor_passage()
+    lead, mouth, far = passage.line_m[0], passage.mouth_m, passage.far_mouth_m
+    assert P.on_track(passage, lead + (-0.5, 0.0)) is None  # before the lead-in
+    assert P.on_track(passage, far + (0.5, 0.0)) is None  # past the far mouth
+    assert P.on_track(passage, np.array([0.0, 1.5])) is None  # too far off the line
+    # just past the lead-in, well off the line: the aim stops ALIGN_M short of the mouth
+    aim = P.on_track(passage, lead + (0.3, 0.6))
+    assert aim is not None
+    carrot, rest = aim
+    assert math.isclose(carrot[0], mouth[0] - P.ALIGN_M, abs_tol=0.01)
+    assert abs(carrot[1]) <= P.THIN_TOLERANCE_M and np.allclose(rest[-1], far)
+    # inside: TRACK_LOOKAHEAD_M ahead on the line
+    carrot, _ = P.on_track(passage, np.array([0.0, 0.08])) or (None, None)
+    assert carrot is not None and math.isclose(carrot[0], P.TRACK_LOOKAHEAD_M, abs_tol=0.05)
+
+
+def robots(*rows: tuple[int, tuple[float, float], tuple[float, float]]) -> Others:
+    ids = np.array([r[0] for r in rows])
+    pos = np.array([r[1] for r in rows], dtype=float)
+    vel = np.array([r[2] for r in rows], dtype=float)
+    n = len(rows)
+    return Others(ids=ids, position_m=pos, velocity_mps=vel, radius_m=np.full(n, 0.5),
+                  linearity=np.zeros(n), track_start_m=pos, is_robot=np.ones(n, dtype=bool))
+
+
+def test_one_way_at_a_time_inside_first_then_nearer_mouth_then_lower_id() -> None:
+    _, passage, _ = corridor_passage()
+    mouth, far = passage.mouth_m, passage.far_mouth_m
+    me = mouth + (-2.0, 0.0)  # at my hold line
+
+    def hold(others: Others, robot_id: int = 5, now_s: float = 0.0,
+             state: P.HoldState | None = None) -> bool:
+        return P.must_hold(passage, robot_id, me, others, now_s, state or P.HoldState())
+
+    # in it and coming at me: wait; in it going my way: follow
+    assert hold(robots((9, (0.0, 0.0), (-1.0, 0.0))))
+    assert not hold(robots((9, (0.0, 0.0), (1.0, 0.0))))
+    # waiting at the far mouth: nearer its mouth goes first, whatever its id
+    assert hold(robots((9, tuple(far + (1.0, 0.0)), (0.0, 0.0))))
+    assert not hold(robots((1, tuple(far + (3.5, 0.0)), (-1.0, 0.0))))
+    # a tie goes to the lower id
+    assert hold(robots((1, tuple(far + (2.0, 0.0)), (0.0, 0.0))))
+    assert not hold(robots((9, tuple(far + (2.0, 0.0)), (0.0, 0.0))))
+    # past its hold line (within HOLD_M) goes before one that is not: a tie by distance
+    # that the lower id would otherwise win
+    assert not P._ahead_of(2.7, 1, 2.4, 5) and P._ahead_of(2.4, 5, 2.7, 1)
+    assert P._ahead_of(2.7, 1, 2.9, 5)  # neither past it: the tie goes to the lower id
+    # one moving away from its mouth (it came out) is no reason to wait
+    assert not hold(robots((1, tuple(far + (1.0, 0.0)), (1.0, 0.0))))
+    # far from either mouth: nobody to wait for
+    assert not hold(robots((1, tuple(far + (6.0, 0.0)), (-1.0, 0.0))))
+
+
+def test_a_wait_for_robots_that_stand_still_ends() -> None:
+    _, passage, _ = corridor_passage()
+    me = passage.mouth_m + (-2.0, 0.0)
+    still = robots((9, (0.0, 0.0), (0.0, 0.0)))  # stands in the passage (stuck, parked)
+    state = P.HoldState()
+    assert P.must_hold(passage, 5, me, still, 10.0, state)
+    assert P.must_hold(passage, 5, me, still, 10.0 + P.HOLD_STILL_S - 0.1, state)
+    assert not P.must_hold(passage, 5, me, still, 10.0 + P.HOLD_STILL_S, state)
+    moving = robots((9, (0.0, 0.0), (-1.0, 0.0)))  # it moves: the wait starts afresh
+    assert P.must_hold(passage, 5, me, moving, 30.0, state)
+    wide = dataclasses.replace(passage, one_lane=False)
+    assert not P.must_hold(wide, 5, me, moving, 30.0, P.HoldState())
+
+
+distance = st.floats(0.0, 4.0, allow_nan=False)
+
+
+@given(distance, distance, st.integers(0, 50), st.integers(0, 50))
+def test_right_of_way_is_a_strict_order(a_m: float, b_m: float, a_id: int, b_id: int
+                                        ) -> None:
+    """Of two robots at opposite mouths (distinct ids) exactly one goes first, so they
+    never both wait nor both go (module docstring, "Why the one-way rule cannot
+    deadlock")."""
+    if a_id == b_id:
+        b_id += 1
+    assert P._ahead_of(a_m, a_id, b_m, b_id) != P._ahead_of(b_m, b_id, a_m, a_id)
+
+
+def test_a_lone_robot_crosses_a_corridor_it_fits_with_0_15_m_either_side() -> None:
+    """Found on the probe `rooms_lane_2` (docs/results.md): without the passage rules a
+    lone robot stood at the mouth of a corridor 1.3 m clear (its diameter 1 m) until the
+    time limit: the tight route hugs one wall, and eIFP's discs inflated by d_safety close
+    the gap."""
+    static = walled_corridor()
+    goal = (9.0, 0.0)
+
+    def drive(mech: object) -> tuple[np.ndarray, float]:
+        planner = make_planner("eifp-mpc", PlannerConfig(), static_map=static,
+                               mechanisms=mech)  # type: ignore[arg-type]
+        return closed_loop(planner, as_others(static), (-9.0, 0.4, 0.0), goal, 40.0)
+
+    path, gap = drive(EIFP_MPC_MECHANISMS)
+    assert math.dist(path[-1], goal) < 0.25
+    assert gap >= 0.05  # the margin it keeps, by design
+    path, _ = drive(dataclasses.replace(EIFP_MPC_MECHANISMS, passages=False))
+    assert (path[:, 0] < -3.0).all()  # never into the corridor
+
+
+def test_the_guide_holds_before_a_one_lane_passage_and_waiting_is_not_being_stuck() -> None:
+    static = walled_corridor()
+    guide = RouteGuide(static, D_SAFETY, liveness=LivenessConfig(), passages=True)
+    walls = as_others(static)
+    coming = robots((1, (0.0, 0.0), (-1.0, 0.0)))  # in the corridor, coming this way
+    start = (-9.0, 0.0)
+    guide.guide(observation(*start, 0.0, 0.0, (9.0, 0.0), walls, robot_id=5), 0.0)
+    passage = guide._passages[0]
+    here = passage.mouth_m + (-2.0, 0.0)
+    for k in range(100):  # 10 s at the hold line: it holds, and never goes stuck
+        g = guide.guide(observation(*here, 0.0, 0.0, (9.0, 0.0), walls, robot_id=5),
+                        k * 0.1, coming)
+        assert g.hold and not g.stuck
+    g = guide.guide(observation(*here, 0.0, 0.0, (9.0, 0.0), walls, robot_id=5), 10.0,
+                    walls)  # the corridor is clear
+    assert not g.hold and g.passage_ids and math.isclose(g.passage_margin_m,
+                                                         passage.margin_m)
