@@ -26,12 +26,14 @@ from agent.planning.liveness import Liveness, LivenessConfig, Strategy, knot
 from agent.planning.passages import (
     HOLD_M,
     NEAR_M,
+    SPOT_REACHED_M,
     HoldState,
     Passage,
     centre_route,
     distance_along,
     must_hold,
     on_track,
+    waiting_spot,
 )
 from agent.planning.routing import (
     MAX_ROUTED_OBSTACLES,
@@ -195,6 +197,11 @@ class RouteGuide:
             left = self._follower.progress_left_m(here)
             if self.liveness is not None:  # waiting is not being stuck
                 self.liveness.monitor.restart(now_s, left)
+            spot = waiting_spot(self._passages[ahead], here, self.static,
+                                observation.radius_m)
+            away = float(math.hypot(*(spot - here)))
+            if away > SPOT_REACHED_M:  # to its waiting spot, off the line
+                return Guidance(goal_m=spot, tail_m=_NO_TAIL, left_m=away, hold=True)
             return Guidance(goal_m=self._follower.remaining_m[0], tail_m=_NO_TAIL,
                             left_m=left, strategy=Strategy.YIELD, hold=True)
         if self.liveness is not None:

@@ -38,9 +38,9 @@ The rules here, in the order a cycle applies them:
   way, and no robot waiting or coming at either mouth has the right of way. Right of way
   outside: the robot past its hold line (`HOLD_M` from its mouth) before one that is not,
   then the robot nearer its mouth (by more than `TIE_M`), then the lower id. A robot
-  that must give way stands `HOLD_M` before its mouth (the passage's clear space is not
-  blocked for the one coming out). A robot inside always has the right of way over one
-  outside. Robots sense each other's positions and ids (not their plans), so both sides
+  that must give way waits at `waiting_spot`, off the line out of the mouth, so the
+  way out is clear for the robots coming out. A robot inside always has the right of
+  way over one outside. Robots sense each other's positions and ids (not their plans), so both sides
   compute the same priority; a robot that gives way to one that stands still (parked,
   or stuck itself) stops giving way after `HOLD_STILL_S`, so no wait is for ever.
 
@@ -82,6 +82,14 @@ HOLD_M = 2.5
 """A robot giving way stands this far before the mouth (centre distance) [m]."""
 LOOK_M = 4.0
 """Robots within this of the far mouth, outside, count as waiting or coming [m]."""
+SPOT_M = 2.2
+"""A robot giving way waits this far from the mouth (inside its hold line) [m]."""
+SPOT_ANGLE_RAD = math.radians(50.0)
+"""... and this far round from the line out of the mouth (`waiting_spot`)."""
+SPOT_CLEAR_M = 0.3
+"""A waiting spot keeps this much more than the robot's radius from every static disc [m]."""
+SPOT_REACHED_M = 0.3
+"""A robot this close to its waiting spot stands there [m]."""
 TIE_M = 0.5
 """Distances to the mouths within this of each other are a tie (the lower id goes) [m]."""
 HOLD_STILL_S = 8.0
@@ -347,6 +355,30 @@ def on_track(passage: Passage, position_m: np.ndarray) -> tuple[np.ndarray, np.n
     if after.shape[0] and float(math.hypot(*(after[0] - carrot))) <= 1e-6:
         after = after[1:]
     return carrot, after
+
+
+def waiting_spot(passage: Passage, position_m: np.ndarray, static: StaticMap,
+                 radius_m: float) -> np.ndarray:
+    """Where a robot that gives way before `passage` waits: `SPOT_M` from the mouth, turned
+    `SPOT_ANGLE_RAD` off the line out of the mouth, to the side the robot is on (the right,
+    seen from the mouth, when it is on the line), or the other side, or on the line,
+    whichever first keeps `radius_m` + `SPOT_CLEAR_M` from every static disc. Off the line,
+    the robots coming out find their way clear; on it, they met a half-ring of robots
+    waiting 2 m from a door (`wide_door_crowd`)."""
+    line = passage.line_m
+    mouth = passage.mouth_m
+    out = line[0] - mouth if passage.mouth_index else mouth - line[min(1, line.shape[0] - 1)]
+    norm = float(math.hypot(*out))
+    out = out / norm if norm > 1e-9 else np.array([-1.0, 0.0])
+    rel = position_m - mouth
+    side = 1.0 if float(out[0] * rel[1] - out[1] * rel[0]) > 0.0 else -1.0
+    for angle in (side * SPOT_ANGLE_RAD, -side * SPOT_ANGLE_RAD, 0.0):
+        c, s_ = math.cos(angle), math.sin(angle)
+        spot = mouth + SPOT_M * np.array([c * out[0] - s_ * out[1], s_ * out[0] + c * out[1]])
+        if len(static) == 0 or (np.hypot(*(static.center_m - spot).T) - static.radius_m
+                                >= radius_m + SPOT_CLEAR_M).all():
+            return spot
+    return mouth + SPOT_M * out
 
 
 @dataclass

@@ -415,6 +415,8 @@ class ViaPointPlanner:
         if guided.tail_m.shape[0]:
             observation = observation.with_goal(guided.goal_m, guided.left_m)
             tail = guided.tail_m
+        elif guided.hold:  # to a waiting spot before a one-lane passage
+            observation = observation.with_goal(guided.goal_m, guided.left_m)
         live = self.mech.liveness
         if guided.squeeze and live is not None:
             observation = observation.with_others(squeezed(

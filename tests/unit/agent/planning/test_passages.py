@@ -14,7 +14,7 @@ from agent.core.config import PlannerConfig
 from agent.core.types import Others
 from agent.planning import passages as P
 from agent.planning.guidance import RouteGuide
-from agent.planning.liveness import LivenessConfig
+from agent.planning.liveness import LivenessConfig, Strategy
 from agent.planning.mechanisms import EIFP_MPC_MECHANISMS
 from agent.planning.planners import make_planner
 from agent.planning.routing import (
@@ -200,3 +200,31 @@ def test_the_guide_holds_before_a_one_lane_passage_and_waiting_is_not_being_stuc
                     walls)  # the corridor is clear
     assert not g.hold and g.passage_ids and math.isclose(g.passage_margin_m,
                                                          passage.margin_m)
+
+
+def test_a_robot_that_gives_way_waits_off_the_line_on_its_own_side() -> None:
+    """Waiting on the line out of the mouth, robots stood in the way of those coming
+    out; the waiting spot is turned off it, to the side the robot is on, clear of the
+    walls."""
+    static, passage, _ = corridor_passage()
+    mouth = passage.mouth_m  # the west mouth; the line leaves it towards -x
+    above = P.waiting_spot(passage, mouth + (-2.0, 0.5), static, RADIUS)
+    below = P.waiting_spot(passage, mouth + (-2.0, -0.5), static, RADIUS)
+    for spot in (above, below):
+        assert math.isclose(math.dist(spot, mouth), P.SPOT_M, abs_tol=1e-9)
+        gap = np.hypot(*(static.center_m - spot).T) - static.radius_m
+        assert gap.min() >= RADIUS + P.SPOT_CLEAR_M
+        assert spot[0] < mouth[0]  # on the robot's side of the mouth
+    assert above[1] > mouth[1] + 1.0 and below[1] < mouth[1] - 1.0  # off the line
+    # the guide sends a robot that gives way to the spot, then stands it there
+    guide = RouteGuide(static, D_SAFETY, liveness=LivenessConfig(), passages=True)
+    walls = as_others(static)
+    coming = robots((1, (0.0, 0.0), (-1.0, 0.0)))
+    guide.guide(observation(-9.0, 0.4, 0.0, 0.0, (9.0, 0.0), walls, robot_id=5), 0.0)
+    here = passage.mouth_m + (-2.0, 0.3)
+    g = guide.guide(observation(*here, 0.0, 0.0, (9.0, 0.0), walls, robot_id=5), 1.0, coming)
+    assert g.hold and g.strategy is Strategy.GO
+    assert math.dist(g.goal_m, P.waiting_spot(passage, here, static, RADIUS)) < 1e-9
+    spot = g.goal_m
+    g = guide.guide(observation(*spot, 0.0, 0.0, (9.0, 0.0), walls, robot_id=5), 1.1, coming)
+    assert g.hold and g.strategy is Strategy.YIELD
