@@ -149,7 +149,7 @@ class RouteGuide:
         if route is None:  # no map, or no route from here (validation saw one from the start)
             route = Route(np.stack((here, goal)), 0.0)
             return RouteFollower(route, StaticMap.empty())
-        if self.passages_on and route.tight:
+        if self.passages_on:
             full = radius_m + self.d_safety_m + ROUTE_MARGIN_M
             route, self._passages = centre_route(route, self.static, radius_m,
                                                  self.d_safety_m, full)

@@ -16,13 +16,15 @@ diameter 1.0 m, until the time limit):
 
 The rules here, in the order a cycle applies them:
 
-- **Centring** (`centre_route`): where the clear width across the route is less than
-  twice the full route clearance (robot radius + d_safety + `ROUTE_MARGIN_M`), the
-  route's points are moved to the middle of the gap (halfway between the nearest disc
-  edges on its left and right), sampled every `SAMPLE_STEP_M` and thinned to the corners
-  that matter, with a lead-in point `LEAD_IN_M` before the mouth on the centre line so
-  the robot arrives aligned. Centring never lowers a point's clearance (the middle of a
-  gap is at least as far from both sides as any point in it).
+- **Centring** (`centre_route`): where the clear width across a tight route is less than
+  twice the full route clearance (robot radius + d_safety + `ROUTE_MARGIN_M`), or across
+  any route less than `one_lane_width_m` (two robots cannot pass each other there with
+  their margins: a door 2.2 m clear that 16 robots crossing both ways jammed,
+  `wide_door_crowd`), the route's points are moved to the middle of the gap (halfway
+  between the nearest disc edges on its left and right), sampled every `SAMPLE_STEP_M` and
+  thinned to the corners that matter, with a lead-in point `LEAD_IN_M` before the mouth on
+  the centre line so the robot arrives aligned. Centring never lowers a point's clearance
+  (the middle of a gap is at least as far from both sides as any point in it).
 - **Following the line** (`on_track`): past the lead-in, the robot aims
   `TRACK_LOOKAHEAD_M` ahead of its nearest point on the centre line, and before the mouth
   no nearer than `ALIGN_M` short of it; the route follower (whose sight lines find nothing
@@ -210,8 +212,10 @@ def _margin(width_m: float, radius_m: float, usual_m: float) -> float:
 def centre_route(route: Route, static: StaticMap, radius_m: float, d_safety_m: float,
                  full_clearance_m: float) -> tuple[Route, tuple[Passage, ...]]:
     """The route with its narrow stretches centred, and those stretches (module
-    docstring). A route that is not tight, or whose centred form would not keep its own
-    clearance, comes back as it was, with no passages.
+    docstring): on a tight route, where the clear width is less than twice the full
+    clearance; on any other route, where it is less than `one_lane_width_m`. A route with
+    no such stretch, or whose centred form would not keep its own clearance, comes back
+    as it was, with no passages.
 
     Args:
         route: a route from `routing.route_or_tight`.
@@ -220,12 +224,13 @@ def centre_route(route: Route, static: StaticMap, radius_m: float, d_safety_m: f
         d_safety_m: the usual margin of Eq. (8) [m].
         full_clearance_m: the full route clearance (robot radius + d_safety + margin) [m].
     """
-    if not route.tight or len(static) == 0:
+    if len(static) == 0:
         return route, ()
     tree = cKDTree(static.center_m)
     pts, dirs = _resample(route.waypoints_m, SAMPLE_STEP_M)
     left, right = _side_gaps(pts, dirs, static, tree)
-    narrow = (left + right) < 2.0 * full_clearance_m
+    one_lane = one_lane_width_m(radius_m, d_safety_m)
+    narrow = (left + right) < (2.0 * full_clearance_m if route.tight else one_lane)
     start_inside = bool(narrow[0])  # a route planned from inside a gap
     narrow[0] = narrow[-1] = False  # the start and the goal stay where they are
     if not narrow.any():
@@ -266,7 +271,7 @@ def centre_route(route: Route, static: StaticMap, radius_m: float, d_safety_m: f
         discs = _bounding_discs(line, static, full_clearance_m)
         passages.append(Passage(
             line_m=full_line, mouth_index=1 if lead_ok else 0, width_m=width,
-            disc_index=discs, one_lane=width < 4.0 * radius_m + 2.0 * TRACKING_TUBE_M,
+            disc_index=discs, one_lane=width < one_lane,
             margin_m=_margin(width, radius_m, d_safety_m),
             entered=start_inside and a == 1))
         cursor = b + 1
@@ -279,7 +284,14 @@ def centre_route(route: Route, static: StaticMap, radius_m: float, d_safety_m: f
                           static.radius_m + route.clearance_m)
     if not legs.all():
         return route, ()
-    return Route(wps, route.clearance_m, tight=True), tuple(passages)
+    return Route(wps, route.clearance_m, tight=route.tight), tuple(passages)
+
+
+def one_lane_width_m(radius_m: float, d_safety_m: float) -> float:
+    """The clear width below which two robots of `radius_m` cannot pass each other with
+    d_safety between them and `TRACKING_TUBE_M` to either wall: a stretch of any route
+    narrower than this is a passage taken one way at a time [m]."""
+    return 4.0 * radius_m + d_safety_m + 2.0 * TRACKING_TUBE_M
 
 
 def _vertex_samples(wps: np.ndarray, pts: np.ndarray) -> list[int]:

@@ -73,7 +73,7 @@ def test_a_tight_route_is_centred_in_its_gap_with_a_lead_in_on_the_centre_line()
 
 
 def test_a_route_with_full_clearance_is_left_alone() -> None:
-    static = walled_corridor(half_clear_m=1.5)  # 3 m clear: the full clearance fits
+    static = walled_corridor(half_clear_m=1.5)  # 3 m clear: full clearance, two lanes
     route = route_or_tight(np.array([-9.0, 0.4]), np.array([9.0, 0.0]), static, RADIUS,
                            D_SAFETY)
     assert route is not None and not route.tight
@@ -228,3 +228,23 @@ def test_a_robot_that_gives_way_waits_off_the_line_on_its_own_side() -> None:
     spot = g.goal_m
     g = guide.guide(observation(*spot, 0.0, 0.0, (9.0, 0.0), walls, robot_id=5), 1.1, coming)
     assert g.hold and g.strategy is Strategy.YIELD
+
+
+def test_a_door_two_robots_cannot_pass_in_is_one_lane_on_a_full_route() -> None:
+    """A door 2.2 m clear admits the full route clearance (1.8 m), so the route is not
+    tight; but two 1 m robots with d_safety between them do not pass each other in it
+    (`one_lane_width_m`: 2.5 m), and 16 robots crossing it both ways jammed it
+    (`wide_door_crowd`, docs/results.md). The stretch is a one-lane passage with the
+    usual margin; a door 3 m clear is not."""
+    static = walled_corridor(half_clear_m=1.1)
+    route = route_or_tight(np.array([-9.0, 0.6]), np.array([9.0, 0.0]), static, RADIUS,
+                           D_SAFETY)
+    assert route is not None and not route.tight
+    centred, found = P.centre_route(route, static, RADIUS, D_SAFETY, FULL)
+    assert len(found) == 1 and not centred.tight
+    passage = found[0]
+    assert passage.one_lane and math.isclose(passage.width_m, 2.2, abs_tol=0.02)
+    assert math.isclose(passage.margin_m, D_SAFETY)  # the gap leaves the usual margin
+    inside = passage.line_m[passage.mouth_index:]
+    assert np.abs(inside[:, 1]).max() <= P.THIN_TOLERANCE_M + 1e-9  # centred
+    assert math.isclose(P.one_lane_width_m(RADIUS, D_SAFETY), 2.5)
