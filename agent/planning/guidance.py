@@ -68,8 +68,9 @@ class Guidance:
         passage_ids: obstacle ids of the discs bounding a narrow passage the robot is
             near (`agent.planning.passages`); planned against with `passage_margin_m`.
         passage_margin_m: the margin against those discs [m] (inf: none).
-        hold: the YIELD is a robot giving way before a one-lane passage: it stands even
-            inside a wall's inflated disc (a yield by id does not).
+        hold: the robot gives way before a one-lane passage: it heads for its waiting
+            spot (`goal_m`, strategy GO) or stands there (YIELD, even inside a wall's
+            inflated disc, which a yield by id does not).
     """
 
     goal_m: np.ndarray
@@ -92,8 +93,8 @@ class RouteGuide:
         routes: plan routes over the map (`Mechanisms.routing`).
         liveness: monitor progress and change strategy when stuck (`Mechanisms.liveness`),
             with these thresholds; None: never.
-        passages: centre tight routes in their narrow passages, plan against a passage's
-            discs with the margin it leaves, and take one-lane passages one way at a time
+        passages: centre routes in their narrow passages, plan against a passage's discs
+            with the margin it leaves, and take one-lane passages one way at a time
             (`Mechanisms.passages`, `agent.planning.passages`).
     """
 
@@ -154,10 +155,12 @@ class RouteGuide:
             route, self._passages = centre_route(route, self.static, radius_m,
                                                  self.d_safety_m, full)
             wps = route.waypoints_m
-            self._passage_ends = tuple(
-                int(np.flatnonzero((wps == p.far_mouth_m).all(axis=1))[0])
-                for p in self._passages)
-            self._passage_starts = tuple(end - (p.line_m.shape[0] - 1)
+            found = [np.flatnonzero((wps == p.far_mouth_m).all(axis=1))
+                     for p in self._passages]
+            if not all(f.size for f in found):  # cannot happen: each line is in the route
+                self._passages = ()
+            self._passage_ends = tuple(int(f[0]) for f in found) if self._passages else ()
+            self._passage_starts = tuple(max(end - (p.line_m.shape[0] - 1), 0)
                                          for p, end in zip(self._passages,
                                                            self._passage_ends))
         return RouteFollower(route, self.static)

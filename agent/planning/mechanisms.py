@@ -93,10 +93,12 @@ class Mechanisms:
             reference to one bounded turn on the spot (`agent.planning.turning`): the
             MPC, linearised about its prediction, finds no gain in turning a hemmed-in
             robot. Needs `liveness` (its progress monitor says when).
-        passages: a tight route is centred in its narrow passages, the discs bounding a
-            passage the robot is near are planned against with the margin the passage
-            leaves, and a passage one robot wide is taken one way at a time
-            (`agent.planning.passages`). Needs `routing`.
+        passages: a route is centred in its narrow passages (gaps that admit the robot
+            but not its margin, and gaps two robots cannot pass each other in), the discs
+            bounding a passage the robot is near are planned against with the margin the
+            passage leaves, and a one-lane passage is taken one way at a time, the robot
+            that gives way waiting off the line (`agent.planning.passages`). Needs
+            `routing`.
         goal_guard: a robot parked at its goal keeps watch on the moving obstacles it
             senses and steps aside to a refuge beside the track of one that would pass
             within the inflated radius L, returning once it has passed
