@@ -109,6 +109,7 @@ class RouteGuide:
         self._passage_ends: tuple[int, ...] = ()  # route index of each passage's far mouth
         self._passage_starts: tuple[int, ...] = ()  # and of its first point (lead-in)
         self._left = 0  # passages the robot has left by their far mouth
+        self._passage_ids: tuple[frozenset[int], ...] = ()  # obstacle ids per passage
         self._hold = HoldState()
         self.holds = 0  # cycles spent giving way at a one-lane passage
         self._follower: RouteFollower | None = None
@@ -163,6 +164,10 @@ class RouteGuide:
             self._passage_starts = tuple(max(end - (p.line_m.shape[0] - 1), 0)
                                          for p, end in zip(self._passages,
                                                            self._passage_ends))
+            ids = self.static.ids
+            self._passage_ids = tuple(  # once per route, not per cycle
+                frozenset(int(i) for i in ids[p.disc_index]) if ids is not None
+                else frozenset() for p in self._passages)
         return RouteFollower(route, self.static)
 
     def _passage_ahead(self, here: np.ndarray) -> int | None:
@@ -247,8 +252,7 @@ class RouteGuide:
         squeeze = self.liveness is not None and self.liveness.squeezing(now_s)
         stuck = self.liveness is not None and self.liveness.stuck_now
         ahead = self._passage_ahead(here)
-        ids, margin = self._passage_discs(None if ahead is None else self._passages[ahead],
-                                          here)
+        ids, margin = self._passage_discs(ahead, here)
         if tail.shape[0] == 0:
             tail = _NO_TAIL
         return Guidance(goal_m=target, tail_m=tail,
@@ -290,17 +294,17 @@ class RouteGuide:
         others = everyone if everyone is not None else observation.others
         return must_hold(passage, observation.robot_id, here, others, now_s, self._hold)
 
-    def _passage_discs(self, passage: Passage | None, here: np.ndarray
+    def _passage_discs(self, ahead: int | None, here: np.ndarray
                        ) -> tuple[frozenset[int], float]:
-        """The obstacle ids bounding the passage ahead and its margin, when the robot is
-        within `passages.NEAR_M` of it."""
-        if passage is None or self.static.ids is None:
+        """The obstacle ids bounding the passage ahead (index `ahead`) and its margin, when
+        the robot is within `passages.NEAR_M` of it."""
+        if ahead is None or self.static.ids is None:
             return frozenset(), math.inf
+        passage = self._passages[ahead]
         _, off = distance_along(passage.line_m, here)
         if off > NEAR_M:
             return frozenset(), math.inf
-        ids = frozenset(int(i) for i in self.static.ids[passage.disc_index])
-        return ids, passage.margin_m
+        return self._passage_ids[ahead], passage.margin_m
 
     def _reroute(self, here: np.ndarray, goal: np.ndarray, observation: Observation) -> bool:
         """Rule 1 of `agent.planning.liveness`: a route round the slow robots near, if one
