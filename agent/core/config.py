@@ -27,7 +27,7 @@ MECHANISM_NAMES: tuple[str, ...] = (
     "direct_leg_check", "goal_tcpa_filter", "encounter_rules", "inflated_threats", "commitment",
     "via_margin_m", "escape_band_m", "escape_all", "horizon_via_points",
     "lines_arcs", "clamp_heading", "braking_guard", "keep_plan", "routing", "liveness",
-    "turn_when_stuck", "goal_guard", "passages")
+    "turn_when_stuck", "goal_guard", "passages", "make_way")
 """The additions to the paper's cycle that `PlannerConfig.without` can switch off: the fields
 of `agent.planning.mechanisms.Mechanisms` (a unit test keeps the two lists equal)."""
 

@@ -44,7 +44,7 @@ class PlanStatus(enum.StrEnum):
     SOLVER_FAILED = "solver_failed"  # OSQP failed: safe braking command
     STALE = "stale"  # set by the robot node when it brakes for lack of fresh poses
     YIELD = "yield"  # stuck: standing so a robot with a lower id can pass (liveness rule 2)
-    STAND_CLEAR = "stand_clear"  # arrived, stepping aside from a moving obstacle (goal_guard)
+    STAND_CLEAR = "stand_clear"  # arrived, standing aside (goal_guard, make_way)
 
 
 def _as_array(name: str, value: object, shape: tuple[int | None, ...]) -> np.ndarray:

@@ -21,9 +21,11 @@ chase a moving point.
 
 Choices the issue left open, and why:
 
-- Only obstacles are watched, not robots: robots plan round a parked robot themselves, and
-  a parked robot that also stepped aside for them would be a second mover in the same
-  place. An obstacle moves when its estimated speed is at least `encounters.MOVING_MPS`.
+- Only obstacles are watched here, not robots: robots plan round a parked robot
+  themselves, and a parked robot that also stepped aside for every robot coming by would
+  be a second mover in the same place. Where no way round exists, a robot that stays
+  pressed against a parked one sends it aside (`agent.planning.make_way`, after this
+  rule). An obstacle moves when its estimated speed is at least `encounters.MOVING_MPS`.
 - The most imminent threat (earliest closest approach; an obstacle already within reach
   counts as now) sets the refuge. A refuge inside the inflated disc of a static obstacle,
   or itself in reach of another moving obstacle, is replaced by the one on the far side

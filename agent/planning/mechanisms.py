@@ -103,6 +103,11 @@ class Mechanisms:
             senses and steps aside to a refuge beside the track of one that would pass
             within the inflated radius L, returning once it has passed
             (`agent.planning.goal_guard`): a blind obstacle otherwise runs it down.
+        make_way: a robot parked at its goal steps aside, across the line from it, for a
+            robot that came up after it parked and stays within `make_way.PRESS_GAP_M` of
+            it for `make_way.PRESS_S`, and returns once that robot has gone by
+            (`agent.planning.make_way`): where a parked robot stands in the only way to
+            another's goal (a corridor, a doorway), nothing else opens it.
         primary_hold_s: with `commitment`, how much later than the most imminent threat's
             the TCPA of last cycle's first threat may be for it to stay first [s].
     """
@@ -125,6 +130,7 @@ class Mechanisms:
     turn_when_stuck: bool = False
     goal_guard: bool = False
     passages: bool = False
+    make_way: bool = False
     primary_hold_s: float = PRIMARY_HOLD_S
 
 
@@ -143,7 +149,7 @@ EIFP_MPC_MECHANISMS = dataclasses.replace(
     EIFP_MECHANISMS, inflated_threats=True, commitment=True, via_margin_m=ARC_VIA_MARGIN_M,
     escape_band_m=ESCAPE_BAND_M, escape_all=True, horizon_via_points=True,
     lines_arcs=True, clamp_heading=False, braking_guard=True, keep_plan=True, routing=True,
-    liveness=LivenessConfig(), turn_when_stuck=True, passages=True)
+    liveness=LivenessConfig(), turn_when_stuck=True, passages=True, make_way=True)
 """eifp-mpc in the default profile: every mechanism."""
 
 

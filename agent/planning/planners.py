@@ -55,6 +55,7 @@ from agent.planning.estimation import ESTIMATION_WINDOW_S
 from agent.planning.goal_guard import WATCH_FROM_M, refuge_point
 from agent.planning.guidance import RouteGuide
 from agent.planning.liveness import Strategy, squeezed
+from agent.planning.make_way import MakeWay
 from agent.planning.mechanisms import Mechanisms
 from agent.planning.mechanisms import mechanisms as mechanisms_of
 from agent.planning.mpc_qp import MpcTuning, profile_tuning
@@ -253,6 +254,7 @@ class ViaPointPlanner:
         self.turns = 0
         self._static = static_map
         self._parked = False  # reached its goal once: `goal_guard` watches it from then
+        self.make_way = MakeWay()  # press clocks once parked (`Mechanisms.make_way`)
         if self.mech.routing or self.mech.liveness is not None:
             self.guide = RouteGuide(
                 static_map if static_map is not None else StaticMap.empty(),
@@ -270,6 +272,7 @@ class ViaPointPlanner:
             tracker.reset()
         self._turn = None
         self._parked = False
+        self.make_way.reset()
 
     def _mpc(self, observation: Observation) -> MpcTracker:
         from agent.planning.mpc import MpcTracker
@@ -288,8 +291,8 @@ class ViaPointPlanner:
         cfg = self.config
         done = arrived_result(observation, self.control_period_s)
         self._parked |= done is not None
-        refuge = self._refuge(observation)
-        if refuge is not None:  # step aside from a moving obstacle (`goal_guard`)
+        refuge = self._refuge(observation, now_s, done is not None)
+        if refuge is not None:  # step aside (`goal_guard`, `make_way`)
             observation = replace(observation, goal_m=refuge, goal_distance_m=None)
             done = arrived_result(observation, self.control_period_s)
             if done is not None:
@@ -381,18 +384,26 @@ class ViaPointPlanner:
             solver_iterations=int(iterations), debug=debug,
         )
 
-    def _refuge(self, observation: Observation) -> np.ndarray | None:
-        """Where a robot that has arrived, or is about to, stands clear of a moving
-        obstacle (`Mechanisms.goal_guard`, `agent.planning.goal_guard`); None: at its goal."""
-        if not (self.mech.goal_guard and len(observation.others)):
+    def _refuge(self, observation: Observation, now_s: float, at_goal: bool
+                ) -> np.ndarray | None:
+        """Where a robot that has arrived, or is about to, stands instead of its goal: clear
+        of a moving obstacle (`Mechanisms.goal_guard`, `agent.planning.goal_guard`), else
+        aside for a robot pressed against it (`Mechanisms.make_way`,
+        `agent.planning.make_way`); None: at its goal."""
+        if not len(observation.others):
             return None
-        ego, goal = observation.ego, observation.goal_m
-        if not (self._parked or math.hypot(ego.x_m - goal[0], ego.y_m - goal[1])
-                <= WATCH_FROM_M):
+        ego, goal, cfg = observation.ego, observation.goal_m, self.config
+        if self.mech.goal_guard and (self._parked or math.hypot(
+                ego.x_m - goal[0], ego.y_m - goal[1]) <= WATCH_FROM_M):
+            refuge = refuge_point(goal, observation.radius_m, observation.others,
+                                  cfg.safety.d_safety_m, cfg.threats.t_max_s, self._static)
+            if refuge is not None:
+                return refuge
+        if not (self.mech.make_way and self._parked):
             return None
-        cfg = self.config
-        return refuge_point(observation.goal_m, observation.radius_m, observation.others,
-                            cfg.safety.d_safety_m, cfg.threats.t_max_s, self._static)
+        return self.make_way.refuge(now_s, goal, observation.radius_m,
+                                    np.array([ego.x_m, ego.y_m]), at_goal,
+                                    observation.others, cfg.safety.d_safety_m, self._static)
 
     def _guide(self, observation: Observation, now_s: float, everyone: Others
                ) -> tuple[Observation, np.ndarray | None, bool] | None:

@@ -128,3 +128,22 @@ def test_one_lane_passages_are_taken_one_way_at_a_time(tmp_path, scene):
     metrics = run_lockstep(load_scenario(path), tmp_path / "run").metrics
     assert metrics.success and metrics.arrived == metrics.robots
     assert metrics.min_gap_m >= 0.05 - 1e-6
+
+
+def test_a_robot_parked_in_a_corridor_makes_way_for_one_that_must_pass_it(tmp_path):
+    """A robot parks on the centre line of a corridor 2.8 m clear; another's goal lies
+    beyond it (docs/results.md, "Making way at the goal"). With `make_way` the parked
+    robot steps aside and both arrive; without it the second stands in front of the first
+    until the time limit."""
+    from dataclasses import replace
+    from pathlib import Path
+
+    from world.scenario_file import load_scenario
+
+    path = Path(__file__).parents[2] / "docs" / "examples" / "probes" / "parked_in_corridor.yaml"
+    scenario = load_scenario(path)
+    on = run_lockstep(scenario, tmp_path / "on").metrics
+    assert on.success and on.arrived == 2 and on.min_gap_m >= 0.05 - 1e-6
+    off = run_lockstep(replace(scenario, planner_config=scenario.planner_config.with_settings(
+        without="make_way")), tmp_path / "off").metrics
+    assert off.arrived == 1 and off.contacts == 0

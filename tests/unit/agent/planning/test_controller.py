@@ -273,7 +273,7 @@ def test_controller_only_ever_accepts_newer_snapshots(latency, jitter, drop, dup
 def test_a_robot_at_its_goal_stops_without_estimating_the_others(planner: str) -> None:
     ctrl = RobotController(spec(planner, start=(20.0, 0.0, 0.0)), PlannerConfig(), TOL_M)
     for k in range(3):
-        ctrl.observe(snap(0.1 * k, 5 * k, {0: (20.0, 0.0, 0.0), 1: (21.5, 0.0, math.pi)}))
+        ctrl.observe(snap(0.1 * k, 5 * k, {0: (20.0, 0.0, 0.0), 1: (22.0, 0.0, math.pi)}))
 
     def no_estimates(**kwargs):
         raise AssertionError("others estimated for a robot at its goal")
@@ -303,6 +303,27 @@ def test_a_parked_robot_watches_the_others_only_while_a_moving_obstacle_is_in_vi
     result = ctrl.plan(0.3)
     assert -2 in ctrl.last_observation.others.ids.tolist()
     assert result.status == PlanStatus.STAND_CLEAR
+
+
+def test_a_parked_robot_with_make_way_estimates_the_others_only_while_a_robot_is_close() -> None:
+    """`make_way` needs to see a robot pressed against a parked one; farther off than the
+    press gap (plus `CLOSE_SLACK_M`) nobody is estimated, as before."""
+    from agent.planning.controller import CLOSE_SLACK_M
+    from agent.planning.make_way import PRESS_GAP_M
+
+    ctrl = RobotController(spec("eifp-mpc", start=(20.0, 0.0, 0.0)), PlannerConfig(), TOL_M)
+    far = 20.0 + 2 * RADIUS_M + PRESS_GAP_M + CLOSE_SLACK_M + 0.05
+    ctrl.observe(snap(0.0, 0, {0: (20.0, 0.0, 0.0), 1: (far, 0.0, math.pi)}))
+    ctrl.plan(0.0)
+    assert len(ctrl.last_observation.others) == 0
+    ctrl.observe(snap(0.1, 5, {0: (20.0, 0.0, 0.0), 1: (far - 0.1, 0.0, math.pi)}))
+    assert ctrl.plan(0.1).status == PlanStatus.ARRIVED
+    assert ctrl.last_observation.others.ids.tolist() == [1]
+    for name in ("ifp", "eifp"):  # no make_way: nobody is estimated
+        other = RobotController(spec(name, start=(20.0, 0.0, 0.0)), PlannerConfig(), TOL_M)
+        other.observe(snap(0.1, 5, {0: (20.0, 0.0, 0.0), 1: (20.6 + 2 * RADIUS_M, 0.0, 0.0)}))
+        other.plan(0.1)
+        assert len(other.last_observation.others) == 0
 
 
 @pytest.mark.parametrize("planner", PLANNER_NAMES)

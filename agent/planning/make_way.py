@@ -1,0 +1,236 @@
+"""Making way at the goal: a parked robot steps aside for a robot that stands pressed
+against it.
+
+Not in the paper (arXiv 2508.08264). A robot at its goal stops planning and stands
+(`agent.planning.planners.arrived_result`); the others plan round it. Where it stands in
+the only way to another robot's goal (on the centre line of a corridor 2.6-3.2 m wide
+with goals further down it, or in a doorway), no way round exists: the other robot's
+liveness rules (`agent.planning.liveness`) re-route, squeeze and yield, and it stands in
+front of the parked robot until the time limit. On four-armed corridor crossings with
+three robots per arm (scenes written for this, none of the benchmark families), 5-6 of 12
+robots never arrived, each standing 0.2 m from a parked robot.
+
+Robots never tell each other where they are going, so a parked robot cannot know that it
+is in the way. What it senses is a robot that came up to it after it parked and stays
+pressed against it: within `PRESS_GAP_M` (surface to surface) for `PRESS_S` without a
+break. It then steps aside (`aside_point`): across the line from that robot to its goal,
+as far as `radius + presser radius + d_safety + ASIDE_MARGIN_M` (the presser then passes
+with its whole inflated disc clear), or as far as the room there allows (`WALL_GAP_M` from
+static discs, `ROOM_GAP_M` from every other sensed robot, so the step does not press on a
+third robot). Of the two sides it takes the one with more room; on equal room the
+presser's left (the robot passes it on its own right, the head-on convention of
+`agent.planning.encounters`). It goes there with the ordinary planner, stands there, and
+returns to its goal once the presser is `PASSED_M` beyond the inflated radius L from the
+goal, or after `HOLD_MAX_S`.
+
+Why it ends (`MakeWay.refuge`): a robot steps aside only for a press that *began after it
+first parked* (robots already within the gap when it arrives, such as neighbours parked at
+their own goals, never count until they have left it), for one presser at a time, for at
+most `HOLD_MAX_S`; a presser that has not gone by when that runs out counts as parked
+there too (it does not need the way, or cannot take it), so it never sends the robot aside
+again until it has left the gap. Every press therefore sends the robot aside at most once,
+and two robots parked next to each other cannot keep stepping aside for each other. The
+step keeps `ROOM_GAP_M` (more than the press gap) from every robot but the presser, so it
+presses on nobody. Robots that came up while the robot stood aside are pressers when it
+is back (a queue behind the first presser is let through one by one).
+
+Choices the scenes left open:
+
+- The presser's heading is not used: a robot stuck in front of another turns on the spot
+  and reverses (`turning`, liveness rule 3), so where it faces says little about where it
+  is going. The direction across is fixed by where the presser stands.
+- Only robots press, not obstacles; moving obstacles have their own rule
+  (`agent.planning.goal_guard`), which comes first.
+- With no room on either side (`MIN_ASIDE_M`), the robot stays: in a block of goals 1.5 m
+  apart every step would press on a neighbour.
+
+Stateful per robot (the press clocks), but no clock or I/O of its own: the planning cycle
+passes the time and what the robot senses.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from agent.core.types import Others
+from agent.planning.routing import StaticMap
+
+PRESS_GAP_M = 0.5
+"""A robot this close to a parked one, surface to surface, presses on it [m]. A stuck
+robot stands 0.1-0.3 m from whoever blocks it (its squeeze margin, d_safety); robots
+parked at goals 2.5 m apart or more (the benchmark's grids and platoons) are 1.5 m apart."""
+
+PRESS_S = 3.0
+"""How long a press must last, without a break, before the parked robot steps aside [s]:
+robots that pass close by and go on do not press."""
+
+ASIDE_MARGIN_M = 0.1
+"""How far beyond the presser's inflated disc (r + r_presser + d_safety from its line)
+the step aside aims, room permitting [m]."""
+
+MIN_ASIDE_M = 0.3
+"""A step aside shorter than this is not taken: it opens nothing [m]."""
+
+STEP_M = 0.05
+"""Resolution of the search across the line [m]."""
+
+WALL_GAP_M = 0.15
+"""The gap a refuge keeps from static discs [m]: the braking guard's 0.05 m plus room to
+track to it."""
+
+ROOM_GAP_M = PRESS_GAP_M + 0.1
+"""The gap a refuge keeps from every sensed robot but the presser [m]: more than the press
+gap, so a robot standing aside presses on nobody."""
+
+PASSED_M = 0.5
+"""The presser has gone by once it is this far beyond L (r + r_presser + d_safety) from
+the goal [m]."""
+
+HOLD_MAX_S = 15.0
+"""The longest a robot stands aside for one presser [s]: one that parks beside the goal
+never goes by."""
+
+
+def aside_point(goal_m: np.ndarray, radius_m: float, presser_m: np.ndarray,
+                presser_radius_m: float, others: Others, presser: int, d_safety_m: float,
+                static: StaticMap | None = None) -> np.ndarray | None:
+    """Where a robot parked at `goal_m` stands aside for the robot at `presser_m`, or None
+    when neither side has `MIN_ASIDE_M` of room.
+
+    Args:
+        goal_m: (2,) the parked robot's goal.
+        radius_m: its radius.
+        presser_m: (2,) the pressing robot's position; presser_radius_m its radius.
+        others: every disc the parked robot senses; the robots among them, but the
+            presser (index `presser`), must stay `ROOM_GAP_M` from the refuge.
+        d_safety_m: the safety margin of Eq. (8).
+        static: the scenario's static discs; the refuge keeps `WALL_GAP_M` from them.
+
+    Returns:
+        (2,) the refuge, across the line from the presser to the goal, or None.
+    """
+    goal = np.asarray(goal_m, dtype=float)
+    axis = goal - np.asarray(presser_m, dtype=float)
+    length = math.hypot(axis[0], axis[1])
+    along = axis / length if length > 1e-9 else np.array([1.0, 0.0])
+    left = np.array([-along[1], along[0]])
+    want = radius_m + presser_radius_m + d_safety_m + ASIDE_MARGIN_M
+    steps = np.arange(1, int(math.floor(want / STEP_M + 1e-9)) + 1) * STEP_M
+    robots = others.is_robot.copy()
+    if 0 <= presser < robots.size:
+        robots[presser] = False
+    best: tuple[float, np.ndarray] | None = None
+    for normal in (left, -left):  # left first: it wins a tie
+        points = goal + steps[:, None] * normal
+        ok = _room(points, radius_m, others.position_m[robots], others.radius_m[robots],
+                   static)
+        # the farthest point reached without crossing a blocked one
+        reach = int(np.argmin(ok)) if not ok.all() else ok.size
+        if reach and (best is None or steps[reach - 1] > best[0] + STEP_M / 2):
+            best = (float(steps[reach - 1]), points[reach - 1])
+    if best is None or best[0] < MIN_ASIDE_M - 1e-9:
+        return None
+    return best[1]
+
+
+def _room(points: np.ndarray, radius_m: float, robot_m: np.ndarray, robot_radius_m: np.ndarray,
+          static: StaticMap | None) -> np.ndarray:
+    """(P,) whether each point keeps `ROOM_GAP_M` from the robots and `WALL_GAP_M` from
+    the static discs."""
+    ok = np.ones(points.shape[0], dtype=bool)
+    if robot_m.shape[0]:
+        gap = (np.linalg.norm(points[:, None, :] - robot_m[None, :, :], axis=2)
+               - robot_radius_m[None, :] - radius_m)
+        ok &= (gap >= ROOM_GAP_M).all(axis=1)
+    if static is not None and len(static.radius_m):
+        gap = (np.linalg.norm(points[:, None, :] - static.center_m[None, :, :], axis=2)
+               - static.radius_m[None, :] - radius_m)
+        ok &= (gap >= WALL_GAP_M).all(axis=1)
+    return ok
+
+
+@dataclass
+class _Aside:
+    presser: int
+    refuge_m: np.ndarray
+    since_s: float
+
+
+@dataclass
+class MakeWay:
+    """The press clocks of one parked robot (`refuge` each cycle once it has parked)."""
+
+    _press: dict[int, float] = field(default_factory=dict)
+    """id -> when its current press began (only presses that began while parked here)."""
+    _present: set[int] = field(default_factory=set)
+    """Robots within the press gap when the robot first arrived, and pressers that did not
+    go by while it stood aside: not pressers until they leave the gap."""
+    _aside: _Aside | None = None
+    _here: bool = False
+    _arrived: bool = False
+    steps: int = 0
+    """How many times the robot stepped aside (for tests and reports)."""
+
+    def reset(self) -> None:
+        """Forget every clock."""
+        self._press.clear()
+        self._present.clear()
+        self._aside = None
+        self._here = False
+        self._arrived = False
+
+    def refuge(self, now_s: float, goal_m: np.ndarray, radius_m: float,
+               ego_m: np.ndarray, at_goal: bool, others: Others, d_safety_m: float,
+               static: StaticMap | None = None) -> np.ndarray | None:
+        """Where the robot should stand this cycle instead of its goal, or None.
+
+        Args:
+            now_s: the cycle's time.
+            goal_m: (2,) the robot's goal; radius_m its radius; ego_m (2,) its position.
+            at_goal: whether it is parked at its goal now.
+            others: what it senses (robots and obstacles).
+            d_safety_m: the safety margin of Eq. (8).
+            static: the scenario's static discs.
+        """
+        ids = others.ids
+        if self._aside is not None:
+            aside = self._aside
+            where = np.flatnonzero(ids == aside.presser)
+            reach = (radius_m + d_safety_m + PASSED_M
+                     + (float(others.radius_m[where[0]]) if where.size else 0.0))
+            gone = (where.size == 0 or float(np.hypot(*(others.position_m[where[0]]
+                                                        - goal_m))) >= reach)
+            if not gone and now_s - aside.since_s < HOLD_MAX_S:
+                return aside.refuge_m
+            if not gone:  # it stays: parked there, or it cannot take the way either
+                self._present.add(aside.presser)
+            self._aside = None
+            self._press.clear()
+        gaps = (np.hypot(*(others.position_m - ego_m).T) - others.radius_m - radius_m
+                if len(others) else np.zeros(0))
+        close = {int(i) for i in ids[others.is_robot & (gaps <= PRESS_GAP_M)]}
+        if not at_goal:
+            self._here = False
+            self._press.clear()
+            return None
+        if not self._here:  # (re)arrived
+            self._here = True
+            self._press.clear()
+            if not self._arrived:  # whoever is this close on arrival does not count
+                self._arrived = True
+                self._present = set(close)
+        self._present &= close
+        self._press = {i: self._press.get(i, now_s) for i in sorted(close - self._present)}
+        due = sorted((t, i) for i, t in self._press.items() if now_s - t >= PRESS_S)
+        for _, presser in due:
+            k = int(np.flatnonzero(ids == presser)[0])
+            refuge = aside_point(goal_m, radius_m, others.position_m[k],
+                                 float(others.radius_m[k]), others, k, d_safety_m, static)
+            if refuge is not None:
+                self._aside = _Aside(presser, refuge, now_s)
+                self.steps += 1
+                return refuge
+        return None

@@ -1,0 +1,127 @@
+"""`agent.planning.make_way`: where a parked robot steps aside for a robot pressed against
+it, and when (the press clocks: who counts as a presser, how long, when it returns)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from agent.core.types import Others
+from agent.planning.make_way import (
+    ASIDE_MARGIN_M,
+    HOLD_MAX_S,
+    PRESS_S,
+    WALL_GAP_M,
+    MakeWay,
+    aside_point,
+)
+from agent.planning.routing import StaticMap
+
+R = 0.5
+D_SAFETY = 0.3
+WANT = R + R + D_SAFETY + ASIDE_MARGIN_M  # the full step across
+GOAL = np.zeros(2)
+
+
+def robots(*rows: tuple[int, float, float]) -> Others:
+    """Others: robots of radius R at (id, x, y), standing."""
+    a = np.array(rows, dtype=float).reshape(-1, 3)
+    n = len(a)
+    return Others(ids=a[:, 0].astype(int), position_m=a[:, 1:3], velocity_mps=np.zeros((n, 2)),
+                  radius_m=np.full(n, R), linearity=np.ones(n), track_start_m=a[:, 1:3],
+                  is_robot=np.ones(n, dtype=bool))
+
+
+def walls(*centres: tuple[float, float], radius: float = 0.5) -> StaticMap:
+    c = np.array(centres, dtype=float).reshape(-1, 2)
+    return StaticMap(center_m=c, radius_m=np.full(len(c), radius),
+                     ids=-np.arange(1, len(c) + 1))
+
+
+def test_in_the_open_the_robot_steps_to_the_pressers_left_by_its_whole_inflated_disc():
+    # The presser stands 0.2 m off on the -x side, facing the goal along +x: its left is +y.
+    point = aside_point(GOAL, R, np.array([-1.2, 0.0]), R, robots((7, -1.2, 0.0)), 0, D_SAFETY)
+    assert point is not None
+    np.testing.assert_allclose(point, [0.0, WANT], atol=1e-9)
+
+
+def test_a_wall_on_one_side_sends_it_to_the_other():
+    static = walls((0.0, 1.5))  # 0.5 m above the robot's edge: no room on the left
+    point = aside_point(GOAL, R, np.array([-1.2, 0.0]), R, robots((7, -1.2, 0.0)), 0,
+                        D_SAFETY, static)
+    np.testing.assert_allclose(point, [0.0, -WANT], atol=1e-9)
+
+
+def test_in_a_corridor_it_goes_as_far_as_the_wall_allows_and_no_farther():
+    # Corridor walls (discs of 0.5 m) centred at y = +-1.9: 2.8 m clear.
+    static = walls(*[(x, s * 1.9) for x in np.arange(-3.0, 3.1, 0.8) for s in (1, -1)])
+    point = aside_point(GOAL, R, np.array([-1.2, 0.0]), R, robots((7, -1.2, 0.0)), 0,
+                        D_SAFETY, static)
+    assert point is not None and abs(point[0]) < 1e-9
+    gap = np.min(np.hypot(*(static.center_m - point).T) - static.radius_m - R)
+    assert WALL_GAP_M - 1e-9 <= gap < WALL_GAP_M + 0.05 + 1e-9  # to the wall, step 0.05 m
+    assert point[1] > 0.0  # equal room both sides: the presser's left
+
+
+def test_a_third_robot_in_the_way_is_not_pressed_on_and_no_room_means_no_step():
+    others = robots((7, -1.2, 0.0), (8, 0.0, 1.6), (9, 0.0, -1.6))  # 0.6 m gaps either side
+    assert aside_point(GOAL, R, np.array([-1.2, 0.0]), R, others, 0, D_SAFETY) is None
+
+
+def press(way: MakeWay, t: float, others: Others, at_goal: bool = True,
+          here: tuple[float, float] = (0.0, 0.0)) -> np.ndarray | None:
+    return way.refuge(t, GOAL, R, np.array(here), at_goal, others, D_SAFETY)
+
+
+def test_a_robot_that_comes_up_and_stays_sends_the_parked_robot_aside_until_it_has_gone_by():
+    way = MakeWay()
+    assert press(way, 0.0, robots((7, -6.0, 0.0))) is None  # arrives: nobody close
+    close = robots((7, -1.2, 0.0))
+    for k in range(int(PRESS_S / 0.1)):  # pressed, but not yet for PRESS_S
+        assert press(way, 1.0 + 0.1 * k, close) is None
+    refuge = press(way, 1.0 + PRESS_S, close)
+    assert refuge is not None and way.steps == 1
+    # It stands aside (not at its goal) while the presser goes past it ...
+    for x in (-1.2, 0.0, 1.0):
+        np.testing.assert_allclose(press(way, 5.0, robots((7, x, 0.0)), at_goal=False,
+                                         here=tuple(refuge)), refuge)
+    # ... and returns once the presser is PASSED_M beyond L from the goal.
+    assert press(way, 6.0, robots((7, 2.0, 0.0)), at_goal=False) is None
+
+
+def test_neighbours_already_there_on_arrival_never_press():
+    way = MakeWay()
+    neighbour = robots((3, 1.2, 0.0))  # parked 0.2 m off before this robot arrived
+    for k in range(200):
+        assert press(way, 0.1 * k, neighbour) is None
+    assert way.steps == 0
+
+
+def test_a_presser_that_never_goes_by_sends_the_robot_aside_once():
+    way = MakeWay()
+    press(way, 0.0, robots((7, -6.0, 0.0)))
+    stays = robots((7, -1.2, 0.0))  # comes up, then parks there for good
+    t, asides = 0.0, 0
+    while t < 5 * HOLD_MAX_S:
+        refuge = press(way, t, stays, at_goal=way._aside is None)
+        asides += refuge is not None
+        t += 0.1
+    assert way.steps == 1
+    assert asides == pytest.approx(HOLD_MAX_S / 0.1, abs=2)
+
+
+def test_pressers_that_came_up_while_it_stood_aside_count_when_it_is_back():
+    way = MakeWay()
+    press(way, 0.0, robots((7, -6.0, 0.0), (8, -8.0, 0.0)))
+    first = robots((7, -1.2, 0.0), (8, -3.5, 0.0))
+    t = 0.0
+    while press(way, t, first) is None:
+        t += 0.1
+    assert way.steps == 1
+    # 7 goes by while 8 comes up behind it; the robot returns with 8 already close.
+    assert press(way, t + 2.0, robots((7, 3.0, 0.0), (8, -1.2, 0.0)), at_goal=False) is None
+    t += 3.0
+    second = robots((7, 6.0, 0.0), (8, -1.2, 0.0))
+    while press(way, t, second) is None and t < 30.0:
+        t += 0.1
+    assert way.steps == 2
