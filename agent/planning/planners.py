@@ -390,10 +390,10 @@ class ViaPointPlanner:
         of a moving obstacle (`Mechanisms.goal_guard`, `agent.planning.goal_guard`), else
         aside for a robot pressed against it (`Mechanisms.make_way`,
         `agent.planning.make_way`); None: at its goal."""
-        if not len(observation.others):
-            return None
         ego, goal, cfg = observation.ego, observation.goal_m, self.config
-        if self.mech.goal_guard and (self._parked or math.hypot(
+        # make_way sees every parked cycle, also with nobody in view (a parked robot is
+        # given the others only while a robot is close): its arrival is the first one
+        if self.mech.goal_guard and len(observation.others) and (self._parked or math.hypot(
                 ego.x_m - goal[0], ego.y_m - goal[1]) <= WATCH_FROM_M):
             refuge = refuge_point(goal, observation.radius_m, observation.others,
                                   cfg.safety.d_safety_m, cfg.threats.t_max_s, self._static)

@@ -326,6 +326,23 @@ def test_a_parked_robot_with_make_way_estimates_the_others_only_while_a_robot_is
         assert len(other.last_observation.others) == 0
 
 
+def test_a_robot_that_comes_within_the_press_gap_in_one_cycle_still_presses() -> None:
+    """The parked robot's arrival is recorded on its first parked cycle, with nobody in
+    view, not on the first cycle someone is close: a robot that shows up 0.2 m off in one
+    step (a lost pose, a late one) is a presser, not a neighbour that was there first."""
+    from agent.planning.make_way import PRESS_S
+
+    ctrl = RobotController(spec("eifp-mpc", start=(20.0, 0.0, 0.0)), PlannerConfig(), TOL_M)
+    ctrl.observe(snap(0.0, 0, {0: (20.0, 0.0, 0.0), 1: (30.0, 0.0, math.pi)}))
+    assert ctrl.plan(0.0).status == PlanStatus.ARRIVED
+    statuses = []
+    for k in range(1, int(PRESS_S / 0.1) + 5):
+        ctrl.observe(snap(0.1 * k, 5 * k, {0: (20.0, 0.0, 0.0), 1: (21.2, 0.0, math.pi)}))
+        statuses.append(ctrl.plan(0.1 * k).status)
+    assert statuses[0] == PlanStatus.ARRIVED and PlanStatus.ARRIVED not in statuses[-3:]
+    assert ctrl.planner.make_way.steps == 1
+
+
 @pytest.mark.parametrize("planner", PLANNER_NAMES)
 def test_a_robot_away_from_its_goal_plans_on_the_full_observation(planner: str) -> None:
     ctrl = RobotController(spec(planner), PlannerConfig(), TOL_M)
