@@ -32,6 +32,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
         EVALUATION_SEEDS,
         FAMILY_ALIASES,
         MODES,
+        STRUCTURED_SUITE,
         TUNING_SEEDS,
         family_names,
     )
@@ -47,7 +48,8 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.add_argument("--families", default="all",
                    help=f"comma-separated families or 'all': {', '.join(family_names())}; "
                         f"also {', '.join(FAMILY_ALIASES)} (several at once), a setup or a "
-                        "case (circle_24)")
+                        "case (circle_24); structured scenes, not in 'all': "
+                        f"{', '.join(family_names(STRUCTURED_SUITE))}")
     p.add_argument("--seeds", default=None,
                    help=f"'evaluation' ({','.join(map(str, EVALUATION_SEEDS))}, the default), "
                         f"'tuning' ({','.join(map(str, TUNING_SEEDS))}: tune on these, "
@@ -137,7 +139,10 @@ def _cases_and_seeds(args: argparse.Namespace) -> tuple[tuple[Case, ...], tuple[
     try:
         seeds = bm.parse_seeds(args.seeds, quick=args.quick)
         families = ["all"] if args.families.strip() == "all" else split_list(args.families)
-        cases = bm.select_cases(bm.QUICK_SUITE if args.quick else bm.SUITE, families)
+        # 'all' is the suite; a name may also pick the structured scenes, outside it
+        cases = bm.select_cases(bm.QUICK_SUITE if args.quick else bm.SUITE, families) \
+            if args.quick or families == ["all"] else \
+            bm.select_cases((*bm.SUITE, *bm.STRUCTURED_SUITE), families)
     except ValueError as exc:
         raise BadInput(str(exc)) from None
     if args.max_cases is not None:

@@ -120,6 +120,18 @@ QUICK_SUITE: tuple[Case, ...] = (
 )
 """`--quick`: small cases, for CI and a first look."""
 
+STRUCTURED_SUITE: tuple[Case, ...] = (
+    *_cases("rooms", (10,)),
+    *_cases("evacuate", (18,)),
+    *_cases("cross_corridors", (12,)),
+    *_cases("dead_end", (6,)),
+    *_cases("parking", (12,)),
+    *_cases("pocket", (6,)),
+    *_cases("random_walls", (14,)),
+)
+"""Structured scenes (`structured_families`): not part of `SUITE` (``--families all``), run
+by name or as ``--families structured``; a held-out check of the liveness rules."""
+
 LIVENESS_FAMILIES: tuple[str, ...] = ("wall_door", "wall_doors", "corridor", "grid_dense",
                                       "pillar_circle", "random_40", "platoons",
                                       "crossing_60_mixed")
@@ -131,6 +143,7 @@ FAMILY_ALIASES: dict[str, tuple[str, ...]] = {
     "swap": ("swap_pairs", "swap_grid"),
     "walls": ("wall_door", "wall_doors", "corridor"),
     "liveness": LIVENESS_FAMILIES,
+    "structured": tuple(c.family for c in STRUCTURED_SUITE),
 }
 """`--families` names that stand for several families."""
 

@@ -45,6 +45,7 @@ from orchestrator.experiments.scenario_blocks import (
     require,
     robot_spec,
 )
+from orchestrator.experiments.structured_families import GENERATORS as STRUCTURED_GENERATORS
 from world.scenario_file import ScenarioError, load_scenario, validate_scenario
 
 SETUPS_DIR = Path(__file__).resolve().parent.parent / "setups"
@@ -502,12 +503,22 @@ FAMILIES: dict[str, tuple[int, str]] = {
     "random_40": (40, "N seeded random starts and goals, 40 robots per 36 m square"),
     "platoons": (16, "two platoons of N/2 (3 columns, 2.5 m apart) meeting head-on"),
     "crossing_60_mixed": (16, "two cohorts of N/2 crossing at 60 deg, v_max 0.8-1.4 m/s"),
+    # Structured scenes, not in the default suite; generators: `structured_families`.
+    "rooms": (10, "N robots in a 3x3 block of rooms with doors 1.6-3.0 m, each to another room"),
+    "evacuate": (18, "N robots leave a 12 m room through one door 2.8-3.4 m wide"),
+    "cross_corridors": (12, "four corridors 2.6-3.2 m clear meet; N/4 per arm to other arms"),
+    "dead_end": (6, "N robots to goals along a dead-end corridor 2.6-3.2 m, random order"),
+    "parking": (12, "N robots from a ring to goals packed 1.5 m apart"),
+    "pocket": (6, "N robots start in U-shaped pockets open away from their goals"),
+    "random_walls": (14, "N random starts and goals among six random walls, 26 m square"),
 }
 
 
 def _family(name: str, n: int, rng: np.random.Generator) -> Scenario:
     if name in LIVENESS_GENERATORS:
         return LIVENESS_GENERATORS[name](n, rng)
+    if name in STRUCTURED_GENERATORS:
+        return STRUCTURED_GENERATORS[name](n, rng)
     if name == "circle":
         return circle(n, rng)
     if name == "crossing":
