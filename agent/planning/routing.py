@@ -511,7 +511,8 @@ class RouteFollower:
     whose sight line from the robot keeps the route's clearance from every static disc
     (less what the robot already lacks of it, `_endpoint_keep`; past a waypoint within
     `WAYPOINT_REACHED_M`, or within `WAYPOINT_PASSED_M` and past it along the next leg,
-    the next waypoint's with the distance to it less too); waypoints before it are
+    the next waypoint's with the distance to it less too, and so on the cycles after while
+    the robot is within `WAYPOINT_PASSED_M` of the passed one); waypoints before it are
     passed and never looked at again, so the goal moves only forward along the route.
     Cost per cycle: one sight-line check of the next few waypoints against the map.
 
@@ -568,6 +569,17 @@ class RouteFollower:
         past = ((here - ahead[:-1]) * (ahead[1:] - ahead[:-1])).sum(axis=1) > 0.0
         reached = np.flatnonzero((away < WAYPOINT_REACHED_M)
                                  | (past & (away < WAYPOINT_PASSED_M)))
+        behind = float(math.hypot(*(wps[self._next - 1] - here)))
+        if not reached.size and self._next >= 2 and behind < WAYPOINT_PASSED_M:
+            # The waypoint passed last, while the robot is still near it, gives the next
+            # one the slack it gave the cycle it was passed: a waypoint aimed at through
+            # the slack stays in sight from where it was seen. Without this the robot
+            # re-routed the next cycle, from a spot a few mm away, and a route round the
+            # other side of a wall could win: `random_walls` 14, seed 7, one robot turned
+            # on the spot for 110 s between two routes.
+            slack = max(WAYPOINT_REACHED_M, behind)
+            seen[:1] |= segment_clears(starts[:1], ahead[:1], blocking.center_m,
+                                       np.maximum(need - slack, 0.0))
         if reached.size:
             last = int(reached[-1])
             seen[last] = True

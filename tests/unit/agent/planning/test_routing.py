@@ -271,6 +271,27 @@ def test_only_the_next_waypoint_after_a_reached_one_is_looked_at_with_less_clear
     assert keep[0] - WAYPOINT_REACHED_M < d < keep[0]
 
 
+def test_a_waypoint_aimed_at_through_a_reached_ones_slack_stays_in_sight_next_cycle() -> None:
+    """The cycle after the follower passed a waypoint and aimed at the next through the
+    slack, that next one is still in sight from a spot 3 mm away (the robot turning on
+    the spot). It was not: the follower saw nothing, the robot re-routed from there, and
+    a route round the other side of the wall could win (`random_walls` 14, seed 7: a robot
+    turned on the spot for 110 s between two routes)."""
+    static = StaticMap(np.array([[0.0, 0.0], [1.2, 0.0], [2.4, 0.0]]), np.full(3, 0.6))
+    here, goal = np.array([2.6, 1.3]), np.array([0.5, -3.0])  # inside the wall end's margin
+    route = route_or_tight(here, goal, static, 0.5, 0.3)
+    assert route is not None and route.waypoints_m.shape[0] >= 4
+    follower = RouteFollower(route, static)
+    first = follower.intermediate_goal(here)  # the first corner is within reach: passed
+    assert first is not None and np.allclose(first, route.waypoints_m[2])
+    again = follower.intermediate_goal(here + 0.002)
+    assert again is not None and np.allclose(again, first)
+    # and it is the slack that keeps it: without it the line misses the clearance
+    keep = static.radius_m + route.clearance_m
+    d = segment_disc_distance((here + 0.002)[None], first[None], static.center_m)[0]
+    assert (d < keep - 1e-3).any()
+
+
 def _all_pairs_full_check(static: StaticMap, clearance_m: float) -> np.ndarray:
     """The visibility graph's edges by the plain check: every ring-node pair against every
     disc (`segment_clears`), which the staged `clear_pairs` must reproduce exactly."""
