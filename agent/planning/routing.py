@@ -569,8 +569,9 @@ class RouteFollower:
         past = ((here - ahead[:-1]) * (ahead[1:] - ahead[:-1])).sum(axis=1) > 0.0
         reached = np.flatnonzero((away < WAYPOINT_REACHED_M)
                                  | (past & (away < WAYPOINT_PASSED_M)))
-        behind = float(math.hypot(*(wps[self._next - 1] - here)))
-        if not reached.size and self._next >= 2 and behind < WAYPOINT_PASSED_M:
+        behind = (float(math.hypot(*(wps[self._next - 1] - here)))
+                  if not reached.size and self._next >= 2 else math.inf)
+        if behind < WAYPOINT_PASSED_M:
             # The waypoint passed last, while the robot is still near it, gives the next
             # one the slack it gave the cycle it was passed: a waypoint aimed at through
             # the slack stays in sight from where it was seen. Without this the robot

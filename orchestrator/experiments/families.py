@@ -505,7 +505,7 @@ FAMILIES: dict[str, tuple[int, str]] = {
     "crossing_60_mixed": (16, "two cohorts of N/2 crossing at 60 deg, v_max 0.8-1.4 m/s"),
     # Structured scenes, not in the default suite; generators: `structured_families`.
     "rooms": (10, "N robots in a 3x3 block of rooms with doors 1.6-3.0 m, each to another room"),
-    "evacuate": (18, "N robots leave a 12 m room through one door 2.8-3.4 m wide"),
+    "evacuate": (18, "N robots leave a 14 m room through one door 2.8-3.4 m wide"),
     "cross_corridors": (12, "four corridors 2.6-3.2 m clear meet; N/4 per arm to other arms"),
     "dead_end": (6, "N robots to goals along a dead-end corridor 2.6-3.2 m, random order"),
     "parking": (12, "N robots from a ring to goals packed 1.5 m apart"),

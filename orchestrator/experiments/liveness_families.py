@@ -125,19 +125,32 @@ def wall_discs(y_m: float, x_from_m: float, x_to_m: float, doors_x_m: Sequence[f
     Returns:
         The discs, from x_from_m to x_to_m.
     """
-    r = WALL_DISC_RADIUS_M
     half_door = DOORWAY_WIDTH_M / 2.0
     edges = [x_from_m, *(x for d in sorted(doors_x_m) for x in (d - half_door, d + half_door)),
              x_to_m]
     discs: list[ObstacleSpec] = []
     for a, b in zip(edges[::2], edges[1::2]):
-        require(b - a >= 2.0 * r - 1e-9, f"wall: a stretch of {b - a:g} m between "
-                "doorways is shorter than one disc")
-        count = math.ceil(round((b - a - 2.0 * r) / WALL_DISC_SPACING_M, 9)) + 1
-        for x in np.linspace(a + r, b - r, count):
-            centre = (round(float(x), COORD_DECIMALS) + 0.0, round(y_m, COORD_DECIMALS) + 0.0)
-            discs.append(ObstacleSpec(id=first_id - len(discs), center=centre, radius_m=r))
+        for x in tile_stretch(a, b):
+            centre = (round(x, COORD_DECIMALS) + 0.0, round(y_m, COORD_DECIMALS) + 0.0)
+            discs.append(ObstacleSpec(id=first_id - len(discs), center=centre,
+                                      radius_m=WALL_DISC_RADIUS_M))
     return discs
+
+
+def tile_stretch(lo_m: float, hi_m: float) -> list[float]:
+    """Centres of the discs that close the solid stretch [lo_m, hi_m] of a wall: evenly
+    spaced, at most `WALL_DISC_SPACING_M` apart, the outer discs' edges on its ends (also
+    `structured_families.line_discs`, along a wall of any direction).
+
+    Raises:
+        ScenarioError: the stretch is shorter than one disc.
+    """
+    r = WALL_DISC_RADIUS_M
+    require(hi_m - lo_m >= 2.0 * r - 1e-9, f"wall: a stretch of {hi_m - lo_m:g} m between "
+            "openings is shorter than one disc")
+    count = math.ceil(round((hi_m - lo_m - 2.0 * r) / WALL_DISC_SPACING_M, 9)) + 1
+    centres: list[float] = np.linspace(lo_m + r, hi_m - r, count).tolist()
+    return centres
 
 
 def _door_offsets(count: int, rng: np.random.Generator) -> np.ndarray:

@@ -32,7 +32,10 @@ import numpy as np
 
 from agent.core.scenario import ObstacleSpec, RobotSpec, Scenario
 from agent.planning.routing import StaticMap, route_or_tight
-from orchestrator.experiments.liveness_families import WALL_DISC_RADIUS_M, WALL_DISC_SPACING_M
+from orchestrator.experiments.liveness_families import (
+    WALL_DISC_RADIUS_M,
+    tile_stretch,
+)
 from orchestrator.experiments.scenario_blocks import (
     COORD_DECIMALS,
     D_SAFETY_M,
@@ -84,20 +87,17 @@ def line_discs(a: Point, b: Point, openings: Sequence[Opening] = (), first_id: i
             must hold at least one disc.
         first_id: id of the first disc; the next count down.
     """
-    r = WALL_DISC_RADIUS_M
     ax, ay = a
     length = math.hypot(b[0] - ax, b[1] - ay)
     ux, uy = (b[0] - ax) / length, (b[1] - ay) / length
     edges = [0.0, *(s for c, w in sorted(openings) for s in (c - w / 2.0, c + w / 2.0)), length]
     discs: list[ObstacleSpec] = []
     for lo, hi in zip(edges[::2], edges[1::2]):
-        require(hi - lo >= 2.0 * r - 1e-9, f"wall: a stretch of {hi - lo:g} m between "
-                "openings is shorter than one disc")
-        count = math.ceil(round((hi - lo - 2.0 * r) / WALL_DISC_SPACING_M, 9)) + 1
-        for s in np.linspace(lo + r, hi - r, count).tolist():
+        for s in tile_stretch(lo, hi):
             centre = (round(ax + ux * s, COORD_DECIMALS) + 0.0,
                       round(ay + uy * s, COORD_DECIMALS) + 0.0)
-            discs.append(ObstacleSpec(id=first_id - len(discs), center=centre, radius_m=r))
+            discs.append(ObstacleSpec(id=first_id - len(discs), center=centre,
+                                      radius_m=WALL_DISC_RADIUS_M))
     return discs
 
 

@@ -11,6 +11,7 @@ import pytest
 from agent.core.scenario import Scenario
 from agent.planning.routing import segment_clears
 from orchestrator.experiments import benchmark as bm
+from orchestrator.experiments import liveness_families as lf
 from orchestrator.experiments import structured_families as sf
 from orchestrator.experiments.families import FAMILIES, resolve
 from orchestrator.experiments.scenario_blocks import benchmark_time_limit_s
@@ -63,8 +64,8 @@ def test_a_wall_of_discs_touches_end_to_end_and_leaves_its_openings_clear():
     assert math.isclose(x.max() + r, 10.0, abs_tol=1e-4)
     left, right = x[x < 4.0], x[x > 4.0]
     assert math.isclose((right.min() - r) - (left.max() + r), 2.2, abs_tol=1e-4)
-    assert np.diff(left).max() <= sf.WALL_DISC_SPACING_M + 1e-9
-    assert np.diff(right).max() <= sf.WALL_DISC_SPACING_M + 1e-9
+    assert np.diff(left).max() <= lf.WALL_DISC_SPACING_M + 1e-9
+    assert np.diff(right).max() <= lf.WALL_DISC_SPACING_M + 1e-9
     with pytest.raises(ValueError, match="shorter than one disc"):
         sf.line_discs((0.0, 0.0), (3.0, 0.0), openings=((1.5, 2.5),))
 
