@@ -108,14 +108,23 @@ class Run:
     def finish(self) -> tuple[dict, dict, dict]:
         """Wait for the end; (end event, robots.json, metrics.json's end section)."""
         end = wait_for_event(self.out_dir, lambda e: e["kind"] == "end", RUN_S, self.world)
-        assert wait_exit(self.world) == ExitCode.OK, (self.out_dir / "world.log").read_text()
+        assert wait_exit(self.world) == ExitCode.OK, self.log_tails()
         for proc in self.robots.values():
-            assert wait_exit(proc) == ExitCode.OK
+            assert wait_exit(proc) == ExitCode.OK, self.log_tails()
         robots = collect_robot_exits(self.out_dir)
         (self.out_dir / "robots.json").write_text(json.dumps(robots))
         write_metrics(self.out_dir, metrics_from_run_dir(self.out_dir))
         metrics = json.loads((self.out_dir / "metrics.json").read_text())
         return end, robots, metrics
+
+    def log_tails(self, lines: int = 40) -> str:
+        """The last lines of the world's and every robot's log: a failure's message carries
+        them, since the temporary run directory is gone once pytest reports."""
+        parts = []
+        for log in sorted(self.out_dir.glob("*.log")):
+            tail = log.read_text(errors="replace").splitlines()[-lines:]
+            parts.append(f"--- {log.name} (last {len(tail)} lines)\n" + "\n".join(tail))
+        return "\n".join(parts)
 
     def kill_all(self) -> None:
         stop_processes([self.world, *self.robots.values()], 0.0, 5.0)

@@ -3,6 +3,8 @@ it, and when (the press clocks: who counts as a presser, how long, when it retur
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -30,6 +32,11 @@ def robots(*rows: tuple[int, float, float]) -> Others:
     return Others(ids=a[:, 0].astype(int), position_m=a[:, 1:3], velocity_mps=np.zeros((n, 2)),
                   radius_m=np.full(n, R), linearity=np.ones(n), track_start_m=a[:, 1:3],
                   is_robot=np.ones(n, dtype=bool))
+
+
+def turning(rid: int, x: float, y: float, heading: float) -> Others:
+    """One robot of `robots` at (x, y), facing `heading`."""
+    return replace(robots((rid, x, y)), heading_rad=np.array([heading]))
 
 
 def walls(*centres: tuple[float, float], radius: float = 0.5) -> StaticMap:
@@ -64,8 +71,24 @@ def test_in_a_corridor_it_goes_as_far_as_the_wall_allows_and_no_farther():
 
 
 def test_a_third_robot_in_the_way_is_not_pressed_on_and_no_room_means_no_step():
-    others = robots((7, -1.2, 0.0), (8, 0.0, 1.6), (9, 0.0, -1.6))  # 0.6 m gaps either side
+    # 0.6 m gaps either side and ahead: every step would press on a neighbour.
+    others = robots((7, -1.2, 0.0), (8, 0.0, 1.6), (9, 0.0, -1.6), (10, 1.6, 0.0))
     assert aside_point(GOAL, R, np.array([-1.2, 0.0]), R, others, 0, D_SAFETY) is None
+
+
+def test_packed_across_it_steps_on_along_the_line_away_from_the_presser():
+    """Goals 1.5 m apart (0.5 m gaps): no room across, but nobody ahead. The robot steps
+    on by the presser's whole inflated disc, away from it, and so opens its spot (a step
+    away from a neighbour closer than `ROOM_GAP_M` is room; one towards it is not)."""
+    others = robots((7, -1.2, 0.0), (8, 0.0, 1.5), (9, 0.0, -1.5))
+    point = aside_point(GOAL, R, np.array([-1.2, 0.0]), R, others, 0, D_SAFETY)
+    assert point is not None
+    np.testing.assert_allclose(point, [WANT, 0.0], atol=1e-9)
+    # A neighbour parked 0.5 m off on one side does not keep it from stepping away from
+    # it, across, on the other side.
+    one_side = robots((7, -1.2, 0.0), (8, 0.0, 1.5))
+    point = aside_point(GOAL, R, np.array([-1.2, 0.0]), R, one_side, 0, D_SAFETY)
+    np.testing.assert_allclose(point, [0.0, -WANT], atol=1e-9)
 
 
 def press(way: MakeWay, t: float, others: Others, at_goal: bool = True,
@@ -98,13 +121,16 @@ def test_neighbours_already_there_on_arrival_never_press():
 
 
 def test_a_presser_that_never_goes_by_sends_the_robot_aside_once():
+    """One that stays (turning on the spot) holds the robot aside `HOLD_MAX_S`; then,
+    and ever after, it counts as parked there."""
     way = MakeWay()
     press(way, 0.0, robots((7, -6.0, 0.0)))
-    stays = robots((7, -1.2, 0.0))  # comes up, then parks there for good
-    t, asides = 0.0, 0
+    t, asides, heading = 0.0, 0, 0.0
     while t < 5 * HOLD_MAX_S:
+        stays = turning(7, -1.2, 0.0, heading)  # comes up, then turns there for good
         refuge = press(way, t, stays, at_goal=way._aside is None)
         asides += refuge is not None
+        heading += 0.05
         t += 0.1
     assert way.steps == 1
     assert asides == pytest.approx(HOLD_MAX_S / 0.1, abs=2)
@@ -118,10 +144,55 @@ def test_pressers_that_came_up_while_it_stood_aside_count_when_it_is_back():
     while press(way, t, first) is None:
         t += 0.1
     assert way.steps == 1
-    # 7 goes by while 8 comes up behind it; the robot returns with 8 already close.
-    assert press(way, t + 2.0, robots((7, 3.0, 0.0), (8, -1.2, 0.0)), at_goal=False) is None
+    # 7 goes by; 8 came up behind it but stands back (2.3 m from the goal, 1.7 m from the
+    # refuge): going back presses on nobody, so the robot returns.
+    refuge = press(way, t, first, at_goal=False)
+    assert press(way, t + 2.0, robots((7, 3.0, 0.0), (8, -2.3, 0.0)), at_goal=False,
+                 here=tuple(refuge)) is None
+    assert way.handovers == 0
     t += 3.0
-    second = robots((7, 6.0, 0.0), (8, -1.2, 0.0))
+    second = robots((7, 6.0, 0.0), (8, -1.2, 0.0))  # then 8 presses on it at its goal
     while press(way, t, second) is None and t < 30.0:
         t += 0.1
     assert way.steps == 2
+
+
+def test_a_queue_is_let_through_without_going_back_in_between():
+    """When its presser has gone by and the next robot already stands where going back
+    would press on it (within L of the goal), the robot stays aside for that one too."""
+    way = MakeWay()
+    press(way, 0.0, robots((7, -6.0, 0.0), (8, -8.0, 0.0)))
+    first = robots((7, -1.2, 0.0), (8, -3.5, 0.0))
+    t = 0.0
+    while (refuge := press(way, t, first)) is None:
+        t += 0.1
+    here = tuple(refuge)
+    # 7 goes by; 8 is 1.0 m from the goal (L = 1.3 m): the robot stays where it is.
+    queue = robots((7, 3.0, 0.0), (8, -1.0, 0.0))
+    np.testing.assert_allclose(press(way, t + 2.0, queue, at_goal=False, here=here), refuge)
+    assert way.handovers == 1 and way.steps == 1
+    # 8 goes by too, and nobody is left: back to the goal.
+    gone = robots((7, 6.0, 0.0), (8, 3.0, 0.0))
+    assert press(way, t + 4.0, gone, at_goal=False, here=here) is None
+    # Each robot gets one turn per spell aside: 8 coming back does not hold it again.
+    assert way.handovers == 1
+
+
+def test_a_robot_kept_off_its_goal_by_a_crowd_still_makes_way():
+    """Back from a step aside but 0.3 m short of its goal (outside the arrival tolerance,
+    a robot standing on the way back), the robot is home: a robot pressed against it
+    there sends it aside as at the goal."""
+    way = MakeWay()
+    press(way, 0.0, robots((7, -6.0, 0.0)))  # parked once
+    short = (0.3, 0.0)
+    crowd = robots((7, -0.9, 0.8))  # 0.29 m gap to the robot where it stands
+    t = 0.0
+    while press(way, t, crowd, at_goal=False, here=short) is None and t < 10.0:
+        t += 0.1
+    assert way.steps == 1 and t == pytest.approx(PRESS_S, abs=0.11)
+    # Farther than its radius from the goal it is not home: no clock runs.
+    away = MakeWay()
+    press(away, 0.0, robots((7, -6.0, 0.0)))
+    for k in range(100):
+        assert press(away, 0.1 * k, robots((7, -0.3, 0.9)), at_goal=False,
+                     here=(0.6, 0.0)) is None
