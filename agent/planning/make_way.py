@@ -116,19 +116,21 @@ def aside_point(goal_m: np.ndarray, radius_m: float, presser_m: np.ndarray,
                 presser_radius_m: float, others: Others, presser: int, d_safety_m: float,
                 static: StaticMap | None = None) -> np.ndarray | None:
     """Where a robot parked at `goal_m` stands aside for the robot at `presser_m`, or None
-    when neither side has `MIN_ASIDE_M` of room.
+    when neither side nor the way on along the line has `MIN_ASIDE_M` of room.
 
     Args:
         goal_m: (2,) the parked robot's goal.
         radius_m: its radius.
         presser_m: (2,) the pressing robot's position; presser_radius_m its radius.
         others: every disc the parked robot senses; the robots among them, but the
-            presser (index `presser`), must stay `ROOM_GAP_M` from the refuge.
+            presser (index `presser`), must stay `ROOM_GAP_M` from the refuge, or no
+            closer than they are to the goal (`_room`).
         d_safety_m: the safety margin of Eq. (8).
         static: the scenario's static discs; the refuge keeps `WALL_GAP_M` from them.
 
     Returns:
-        (2,) the refuge, across the line from the presser to the goal, or None.
+        (2,) the refuge: across the line from the presser to the goal, or on along it,
+        away from the presser, when neither side has room; or None.
     """
     goal = np.asarray(goal_m, dtype=float)
     axis = goal - np.asarray(presser_m, dtype=float)
