@@ -14,7 +14,9 @@ The graph (`plan_route`):
   disc, of radius (r_j + clearance) / cos(pi / RING_NODES), so that the chord between two
   neighbouring ring points still clears the inflated disc. Ring points inside another
   inflated disc are dropped (a wall of overlapping discs keeps only its ends and its
-  doorways).
+  doorways). A doorway barely wider than the clearance loses the ring points facing
+  across it that way, so it gets nodes of its own: its middle and a lead-in on either side
+  (`_doorway_points`).
 - Edges: every pair of nodes whose segment clears every inflated disc
   (`segment_clears`), weighted by its length. A start or goal already inside an inflated
   disc (a robot parked next to a pillar) clears that disc by its own distance to it
@@ -253,19 +255,62 @@ def _endpoint_keep(point_m: np.ndarray, center_m: np.ndarray, keep_m: np.ndarray
 
 def _ring_nodes(static: StaticMap, keep_m: np.ndarray, of: slice = slice(None)
                 ) -> np.ndarray:
-    """(n, 2) ring points round the discs `of` (every disc by default), outside every
-    inflated disc of the map."""
-    centers = static.center_m[of]
-    if centers.shape[0] == 0:
+    """(n, 2) the graph's nodes of the discs `of` (every disc by default), outside every
+    inflated disc of the map: per disc, its ring points, then its doorway points
+    (`_doorway_points`) with the discs before it. Disc by disc, so that the nodes of
+    discs added to a map (`VisibilityGraph.with_discs`) come last, as `build` on the
+    grown map orders them."""
+    index = np.arange(len(static))[of]
+    if index.size == 0:
         return np.zeros((0, 2))
+    centers = static.center_m[index]
     angle = 2.0 * math.pi * np.arange(RING_NODES) / RING_NODES
-    ring = keep_m[of] / math.cos(math.pi / RING_NODES)
+    ring = keep_m[index] / math.cos(math.pi / RING_NODES)
     pts = (centers[:, None, :]
            + ring[:, None, None] * np.stack((np.cos(angle), np.sin(angle)), axis=1)[None])
-    pts = pts.reshape(-1, 2)
+    owner = np.repeat(index, RING_NODES)
+    door, door_owner = _doorway_points(static, keep_m, index)
+    pts = np.concatenate((pts.reshape(-1, 2), door))
+    owner = np.concatenate((owner, door_owner))
+    pts = pts[np.argsort(owner, kind="stable")]
     d = np.hypot(*(pts[:, None, :] - static.center_m[None, :, :]).transpose(2, 0, 1))
     outside: np.ndarray = pts[(d >= keep_m[None, :] - LOOKAHEAD_TOLERANCE_M).all(axis=1)]
     return outside
+
+
+def _doorway_points(static: StaticMap, keep_m: np.ndarray, index: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """Three points per doorway between a disc of `index` and a disc before it: its
+    middle, and a lead-in on either side, square to the line between the two centres and
+    as far out as the larger inflated radius (a line into the middle must come almost
+    straight across); and the later disc of each pair (their owner).
+
+    A doorway is a gap between two inflated discs (free width w >= 0, so it admits the
+    clearance) narrower than the two ring points facing across it stand out from their
+    own inflated discs together (ring - keep of each): those ring points then fall inside
+    the other disc's inflated disc and are dropped, and the gap had no node. A route
+    through it could only be one straight edge threading it from far off (`rooms`,
+    tuning seed 104: a lone robot's route ran back to a room's far corner to line up with
+    a door 0.1 m wider than its clearance; pushed off that line it planned the same
+    detour again, and circled in the room until the time limit)."""
+    if index.size == 0 or len(static) < 2:
+        return np.zeros((0, 2)), np.zeros(0, dtype=np.intp)
+    centers = static.center_m
+    stand_out = keep_m * (1.0 / math.cos(math.pi / RING_NODES) - 1.0)
+    rel = centers[None, :, :] - centers[index][:, None, :]  # (k, M, 2): later -> earlier
+    dist = np.hypot(rel[..., 0], rel[..., 1])
+    width = dist - keep_m[index][:, None] - keep_m[None, :]
+    before = np.arange(len(static))[None, :] < index[:, None]
+    door = before & (width >= 0.0) & (width < stand_out[index][:, None] + stand_out[None, :])
+    a, b = np.nonzero(door)
+    if a.size == 0:
+        return np.zeros((0, 2)), np.zeros(0, dtype=np.intp)
+    unit = rel[a, b] / dist[a, b][:, None]
+    mid = centers[index[a]] + unit * (keep_m[index[a]] + 0.5 * width[a, b])[:, None]
+    lead = np.maximum(keep_m[index[a]], keep_m[b])[:, None] * np.column_stack(
+        (-unit[:, 1], unit[:, 0]))
+    points = np.stack((mid - lead, mid, mid + lead), axis=1).reshape(-1, 2)
+    return points, np.repeat(index[a], 3)
 
 
 def _hits(a_m: np.ndarray, b_m: np.ndarray, center_m: np.ndarray, keep_m: np.ndarray

@@ -337,3 +337,41 @@ def test_a_map_of_several_hundred_discs_is_routed_round_its_walls() -> None:
     assert route.length_m > 1.05 * float(np.hypot(*(goal - start)))
     a, b = route.waypoints_m[:-1], route.waypoints_m[1:]
     assert segment_clears(a, b, static.center_m, static.radius_m + CLEARANCE_M).all()
+
+
+def test_a_doorway_barely_wider_than_the_clearance_is_entered_from_anywhere_in_sight() -> None:
+    # `rooms`, tuning seed 104: a door 1.9 m clear, 0.1 m wider than the robot's route
+    # clearance on both sides. The two ring points facing across it fall inside each
+    # other's inflated discs, so without nodes of its own the only routes through it were
+    # single edges threading it from far off: from a point off its axis the route ran back
+    # 3.5 m to a corner of the room to line up with it.
+    radius = 0.6
+    width = 2.0 * CLEARANCE_M + 0.1
+    static = wall(door_m=width, radius_m=radius, spacing_m=0.92)
+    door = np.zeros(2)
+    start, goal = np.array([-5.2, -1.7]), np.array([6.0, 1.2])
+    route = route_or_tight(start, goal, static, ROBOT_M, D_SAFETY_M)
+    assert route is not None and not route.tight
+    wps = route.waypoints_m
+    assert np.min(np.hypot(*(wps - door).T)) < 1e-9  # through the middle of the door
+    # never back away from the wall before going through it
+    assert np.all(np.diff(wps[:, 0]) > 0.0), wps
+    shortest = float(np.hypot(*(door - start)) + np.hypot(*(goal - door)))
+    assert route.length_m < 1.1 * shortest
+    a, b = wps[:-1], wps[1:]
+    assert segment_clears(a, b, static.center_m, static.radius_m + CLEARANCE_M
+                          - 1e-6).all()
+
+
+def test_doorway_nodes_keep_a_grown_graph_equal_to_one_built_on_the_grown_map() -> None:
+    static = wall(door_m=2.0 * CLEARANCE_M + 0.1, radius_m=0.6, spacing_m=0.92)
+    graph = VisibilityGraph.build(static, CLEARANCE_M)
+    assert np.min(np.hypot(*graph.nodes_m.T)) < 1e-9  # the doorway's middle is a node
+    extra = np.array([[3.0, 5.0], [-3.0, -5.0]])  # a second doorway among the new discs
+    extra = np.concatenate((extra, [[3.0, 5.0 + 2 * ROBOT_M + 2 * CLEARANCE_M + 0.05]]))
+    grown = graph.with_discs(extra, np.full(3, ROBOT_M))
+    fresh = VisibilityGraph.build(static.with_discs(extra, np.full(3, ROBOT_M)), CLEARANCE_M)
+    assert np.array_equal(grown.nodes_m, fresh.nodes_m)
+    assert np.array_equal(grown.edges, fresh.edges)
+    assert np.any(np.all(np.isclose(fresh.nodes_m, [3.0, 5.0 + ROBOT_M + CLEARANCE_M + 0.025]),
+                         axis=1))
