@@ -8,6 +8,7 @@ the CLI adds `run.json` (how the run was started: setup, planner, seed, mode, ..
 from __future__ import annotations
 
 import csv
+import importlib
 import json
 import math
 import platform
@@ -276,6 +277,30 @@ def numerics_versions() -> dict[str, str | None]:
         except metadata.PackageNotFoundError:
             versions[name] = None
     return versions
+
+
+def numerics_cpu() -> dict[str, Any]:
+    """The processor a run's numbers came from, for run.json: its model name (Linux) and
+    the SIMD targets numpy dispatches to on it. numpy picks its kernels at run time, so
+    the same package versions can round differently on another CPU, and a chaotic crowd
+    run can then end differently (docs/results.md: a run that left one robot short on one
+    machine brought every robot on another, with the same versions)."""
+    model = platform.processor() or None
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as cpuinfo:
+            for line in cpuinfo:
+                if line.startswith("model name"):
+                    model = line.split(":", 1)[1].strip()
+                    break
+    except OSError:
+        pass
+    try:
+        umath = importlib.import_module("numpy._core._multiarray_umath")
+        features: dict[str, bool] = umath.__cpu_features__
+        dispatch = [name for name in umath.__cpu_dispatch__ if features.get(name)]
+    except (ImportError, AttributeError):  # another numpy layout: say so, do not fail
+        dispatch = None
+    return {"model": model, "machine": platform.machine(), "numpy_simd": dispatch}
 
 
 def write_json(path: Path, content: Any) -> Path:

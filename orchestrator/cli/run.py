@@ -16,7 +16,13 @@ from agent.flags import non_negative_int
 from agent.process import ExitCode
 from orchestrator.analysis.console import ProgressLine, run_summary
 from orchestrator.analysis.plots import profile_note, write_run_plots
-from orchestrator.analysis.rundir import end_event, numerics_versions, run_ending, safe_name
+from orchestrator.analysis.rundir import (
+    end_event,
+    numerics_cpu,
+    numerics_versions,
+    run_ending,
+    safe_name,
+)
 from orchestrator.cli.common import (
     DEFAULT_RUNS_DIR,
     JITTER_HELP,
@@ -159,7 +165,7 @@ def run(args: argparse.Namespace) -> int:
         "faults": faults.to_json() if faults is not None else None,
         "started": dt.datetime.now().isoformat(timespec="seconds"),
         "argv": list(args.argv),
-        "versions": numerics_versions(),
+        "versions": numerics_versions(), "cpu": numerics_cpu(),
     })
     live = _start_live(args, scenario)
     progress = ProgressLine(label, quiet=args.quiet)

@@ -37,6 +37,7 @@ import numpy as np
 from agent.core.scenario import Scenario
 from orchestrator.analysis.rundir import (
     end_event,
+    numerics_cpu,
     numerics_versions,
     run_ending,
     safe_name,
@@ -261,7 +262,7 @@ def run_job(job: Job) -> dict[str, Any]:
             "start_jitter_m": START_JITTER_M, "benchmark_family": job.case.family,
             "time_scale": job.time_scale if job.mode == "distributed" else None,
             "started": dt.datetime.now().isoformat(timespec="seconds"),
-            "versions": numerics_versions(),
+            "versions": numerics_versions(), "cpu": numerics_cpu(),
         })
         status = None
         metrics: RunMetrics | None

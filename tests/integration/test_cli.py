@@ -88,6 +88,9 @@ def test_lockstep_run_of_setup_a_writes_everything(two_runs, capsys):
     assert info["versions"]["numpy"] == numpy.__version__
     assert info["versions"]["osqp"] == osqp.__version__
     assert set(info["versions"]) == {"python", "numpy", "scipy", "osqp", "pyrvo"}
+    # ... and the processor: numpy picks its SIMD kernels on it at run time
+    assert set(info["cpu"]) == {"model", "machine", "numpy_simd"}
+    assert info["cpu"]["machine"] and isinstance(info["cpu"]["numpy_simd"], list)
 
 
 def test_run_exit_status_follows_success_and_prints_summary(tmp_path, capsys):
