@@ -124,7 +124,7 @@ class RouteGuide:
         spends at start-up rather than standing in a running world."""
         if self.routes:
             shared_graph(self.static, radius_m + self.d_safety_m + ROUTE_MARGIN_M)
-            shared_graph(self.static, radius_m + TIGHT_MARGIN_M)
+            shared_graph(self.static, radius_m + TIGHT_MARGIN_M, doorways=False)
 
     def reset(self) -> None:
         """Forget the route and the liveness state."""

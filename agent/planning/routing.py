@@ -253,11 +253,11 @@ def _endpoint_keep(point_m: np.ndarray, center_m: np.ndarray, keep_m: np.ndarray
     return keep
 
 
-def _ring_nodes(static: StaticMap, keep_m: np.ndarray, of: slice = slice(None)
-                ) -> np.ndarray:
+def _ring_nodes(static: StaticMap, keep_m: np.ndarray, of: slice = slice(None),
+                doorways: bool = True) -> np.ndarray:
     """(n, 2) the graph's nodes of the discs `of` (every disc by default), outside every
-    inflated disc of the map: per disc, its ring points, then its doorway points
-    (`_doorway_points`) with the discs before it. Disc by disc, so that the nodes of
+    inflated disc of the map: per disc, its ring points, then (with `doorways`) its
+    doorway points (`_doorway_points`) with the discs before it. Disc by disc, so that the nodes of
     discs added to a map (`VisibilityGraph.with_discs`) come last, as `build` on the
     grown map orders them."""
     index = np.arange(len(static))[of]
@@ -269,7 +269,8 @@ def _ring_nodes(static: StaticMap, keep_m: np.ndarray, of: slice = slice(None)
     pts = (centers[:, None, :]
            + ring[:, None, None] * np.stack((np.cos(angle), np.sin(angle)), axis=1)[None])
     owner = np.repeat(index, RING_NODES)
-    door, door_owner = _doorway_points(static, keep_m, index)
+    door, door_owner = (_doorway_points(static, keep_m, index) if doorways
+                        else (np.zeros((0, 2)), np.zeros(0, dtype=np.intp)))
     pts = np.concatenate((pts.reshape(-1, 2), door))
     owner = np.concatenate((owner, door_owner))
     pts = pts[np.argsort(owner, kind="stable")]
@@ -401,22 +402,30 @@ class VisibilityGraph:
         nodes_m: (n, 2) ring nodes [m].
         edges: (E, 2) node index pairs (i < j, in `np.triu_indices` order) whose segment
             clears every inflated disc.
+        doorways: whether the nodes include doorway nodes (`_doorway_points`).
     """
 
     static: StaticMap
     clearance_m: float
     nodes_m: np.ndarray
     edges: np.ndarray
+    doorways: bool = True
 
     @staticmethod
-    def build(static: StaticMap, clearance_m: float) -> VisibilityGraph:
-        """Ring nodes and the clear segments between them (`clear_pairs`)."""
+    def build(static: StaticMap, clearance_m: float, doorways: bool = True
+              ) -> VisibilityGraph:
+        """Ring nodes (and doorway nodes) and the clear segments between them
+        (`clear_pairs`). The tight clearance's graph is built without doorway nodes
+        (`route_or_tight`): in a hall of shelves every gap between two shelf discs is a
+        doorway at that clearance, which more than doubled its nodes and its build took
+        five times as long (`orchestrator bench --routes 14`: 1.9 -> 9.9 s); a tight route
+        is centred in its passage anyway (`agent.planning.passages`)."""
         keep = static.radius_m + clearance_m
-        nodes = _ring_nodes(static, keep)
+        nodes = _ring_nodes(static, keep, doorways=doorways)
         i, j = np.triu_indices(nodes.shape[0], k=1)
         ok = clear_pairs(nodes, i, j, static, keep)
         return VisibilityGraph(static, float(clearance_m), nodes,
-                               np.column_stack((i[ok], j[ok])))
+                               np.column_stack((i[ok], j[ok])), doorways)
 
     def with_discs(self, center_m: np.ndarray, radius_m: np.ndarray) -> VisibilityGraph:
         """This graph on the map plus more discs, as `build` makes it on that map (the
@@ -429,7 +438,8 @@ class VisibilityGraph:
         added_center, added_keep = static.center_m[new], keep[new]
         kept = np.flatnonzero(segment_clears(self.nodes_m, self.nodes_m, added_center,
                                              added_keep))
-        nodes = np.concatenate((self.nodes_m[kept], _ring_nodes(static, keep, new)))
+        nodes = np.concatenate((self.nodes_m[kept],
+                                _ring_nodes(static, keep, new, self.doorways)))
         index = np.full(self.nodes_m.shape[0], -1)
         index[kept] = np.arange(kept.size)
         old = index[self.edges].reshape(-1, 2)
@@ -442,7 +452,7 @@ class VisibilityGraph:
         ok = clear_pairs(nodes, i, j, static, keep)
         edges = np.concatenate((old, np.column_stack((i[ok], j[ok]))))
         edges = edges[np.lexsort((edges[:, 1], edges[:, 0]))]
-        return VisibilityGraph(static, self.clearance_m, nodes, edges)
+        return VisibilityGraph(static, self.clearance_m, nodes, edges, self.doorways)
 
 
 def plan_route(start_m: np.ndarray, goal_m: np.ndarray, static: StaticMap,
@@ -495,17 +505,20 @@ def plan_route(start_m: np.ndarray, goal_m: np.ndarray, static: StaticMap,
 
 
 @functools.lru_cache(maxsize=8)
-def _shared_graph(centers: bytes, radii: bytes, clearance_m: float) -> VisibilityGraph:
+def _shared_graph(centers: bytes, radii: bytes, clearance_m: float, doorways: bool
+                  ) -> VisibilityGraph:
     """The visibility graph of one map and clearance, built once per process: every robot
     of a lockstep run with the same radius shares it (a memo of a pure function)."""
     static = StaticMap(np.frombuffer(centers).reshape(-1, 2), np.frombuffer(radii))
-    return VisibilityGraph.build(static, clearance_m)
+    return VisibilityGraph.build(static, clearance_m, doorways)
 
 
-def shared_graph(static: StaticMap, clearance_m: float) -> VisibilityGraph:
-    """`VisibilityGraph.build(static, clearance_m)`, memoised on the map's contents."""
+def shared_graph(static: StaticMap, clearance_m: float, doorways: bool = True
+                 ) -> VisibilityGraph:
+    """`VisibilityGraph.build(static, clearance_m, doorways)`, memoised on the map's
+    contents."""
     return _shared_graph(static.center_m.tobytes(), static.radius_m.tobytes(),
-                         float(clearance_m))
+                         float(clearance_m), doorways)
 
 
 def route_or_tight(start_m: np.ndarray, goal_m: np.ndarray, static: StaticMap,
@@ -519,7 +532,8 @@ def route_or_tight(start_m: np.ndarray, goal_m: np.ndarray, static: StaticMap,
     if full is not None and full.waypoints_m.shape[0] == 2:
         return full  # the straight line
     clearance = robot_radius_m + TIGHT_MARGIN_M
-    tight = plan_route(start_m, goal_m, static, clearance, shared_graph(static, clearance))
+    tight = plan_route(start_m, goal_m, static, clearance,
+                       shared_graph(static, clearance, doorways=False))
     if tight is None or (full is not None
                          and full.length_m <= TIGHT_DETOUR_RATIO * tight.length_m):
         return full
@@ -539,7 +553,7 @@ def unreachable_reason(start_m: np.ndarray, goal_m: np.ndarray, static: StaticMa
         return None
     clearance = robot_radius_m + TIGHT_MARGIN_M
     if plan_route(start_m, goal_m, static, clearance,
-                  shared_graph(static, clearance)) is not None:
+                  shared_graph(static, clearance, doorways=False)) is not None:
         return None
     keep = static.radius_m + robot_radius_m
     goal = np.asarray(goal_m, dtype=float)
