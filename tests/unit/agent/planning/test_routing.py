@@ -375,3 +375,7 @@ def test_doorway_nodes_keep_a_grown_graph_equal_to_one_built_on_the_grown_map() 
     assert np.array_equal(grown.edges, fresh.edges)
     assert np.any(np.all(np.isclose(fresh.nodes_m, [3.0, 5.0 + ROBOT_M + CLEARANCE_M + 0.025]),
                          axis=1))
+    # the tight clearance's graph goes without (a hall of shelves is all doorways there)
+    tight = VisibilityGraph.build(static, CLEARANCE_M, doorways=False)
+    assert np.min(np.hypot(*tight.nodes_m.T)) > 1.0
+    assert not tight.with_discs(extra, np.full(3, ROBOT_M)).doorways
