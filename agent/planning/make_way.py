@@ -34,13 +34,15 @@ keep it from the last few centimetres, and it must still make way there.
 
 Why it ends (`MakeWay.refuge`): a robot steps aside only for a press that *began after it
 first parked* (robots already within the gap when it arrives, such as neighbours parked at
-their own goals, never count until they have left it), for one presser at a time, for at
-most `HOLD_MAX_S`; a presser that has not gone by when that runs out counts as parked
-there too (it does not need the way, or cannot take it), so it never sends the robot aside
-again until it has left the gap. A spell aside waits for each robot of a queue at most
-once. Every press therefore sends the robot aside at most once, and two robots parked next
-to each other cannot keep stepping aside for each other. Robots that came up while the
-robot stood aside, and were not waited for, are pressers when it is back.
+their own goals, never count until they have left it, or have moved `PRESENT_DRIFT_M`
+within it: no parked neighbour does, a robot stuck against it does; once per robot), for
+one presser at a time, for at most `HOLD_MAX_S`; a presser that has not gone by when that
+runs out counts as parked there too (it does not need the way, or cannot take it), so it
+never sends the robot aside again until it has left the gap. A spell aside waits for each
+robot of a queue at most once. Every press therefore sends the robot aside at most once,
+and two robots parked next to each other cannot keep stepping aside for each other (a
+robot released by its drift presses like one that came up later). Robots that came up
+while the robot stood aside, and were not waited for, are pressers when it is back.
 
 Choices the scenes left open:
 
@@ -98,6 +100,14 @@ gap, so a robot standing aside presses on nobody."""
 PASSED_M = 0.5
 """The presser has gone by once it is this far beyond L (r + r_presser + d_safety) from
 the goal [m]."""
+
+PRESENT_DRIFT_M = 0.5
+"""A robot already within the press gap when this one arrived is not a presser (a
+neighbour parked at its own goal) until it leaves the gap, or until it has moved this far
+from where it stood then without leaving it [m]: a parked neighbour does not move, a robot
+stuck against this one shuffles (`cross_corridors` 12, seed 112, one of the extra tuning
+seeds: a robot pressed 0.2-0.4 m against one that parked in front of it, moving up to
+0.8 m about, for 90 s, and was never a presser). Once per robot."""
 
 HOLD_MAX_S = 15.0
 """The longest a robot stands aside for one presser [s]: one that parks beside the goal
@@ -204,6 +214,8 @@ class MakeWay:
     _handed: set[int] = field(default_factory=set)
     """Robots it has stood aside for since it last came back to its goal: none is waited
     for twice in one spell aside."""
+    _spots: dict[int, np.ndarray] = field(default_factory=dict)
+    """id -> where a robot present on arrival stood then (`PRESENT_DRIFT_M`)."""
     _aside: _Aside | None = None
     _here: bool = False
     _arrived: bool = False
@@ -216,6 +228,7 @@ class MakeWay:
         """Forget every clock."""
         self._press.clear()
         self._present.clear()
+        self._spots.clear()
         self._handed.clear()
         self._aside = None
         self._here = False
@@ -270,7 +283,10 @@ class MakeWay:
             if not self._arrived:  # whoever is this close on arrival does not count
                 self._arrived = True
                 self._present = set(close)
+                self._spots = {int(i): others.position_m[k].copy()
+                               for k, i in enumerate(ids) if int(i) in close}
         self._present &= close
+        self._release_drifted(others)
         self._press = {i: self._press.get(i, now_s) for i in sorted(close - self._present)}
         due = sorted((t, i) for i, t in self._press.items() if now_s - t >= PRESS_S)
         for _, presser in due:
@@ -282,6 +298,17 @@ class MakeWay:
                 self.steps += 1
                 return refuge
         return None
+
+    def _release_drifted(self, others: Others) -> None:
+        """Robots present on arrival that have moved `PRESENT_DRIFT_M` from where they
+        stood then (still within the gap: the others left it) are present no longer."""
+        for rid, spot in list(self._spots.items()):
+            where = np.flatnonzero(others.ids == rid)
+            if rid not in self._present or where.size == 0:
+                del self._spots[rid]
+            elif float(np.hypot(*(others.position_m[where[0]] - spot))) > PRESENT_DRIFT_M:
+                self._present.discard(rid)
+                del self._spots[rid]
 
     @staticmethod
     def _gone(robot: int, goal_m: np.ndarray, radius_m: float, others: Others,

@@ -186,3 +186,21 @@ def test_a_robot_kept_off_its_goal_by_a_crowd_still_makes_way():
     for k in range(100):
         assert press(away, 0.1 * k, robots((7, -0.3, 0.9)), at_goal=False,
                      here=(0.6, 0.0)) is None
+
+
+def test_a_robot_there_on_arrival_that_shuffles_against_it_becomes_a_presser():
+    """Stuck against the robot when it parked (`cross_corridors` 12, seed 112): present on
+    arrival, but it moves about within the press gap, as no parked neighbour does."""
+    way = MakeWay()
+    assert press(way, 0.0, robots((7, -1.3, 0.0))) is None  # there on arrival, 0.3 m off
+    t = 0.1
+    for k in range(50):  # it stays in the gap, shuffling less than PRESENT_DRIFT_M
+        assert press(way, t, robots((7, -1.3, 0.2 * np.sin(k)))) is None
+        t += 0.1
+    assert way.steps == 0
+    drifted, refuge = t, None
+    while refuge is None and t < 10.0:  # now 0.6 m from where it stood on arrival
+        refuge = press(way, t, robots((7, -1.2, 0.6)))
+        t += 0.1
+    assert refuge is not None and way.steps == 1
+    assert t - 0.1 == pytest.approx(drifted + PRESS_S, abs=0.11)  # pressed since it drifted
