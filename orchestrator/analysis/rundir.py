@@ -294,12 +294,15 @@ def numerics_cpu() -> dict[str, Any]:
                     break
     except OSError:
         pass
-    try:
-        umath = importlib.import_module("numpy._core._multiarray_umath")
-        features: dict[str, bool] = umath.__cpu_features__
-        dispatch = [name for name in umath.__cpu_dispatch__ if features.get(name)]
-    except (ImportError, AttributeError):  # another numpy layout: say so, do not fail
-        dispatch = None
+    dispatch: list[str] | None = None  # another numpy layout: say so, do not fail
+    for module in ("numpy._core._multiarray_umath", "numpy.core._multiarray_umath"):
+        try:  # numpy 2 names it _core; 1.26 (the oldest the project takes) core
+            umath = importlib.import_module(module)
+            features: dict[str, bool] = umath.__cpu_features__
+            dispatch = [name for name in umath.__cpu_dispatch__ if features.get(name)]
+            break
+        except (ImportError, AttributeError):
+            continue
     return {"model": model, "machine": platform.machine(), "numpy_simd": dispatch}
 
 
