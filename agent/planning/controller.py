@@ -92,6 +92,9 @@ class RobotController:
         guide = getattr(self.planner, "guide", None)
         if guide is not None:  # route graphs built before the run, not on its first cycle
             guide.prepare(spec.radius_m)
+        prepare_tracker = getattr(self.planner, "prepare_tracker", None)
+        if prepare_tracker is not None:  # likewise the MPC's QP
+            prepare_tracker(spec.limits)
         self.tracker = NeighborTracker(spec.id, ESTIMATION_WINDOW_S)
         self.snapshot: PoseSnapshot | None = None
         self.command = (0.0, 0.0)

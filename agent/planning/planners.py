@@ -274,15 +274,25 @@ class ViaPointPlanner:
         self._parked = False
         self.make_way.reset()
 
-    def _mpc(self, observation: Observation) -> MpcTracker:
+    def prepare_tracker(self, limits: RobotLimits) -> None:
+        """Set up eIFP-MPC's tracker for these limits now rather than on the first cycle
+        that needs it (the QP's matrices, scaling and OSQP set-up: about 2 ms, a cost that
+        otherwise lands on every robot's first plan at once when a fleet starts). The
+        tracker is the one that cycle would have built, so nothing planned changes."""
+        if self.name == "eifp-mpc":
+            self._tracker(limits)
+
+    def _tracker(self, limits: RobotLimits) -> MpcTracker:
         from agent.planning.mpc import MpcTracker
 
-        key = observation.limits
-        tracker = self._trackers.get(key)
+        tracker = self._trackers.get(limits)
         if tracker is None:
-            tracker = MpcTracker(observation.limits, self.config.mpc, self.tuning)
-            self._trackers[key] = tracker
+            tracker = MpcTracker(limits, self.config.mpc, self.tuning)
+            self._trackers[limits] = tracker
         return tracker
+
+    def _mpc(self, observation: Observation) -> MpcTracker:
+        return self._tracker(observation.limits)
 
     def plan(self, observation: Observation, now_s: float) -> PlanResult:
         """One cycle: threats and via-points, spline, then MPC or the tracking law."""

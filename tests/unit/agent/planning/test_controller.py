@@ -238,6 +238,35 @@ def test_every_planner_plans_a_finite_command_within_limits(planner: str) -> Non
         assert len(results[-1].threats) > 0
 
 
+def test_the_mpc_is_set_up_before_the_first_plan_and_plans_as_one_set_up_late(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    # A fleet starting at once would otherwise pay every robot's QP set-up on its first
+    # cycle together; built up front, it is the same tracker and the same commands.
+    def drive(ctrl: RobotController) -> list[tuple[float, float]]:
+        out = []
+        for k in range(5):
+            t = 0.1 * k
+            ctrl.observe(snap(t, 5 * k, {0: (0.8 * t, 0.0, 0.0), 1: (6.0 - t, 0.3, math.pi)}))
+            result = ctrl.plan(t)
+            out.append((result.v_mps, result.omega_radps))
+        return out
+
+    early = RobotController(spec("eifp-mpc"), PlannerConfig(), TOL_M)
+    trackers = early.planner._trackers  # type: ignore[attr-defined]
+    assert list(trackers) == [early.spec.limits]
+    built = trackers[early.spec.limits]
+    early_commands = drive(early)
+    assert trackers[early.spec.limits] is built and len(trackers) == 1
+
+    from agent.planning.planners import ViaPointPlanner
+    monkeypatch.setattr(ViaPointPlanner, "prepare_tracker", lambda self, limits: None)
+    late = RobotController(spec("eifp-mpc"), PlannerConfig(), TOL_M)
+    assert late.planner._trackers == {}  # type: ignore[attr-defined]
+    assert drive(late) == early_commands
+    # The planners without a tracker set none up.
+    assert RobotController(spec("eifp"), PlannerConfig(), TOL_M).planner._trackers == {}  # type: ignore[attr-defined]
+
+
 # --- stale and out-of-order input (through the seeded link model) --------------------------
 
 @settings(max_examples=40, deadline=None, database=None)
