@@ -56,7 +56,7 @@ this is weaker).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -95,7 +95,7 @@ SPOT_REACHED_M = 0.3
 TIE_M = 0.5
 """Distances to the mouths within this of each other are a tie (the lower id goes) [m]."""
 HOLD_STILL_S = 8.0
-"""A robot stops giving way to robots that all stood still this long [s]."""
+"""A robot stops giving way to robots that have each stood still this long [s]."""
 TRACK_LOOKAHEAD_M = 1.5
 """On a passage's line, the robot aims this far ahead of its nearest point on it [m]."""
 TRACK_OFFSET_M = 1.0
@@ -395,10 +395,17 @@ def waiting_spot(passage: Passage, position_m: np.ndarray, static: StaticMap,
 
 @dataclass
 class HoldState:
-    """What `must_hold` remembers between cycles: since when every robot it gives way to
-    has stood still."""
+    """What `must_hold` remembers between cycles: since when each sensed robot has stood
+    still (id -> sim time), whether it blocked the way then or not.
 
-    still_since_s: float = math.inf
+    Per robot rather than one clock for the hold: as a robot walks from its waiting spot
+    to the lead-in, its distance to the mouth changes and a robot parked just beyond the
+    far mouth goes in and out of the right of way; a clock reset whenever nobody blocked
+    for a cycle restarted the wait each time, and the robot walked between the spot and
+    the lead-in for ever (`rooms` 10, structured tuning seed 100, on the machine of
+    2026-12-07: a lone robot, and a robot parked 1.5 m past the far mouth of its door)."""
+
+    still_since_s: dict[int, float] = field(default_factory=dict)
 
 
 def must_hold(passage: Passage, robot_id: int, position_m: np.ndarray, others: Others,
@@ -415,8 +422,14 @@ def must_hold(passage: Passage, robot_id: int, position_m: np.ndarray, others: O
         state: the hold's memory, kept by the caller per passage.
     """
     if not passage.one_lane or len(others) == 0:
-        state.still_since_s = math.inf
+        state.still_since_s.clear()
         return False
+    since = {}
+    for k in np.flatnonzero(others.is_robot):
+        if float(np.hypot(*others.velocity_mps[k])) < SLOW_MPS:
+            rid = int(others.ids[k])
+            since[rid] = state.still_since_s.get(rid, now_s)
+    state.still_since_s = since
     line = passage.line_m[passage.mouth_index:]
     if line.shape[0] == 1:
         line = np.concatenate((line, line))
@@ -442,15 +455,9 @@ def must_hold(passage: Passage, robot_id: int, position_m: np.ndarray, others: O
             continue  # far from the mouth, or moving away from it
         if _ahead_of(theirs, int(others.ids[k]), mine, robot_id):
             blocking.append(k)
-    if not blocking:
-        state.still_since_s = math.inf
-        return False
-    speed = np.hypot(*others.velocity_mps[blocking].T)
-    if (speed >= SLOW_MPS).any():
-        state.still_since_s = math.inf
-        return True
-    state.still_since_s = min(state.still_since_s, now_s)
-    return now_s - state.still_since_s < HOLD_STILL_S
+    # a moving robot holds the way; a still one only until it has stood HOLD_STILL_S
+    return any(now_s - since.get(int(others.ids[k]), now_s) < HOLD_STILL_S
+               for k in blocking)
 
 
 def _ahead_of(theirs_m: float, their_id: int, mine_m: float, my_id: int) -> bool:

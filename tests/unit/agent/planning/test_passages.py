@@ -149,6 +149,26 @@ def test_a_wait_for_robots_that_stand_still_ends() -> None:
     assert not P.must_hold(wide, 5, me, moving, 30.0, P.HoldState())
 
 
+def test_the_wait_for_a_still_robot_is_not_restarted_by_the_order_flickering() -> None:
+    # Found on `rooms` 10 (structured tuning seed 100): a robot parked 1.5 m past the far
+    # mouth is ahead in the order from the hold line but not from nearer the mouth; the
+    # waiting robot walking between its spot and the lead-in restarted the wait each time.
+    _, passage, _ = corridor_passage()
+    far_out = robots((9, tuple(passage.far_mouth_m + (1.5, 0.0)), (0.0, 0.0)))
+    back, near = passage.mouth_m + (-2.4, 0.0), passage.mouth_m + (-1.0, 0.0)
+    state = P.HoldState()
+    assert P.must_hold(passage, 5, back, far_out, 10.0, state)
+    assert not P.must_hold(passage, 5, near, far_out, 12.0, state)  # not ahead from here
+    assert P.must_hold(passage, 5, back, far_out, 14.0, state)
+    assert not P.must_hold(passage, 5, back, far_out, 10.0 + P.HOLD_STILL_S, state)
+    # once it moves, its stillness counts afresh
+    coming = robots((9, tuple(passage.far_mouth_m + (1.5, 0.0)), (-0.5, 0.0)))
+    assert P.must_hold(passage, 5, back, coming, 20.0, state)
+    assert P.must_hold(passage, 5, back, far_out, 21.0, state)
+    assert P.must_hold(passage, 5, back, far_out, 21.0 + P.HOLD_STILL_S - 0.1, state)
+    assert not P.must_hold(passage, 5, back, far_out, 21.0 + P.HOLD_STILL_S, state)
+
+
 distance = st.floats(0.0, 4.0, allow_nan=False)
 
 
