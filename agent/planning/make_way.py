@@ -28,9 +28,9 @@ the presser is `PASSED_M` beyond the inflated radius L from the goal, or after
 instead: one standing where going back would press on it (within L of the goal, or the
 press gap of the robot), which has not had a turn in this spell aside.
 
-A robot that has parked once is *home* while it is within three radii of its goal
+A robot that has parked once is *home* while it is within its radius of its goal
 (`HOME_FRACTION`), also outside the arrival tolerance: back from a step aside, a crowd may
-keep it from its goal, and it must still make way there.
+keep it from the last few centimetres, and it must still make way there.
 
 Why it ends (`MakeWay.refuge`): a robot steps aside only for a press that *began after it
 first parked* (robots already within the gap when it arrives, such as neighbours parked at
@@ -113,18 +113,13 @@ HOLD_MAX_S = 15.0
 """The longest a robot stands aside for one presser [s]: one that parks beside the goal
 never goes by."""
 
-HOME_FRACTION = 3.0
+HOME_FRACTION = 1.0
 """A robot that has parked once is *home* while it is within this fraction of its own
-radius of its goal [-]: make_way treats it as parked (it steps aside for pressers; it
-still plans back to its goal otherwise). Back from a step aside, a robot that a crowd
-keeps from its goal (outside the arrival tolerance) would otherwise plan like any other
-robot and never step aside again, while the robots behind it wait on it for good
-(`dead_end` 6, tuning seed 100: 0.29 m from its goal with two robots pressed against it
-for 80 s). One radius was not enough: in a corridor a robot pushed 0.5-1.0 m off its goal
-by a robot going past, the next robot of the queue standing on that goal, each waited for
-the other to move (`cross_corridors` 12, structured tuning seeds 100 and 104, and
-`parking` 12 seed 102, on the machine of 2026-12-07); at three radii the one off its goal
-steps aside for the one pressed against it."""
+radius of its goal [-]: it still covers the goal spot, and make_way treats it as parked.
+Back from a step aside, a robot that a crowd keeps from the last few centimetres to its
+goal (outside the arrival tolerance) would otherwise plan like any other robot and never
+step aside again, while the robots behind it wait on it for good (`dead_end` 6, tuning
+seed 100: 0.29 m from its goal with two robots pressed against it for 80 s)."""
 
 
 def aside_point(goal_m: np.ndarray, radius_m: float, presser_m: np.ndarray,
