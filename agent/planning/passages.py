@@ -427,11 +427,9 @@ def must_hold(passage: Passage, robot_id: int, position_m: np.ndarray, others: O
     if not passage.one_lane or len(others) == 0:
         state.still_since_s.clear()
         return False
-    since = {}
-    for k in np.flatnonzero(others.is_robot):
-        if float(np.hypot(*others.velocity_mps[k])) < SLOW_MPS:
-            rid = int(others.ids[k])
-            since[rid] = state.still_since_s.get(rid, now_s)
+    speed = np.hypot(others.velocity_mps[:, 0], others.velocity_mps[:, 1])
+    still_ids = others.ids[others.is_robot & (speed < SLOW_MPS)].tolist()
+    since = {rid: state.still_since_s.get(rid, now_s) for rid in still_ids}
     state.still_since_s = since
     line = passage.line_m[passage.mouth_index:]
     if line.shape[0] == 1:
