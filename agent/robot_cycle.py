@@ -179,6 +179,11 @@ class SimClock:
         if tick > self.tick:
             self.tick, self.stamp_s, self.wall_s = tick, stamp_s, wall_s
 
+    def restart(self) -> None:
+        """Forget the pose it runs from: the next accepted pose sets it (`started` is False
+        until then, so no pose is refused as ahead of it)."""
+        self.tick = -1
+
 
 @dataclass
 class WorldWatch:
@@ -394,6 +399,12 @@ class RobotCycle:
             return False
         self.counts.suspended += 1
         self.world.resumed_wall_s = wall_s
+        # The clock ran on from a pose taken before the stop; if the world's sim time went
+        # on further than the stall measured here (MAX_POSE_AHEAD_S or more), every pose
+        # after it was refused as ahead, none could set the clock again, and the robot left
+        # with "no poses" (tests/system/test_faults.py, SIGSTOP for 3 s, seen once in CI).
+        # The next pose from the world's session sets it instead.
+        self.clock.restart()
         return True
 
     def pose_timed_out(self, wall_s: float, timeout_s: float) -> bool:

@@ -266,6 +266,22 @@ def test_after_its_own_suspension_a_robot_waits_the_longer_rejoin_grace() -> Non
     assert reason is not None and "not back within" in reason
 
 
+def test_after_a_suspension_the_next_pose_sets_the_clock_even_far_ahead_of_it() -> None:
+    # SIGSTOPped at sim 0.2 s for longer than the loop measured: the world is at 6.0 s, the
+    # clock run on from the old pose says 3.2 s. Refused as ahead, no pose could ever set
+    # the clock again (tests/system/test_faults.py, seen once in CI).
+    stuck = _cycle()
+    stuck.sense(_pose(10, 0.2), 1000.0, 1000.0)
+    assert stuck.sense(_pose(300, 6.0), 1003.0, 1003.0) is False  # no suspension noticed
+    cycle = _cycle()
+    cycle.sense(_pose(10, 0.2), 1000.0, 1000.0)
+    assert cycle.loop_stalled(3.0, 1003.0) is True
+    assert not cycle.clock.started
+    assert cycle.sense(_pose(300, 6.0), 1003.0, 1003.0) is True
+    assert cycle.clock.tick == 300 and cycle.clock.now_s(1003.1) == pytest.approx(6.1)
+    assert cycle.counts.refused_poses == 0
+
+
 def test_the_pose_timeout_runs_from_the_last_pose_or_a_resumption() -> None:
     cycle = _cycle()
     assert not cycle.pose_timed_out(1e6, 5.0)  # no pose yet: the start-up deadline rules
