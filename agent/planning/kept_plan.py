@@ -15,10 +15,13 @@ import numpy as np
 from agent.core.types import Side
 from agent.planning.threats import legs_threats
 
-KEEP_PLAN_RATIO = 0.1
+KEEP_PLAN_RATIO = 0.3
 """With `Mechanisms.keep_plan`, last cycle's via-points are kept while every leg through
 them is still clear and the path through them is at most this fraction longer than the
-new plan's."""
+new plan's. 0.3 since 2026-12-07 (0.1 before): a pass once chosen is seen through unless it
+fails or costs a third more, which cut reversals on the liveness families' tuning seeds
+(docs/method.md, "Tuning record"); 0.5 cut no more and left a robot of `grid_dense` 25
+standing."""
 
 PASSED_VIA_M = 0.3
 """A kept via-point closer to the robot than this, or behind it along the next leg, has

@@ -10,6 +10,7 @@ from hypothesis import strategies as st
 from agent.core.config import PlannerConfig, ReferenceConfig, RobotLimits
 from agent.core.types import EgoState, Observation, Others, PlanStatus, Side
 from agent.planning.ifp import ESCAPE_STANDING_MPS, ViaPlan, plan_ifp, select_earliest
+from agent.planning.kept_plan import KEEP_PLAN_RATIO
 from agent.planning.mechanisms import VIA_MARGIN_M
 from agent.planning.viapoints import ESCAPE_MARGIN_M, candidate_pair
 from tests.examples import examples
@@ -534,13 +535,28 @@ def test_keep_plan_drops_a_much_longer_plan_and_passed_or_unsensed_via_points():
     obs = observe(others([(5.0, 0.0)]), v=1.0)
     rules = _rules(keep_plan=True)
     # A detour far above the disc: more than KEEP_PLAN_RATIO longer than the new plan.
-    assert _plan(obs, rules, previous=_previous((5.0, 4.0))).side is Side.RIGHT
+    detour = (5.0, 6.0)
+    assert 2.0 * math.hypot(*detour) > (1.0 + KEEP_PLAN_RATIO) * 10.5
+    assert _plan(obs, rules, previous=_previous(detour)).side is Side.RIGHT
     # The via-point resolves someone no longer sensed.
     assert _plan(obs, rules, previous=_previous((5.0, 0.8), other_id=7)).side is Side.RIGHT
     # The robot is past the via-point along the next leg: it is dropped, nothing is left.
     past = observe(others([(5.0, 0.0)]), x=5.5, y=0.9, v=1.0)
     plan = _plan(past, rules, previous=_previous((5.0, 0.8)))
     assert not any(np.allclose(w, [5.0, 0.8]) for w in plan.waypoints_m)
+
+
+def test_keep_plan_sees_a_pass_through_while_it_costs_less_than_the_ratio_more():
+    # Last cycle passed the disc wide on the LEFT: 10-30 % longer than this cycle's plan
+    # (the RIGHT tangent). The pass still clears the disc, so it is seen through.
+    obs = observe(others([(5.0, 0.0)]), v=1.0)
+    fresh = _plan(obs, _rules())
+    fresh_m = float(np.hypot(*np.diff(fresh.waypoints_m, axis=0).T).sum())
+    wide = (5.0, 3.0)
+    wide_m = 2.0 * math.hypot(*wide)
+    assert 1.1 * fresh_m < wide_m <= (1.0 + KEEP_PLAN_RATIO) * fresh_m
+    kept = _plan(obs, _rules(keep_plan=True), previous=_previous(wide))
+    assert kept.side is Side.LEFT and np.allclose(kept.waypoints_m[1], wide)
 
 
 def test_keep_plan_keeps_the_remaining_via_points_of_a_longer_plan():
