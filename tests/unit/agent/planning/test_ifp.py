@@ -535,8 +535,10 @@ def test_keep_plan_drops_a_much_longer_plan_and_passed_or_unsensed_via_points():
     obs = observe(others([(5.0, 0.0)]), v=1.0)
     rules = _rules(keep_plan=True)
     # A detour far above the disc: more than KEEP_PLAN_RATIO longer than the new plan.
+    fresh = _plan(obs, _rules())
+    fresh_m = float(np.hypot(*np.diff(fresh.waypoints_m, axis=0).T).sum())
     detour = (5.0, 6.0)
-    assert 2.0 * math.hypot(*detour) > (1.0 + KEEP_PLAN_RATIO) * 10.5
+    assert 2.0 * math.hypot(*detour) > (1.0 + KEEP_PLAN_RATIO) * fresh_m
     assert _plan(obs, rules, previous=_previous(detour)).side is Side.RIGHT
     # The via-point resolves someone no longer sensed.
     assert _plan(obs, rules, previous=_previous((5.0, 0.8), other_id=7)).side is Side.RIGHT
