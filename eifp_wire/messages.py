@@ -284,6 +284,12 @@ def _points(value: object, where: str, max_n: int) -> np.ndarray:
     return flat.reshape(-1, 2)
 
 
+def _check_ego(ego: np.ndarray) -> None:
+    """A plan's ego pose: x, y within the coordinate range, a finite heading."""
+    check_values(ego[:2], "debug.ego.xy", -MAX_COORD_M, MAX_COORD_M)
+    check_values(ego[2:], "debug.ego.theta", -1e3, 1e3)
+
+
 def _pack_points(points: np.ndarray) -> bytes:
     return np.ascontiguousarray(points, dtype=F8).reshape(-1).tobytes()
 
@@ -321,6 +327,25 @@ class PlanDebugMsg:
     TYPE: typing.ClassVar[str] = "debug"
 
     def __post_init__(self) -> None:
+        self._check_scalars()
+        d = self.debug
+        if not isinstance(d, PlanDebug):
+            raise ProtocolError("debug: expected a PlanDebug")
+        if len(d.threat_ids) > MAX_DEBUG_THREATS:
+            raise ProtocolError(f"debug.threats: more than {MAX_DEBUG_THREATS}")
+        for tid in d.threat_ids:
+            check_int(tid, "debug.threats[]", MIN_OBSTACLE_ID, MAX_ROBOT_ID)
+        _check_ego(d.ego)
+        for name, where in (("via_points_m", "debug.via"), ("reference_m", "debug.ref"),
+                            ("predicted_m", "debug.pred")):
+            points = getattr(d, name)
+            if points.shape[0] > MAX_DEBUG_POINTS:
+                raise ProtocolError(f"{where}: {points.shape[0]} points exceed "
+                                    f"{MAX_DEBUG_POINTS}")
+            check_values(points, where, -MAX_COORD_M, MAX_COORD_M)
+
+    def _check_scalars(self) -> None:
+        """Check (and normalise) every field but `debug`."""
         set_ = object.__setattr__
         set_(self, "robot_id", check_int(self.robot_id, "debug.robot", 0, MAX_ROBOT_ID))
         set_(self, "seq", check_int(self.seq, "debug.seq", 0, MAX_SEQ))
@@ -332,22 +357,6 @@ class PlanDebugMsg:
         if status not in _STATUS_VALUES:
             raise ProtocolError(f"debug.status: unknown status {status!r}")
         set_(self, "status", str(status))
-        d = self.debug
-        if not isinstance(d, PlanDebug):
-            raise ProtocolError("debug: expected a PlanDebug")
-        if len(d.threat_ids) > MAX_DEBUG_THREATS:
-            raise ProtocolError(f"debug.threats: more than {MAX_DEBUG_THREATS}")
-        for tid in d.threat_ids:
-            check_int(tid, "debug.threats[]", MIN_OBSTACLE_ID, MAX_ROBOT_ID)
-        check_values(d.ego[:2], "debug.ego.xy", -MAX_COORD_M, MAX_COORD_M)
-        check_values(d.ego[2:], "debug.ego.theta", -1e3, 1e3)
-        for name, where in (("via_points_m", "debug.via"), ("reference_m", "debug.ref"),
-                            ("predicted_m", "debug.pred")):
-            points = getattr(d, name)
-            if points.shape[0] > MAX_DEBUG_POINTS:
-                raise ProtocolError(f"{where}: {points.shape[0]} points exceed "
-                                    f"{MAX_DEBUG_POINTS}")
-            check_values(points, where, -MAX_COORD_M, MAX_COORD_M)
 
     @classmethod
     def from_result(cls, robot_id: int, seq: int, t_s: float,
@@ -405,18 +414,20 @@ class PlanDebugMsg:
                                 f"{MAX_DEBUG_THREATS} ids")
         threat_ids = tuple(check_int(i, "debug.threats[]", MIN_OBSTACLE_ID, MAX_ROBOT_ID)
                            for i in threats)
-        check_values(ego, "debug.ego", -MAX_COORD_M, MAX_COORD_M)
-        try:
-            debug = PlanDebug(ego=ego, threat_ids=threat_ids,
-                              via_points_m=_points(body["via"], "debug.via", MAX_DEBUG_POINTS),
-                              reference_m=_points(body["ref"], "debug.ref", MAX_DEBUG_POINTS),
-                              predicted_m=_points(body["pred"], "debug.pred", MAX_DEBUG_POINTS))
-        except ValueError as exc:
-            if isinstance(exc, ProtocolError):
-                raise
-            raise ProtocolError(f"debug: {exc}") from exc
-        msg = cls(robot_id=body["robot"], seq=body["seq"], t_s=body["t"], v_mps=body["v"],
-                  omega_radps=body["omega"], status=body["status"], debug=debug)
+        _check_ego(ego)
+        # Every array is checked here, once (the world decodes one message per plan of
+        # every robot): the PlanDebug and the message are built without checking again.
+        debug = PlanDebug.trusted(ego, threat_ids,
+                                  _points(body["via"], "debug.via", MAX_DEBUG_POINTS),
+                                  _points(body["ref"], "debug.ref", MAX_DEBUG_POINTS),
+                                  _points(body["pred"], "debug.pred", MAX_DEBUG_POINTS))
+        msg = object.__new__(cls)
+        for name, value in (("robot_id", body["robot"]), ("seq", body["seq"]),
+                            ("t_s", body["t"]), ("v_mps", body["v"]),
+                            ("omega_radps", body["omega"]), ("status", body["status"]),
+                            ("debug", debug)):
+            object.__setattr__(msg, name, value)
+        msg._check_scalars()
         known = known_set(known_ids)
         _check_sender("debug.robot", msg.robot_id, known, expected_robot_id)
         strangers = set() if known is None else set(threat_ids) - known

