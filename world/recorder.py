@@ -80,8 +80,8 @@ class RunRecorder:
         """One row per robot: ground-truth pose and the (v, omega) applied during the tick."""
         n = len(robot_ids)
         if n:
-            # One %-format for the tick's n rows: about 3x faster than a row at a time
-            # (64 robots at 50 Hz), and the same text.
+            # One %-format for the tick's n rows: about twice as fast as a row at a time
+            # (64 robots: 74 against 158 µs, measured under load), and the same text.
             rows = np.column_stack((pose[:, :3], applied[:, :2])).tolist()
             values = [v for rid, row in zip(np.asarray(robot_ids).tolist(), rows)
                       for v in (rid, *row)]

@@ -7,7 +7,7 @@ in one tick (N / 5: every robot sends one per 0.1 s), step the dynamics (integra
 arrivals, contacts), cut the poses into one message per published cell of the pose grid
 (`world.world_cycle.WorldCycle.pose_cells`), write the trajectory rows (and `run.mcap`'s
 scene every other tick), and decode and record the plan internals that arrive in one tick
-(N / 5, each with `BENCH_PLAN_POINTS` reference points). No transport.
+(N / 5, each of the size `BENCH_PLAN_POINTS`). No transport.
 
 Besides the stage times it reports what the pose grid sends: the bytes of all cell
 messages of a tick, how many cells, and what one robot receives per tick (the mean over
@@ -34,9 +34,12 @@ WORLD_STAGES = ("step", "poses", "record", "commands", "plans")
 """Stages of a world tick, timed separately."""
 WORLD_TICK_S = 0.02
 """The world's tick [s] (50 Hz, as `world.node`'s default)."""
-BENCH_PLAN_POINTS = (3, 40, 11)
-"""Via-points, reference samples and MPC prediction of each recorded plan: a plan of the
-`circles` family round three threats."""
+BENCH_PLAN_POINTS = (2, 21, 21)
+"""Via-points, reference samples and MPC prediction of each recorded plan, with
+`BENCH_PLAN_THREATS` threats: the largest of a lockstep run of `circles` 16 (2400 plans:
+via-points median 1, at most 2; 21 reference samples and 21 predicted points in every
+plan; threats median 1, at most 2)."""
+BENCH_PLAN_THREATS = 2
 CONTROL_RATE_HZ = 10.0
 """A robot plans, sends a command and takes its slot's cells this often [Hz]."""
 WORLD_PLOTTED = (
@@ -73,7 +76,8 @@ def world_tick_costs(n: int, ticks: int, out_dir: Path) -> dict[str, Any]:
     payloads = [CommandMsg(rid, 0, 0.0, 0.5, 0.0, 1.0, "ok").encode() for rid in ids]
     rng = np.random.default_rng(0)
     plans = [(str(cycle.keys.debug(rid)), PlanDebugMsg(rid, 0, 0.0, 0.5, 0.0, "ok", PlanDebug(
-        ego=np.zeros(3), threat_ids=tuple(ids[(j + 1 + k) % n] for k in range(3)),
+        ego=np.zeros(3),
+        threat_ids=tuple(ids[(j + 1 + k) % n] for k in range(BENCH_PLAN_THREATS)),
         via_points_m=rng.uniform(-5.0, 5.0, (BENCH_PLAN_POINTS[0], 2)),
         reference_m=rng.uniform(-5.0, 5.0, (BENCH_PLAN_POINTS[1], 2)),
         predicted_m=rng.uniform(-5.0, 5.0, (BENCH_PLAN_POINTS[2], 2)))).encode())
