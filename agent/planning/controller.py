@@ -24,16 +24,17 @@ from agent.core.scenario import RobotSpec
 from agent.core.types import EgoState, Observation, Others, PlanResult, PlanStatus, PoseSnapshot
 from agent.planning.estimation import ESTIMATION_MARGIN_M as ESTIMATION_MARGIN_M  # re-exported
 from agent.planning.estimation import ESTIMATION_WINDOW_S, NeighborTracker
-from agent.planning.make_way import PRESS_GAP_M
+from agent.planning.make_way import LINGER_VIEW_M, PRESS_VIEW_M, VIEW_SLACK_M
 from agent.planning.mechanisms import Mechanisms
 from agent.planning.mpc_qp import MpcTuning
 from agent.planning.planners import CONTROL_PERIOD_S, at_goal, make_planner
 from agent.planning.routing import StaticMap
 
-CLOSE_SLACK_M = 0.3
-"""How much farther than the press gap a robot may be for a parked robot to estimate the
-others (`Controller._robot_close`): the snapshot's raw positions, not yet moved on by the
-pose age, so a robot closing in is seen as pressing a cycle early rather than late [m]."""
+CLOSE_SLACK_M = VIEW_SLACK_M
+"""How much farther than the press or linger gap a robot may be for a parked robot to
+estimate the others (`Controller._robot_close`; `make_way.VIEW_SLACK_M`): the snapshot's raw
+positions, not yet moved on by the pose age, so a robot closing in is seen as pressing a
+cycle early rather than late [m]."""
 
 MAX_COMPENSATED_AGE_S = 1.0
 """Poses older than this are not extrapolated further (the prediction would be fiction)."""
@@ -176,13 +177,14 @@ class RobotController:
         )
 
     def _robot_close(self, snap: PoseSnapshot, row: int) -> bool:
-        """Whether another robot is within `make_way.PRESS_GAP_M` (plus `CLOSE_SLACK_M`)
-        of this one, from the snapshot's raw positions: a parked robot with `make_way`
-        estimates the others only then (a few microseconds against the estimates' 0.25 ms)."""
+        """Whether another robot is within `make_way`'s press or linger gap (the larger,
+        plus `CLOSE_SLACK_M`) of this one, from the snapshot's raw positions: a parked robot
+        with `make_way` estimates the others only then (a few microseconds against the
+        estimates' 0.25 ms)."""
         ids, pose = snap.ids, snap.pose
         gap = (np.hypot(pose[:, 0] - pose[row, 0], pose[:, 1] - pose[row, 1])
                - snap.radius_m - snap.radius_m[row])
-        close = (ids >= 0) & (gap <= PRESS_GAP_M + CLOSE_SLACK_M)
+        close = (ids >= 0) & (gap <= max(PRESS_VIEW_M, LINGER_VIEW_M))
         close[row] = False
         return bool(close.any())
 

@@ -113,6 +113,46 @@ HOLD_MAX_S = 15.0
 """The longest a robot stands aside for one presser [s]: one that parks beside the goal
 never goes by."""
 
+VIEW_SLACK_M = 0.3
+"""How much farther than a gap a parked robot looks (`PRESS_VIEW_M`, `LINGER_VIEW_M`): a
+robot closing in is seen a cycle early rather than late [m]."""
+
+PRESS_VIEW_M = PRESS_GAP_M + VIEW_SLACK_M
+"""At its goal, the press rules see the others only while a robot is this close (surface
+to surface) [m]; otherwise no one (out of sight: a presser has gone). The parked robot's
+controller estimates the others only while a robot is within the larger of this and
+`LINGER_VIEW_M` (`agent.planning.controller.RobotController._robot_close`)."""
+
+LINGER_GAP_M = 1.5
+"""In a passage the parked robot closes (`closes_passage`), a robot this close, surface to
+surface, that keeps moving (`LINGER_MOVE_M`), lingers by it [m]: a robot blocked there
+loops or shuffles 0.4-1.7 m off, inside the press gap for at most a second at a time
+(`dead_end` 6, tuning seeds 102, 105 and 109)."""
+
+LINGER_MOVE_M = 0.2
+"""A lingerer keeps moving: it has moved this far from where it last stood within the last
+`LINGER_STILL_S` [m]. A neighbour parked at its own goal nearby (goals 2.4 m apart along a
+dead-end corridor leave a 1.4 m gap) stands still and never lingers."""
+
+LINGER_STILL_S = 2.0
+"""See `LINGER_MOVE_M` [s]."""
+
+LINGER_VIEW_M = LINGER_GAP_M + VIEW_SLACK_M
+"""The linger rule's view: see `PRESS_VIEW_M` [m]."""
+
+LINGER_S = 5.0
+"""How long a robot must linger, without a break, before the parked robot steps aside for
+it [s]: a robot driving by at 1 m/s stays within `LINGER_GAP_M` for up to about 4 s."""
+
+LINGER_GONE_M = 1.5
+"""A lingerer has gone by once it is `PASSED_M` beyond L from the goal on the far side
+from where it lingered, or this far beyond L on any side [m]: one that loops out 1-2 m and
+back has not gone by."""
+
+PASS_SQUEEZE_M = 0.1
+"""The gap a robot passing beside the parked one keeps from it, at the tightest, when
+`closes_passage` asks whether it could pass [m]."""
+
 HOME_FRACTION = 1.0
 """A robot that has parked once is *home* while it is within this fraction of its own
 radius of its goal [-]: it still covers the goal spot, and make_way treats it as parked.
@@ -166,6 +206,32 @@ def aside_point(goal_m: np.ndarray, radius_m: float, presser_m: np.ndarray,
     return point if point is not None and reach >= MIN_ASIDE_M - 1e-9 else None
 
 
+def closes_passage(goal_m: np.ndarray, radius_m: float, other_m: np.ndarray,
+                   other_radius_m: float, static: StaticMap | None) -> bool:
+    """Whether a robot parked at `goal_m` closes the way of the robot at `other_m` past
+    it: on neither side of the line from that robot to the goal can a disc of its radius
+    pass `PASS_SQUEEZE_M` from the parked robot and `WALL_GAP_M` from every static disc
+    (checked where it would be abreast of the goal, and 0.3 m before and after). In the
+    open, or beside one wall, the way stays open; in a corridor or a doorway narrower than
+    two robots and a squeeze, it is closed."""
+    if static is None or not len(static.radius_m):
+        return False
+    goal = np.asarray(goal_m, dtype=float)
+    axis = goal - np.asarray(other_m, dtype=float)
+    length = math.hypot(axis[0], axis[1])
+    along = axis / length if length > 1e-9 else np.array([1.0, 0.0])
+    left = np.array([-along[1], along[0]])
+    offset = radius_m + other_radius_m + PASS_SQUEEZE_M
+    shifts = np.array([-0.3, 0.0, 0.3])[:, None] * along
+    for normal in (left, -left):
+        points = goal + offset * normal + shifts
+        gap = (np.linalg.norm(points[:, None, :] - static.center_m[None, :, :], axis=2)
+               - static.radius_m[None, :] - other_radius_m)
+        if (gap >= WALL_GAP_M).all():
+            return False
+    return True
+
+
 def _reach(goal: np.ndarray, direction: np.ndarray, steps: np.ndarray, radius_m: float,
            robot_m: np.ndarray, robot_radius_m: np.ndarray, static: StaticMap | None
            ) -> tuple[float, np.ndarray | None]:
@@ -195,11 +261,25 @@ def _room(points: np.ndarray, goal: np.ndarray, radius_m: float, robot_m: np.nda
     return ok
 
 
+@dataclass(frozen=True)
+class _Spell:
+    """A robot's spell within `LINGER_GAP_M` of a parked one."""
+
+    since_s: float
+    """When it began."""
+    anchor_m: np.ndarray
+    """Where the robot stood when it last moved `LINGER_MOVE_M`."""
+    moved_s: float
+    """When that was."""
+
+
 @dataclass
 class _Aside:
     presser: int
     refuge_m: np.ndarray
     since_s: float
+    lingered_from_m: np.ndarray | None = None
+    """Where a lingerer stood when the robot stepped aside for it (None: a presser)."""
 
 
 @dataclass
@@ -216,6 +296,11 @@ class MakeWay:
     for twice in one spell aside."""
     _spots: dict[int, np.ndarray] = field(default_factory=dict)
     """id -> where a robot present on arrival stood then (`PRESENT_DRIFT_M`)."""
+    _linger: dict[int, _Spell] = field(default_factory=dict)
+    """id -> its current spell within `LINGER_GAP_M` (robots not near on arrival)."""
+    _near: set[int] = field(default_factory=set)
+    """Robots within `LINGER_GAP_M` when the robot first arrived, and lingerers that did
+    not go by while it stood aside: not lingerers until they leave that gap."""
     _aside: _Aside | None = None
     _here: bool = False
     _arrived: bool = False
@@ -229,6 +314,8 @@ class MakeWay:
         self._press.clear()
         self._present.clear()
         self._spots.clear()
+        self._linger.clear()
+        self._near.clear()
         self._handed.clear()
         self._aside = None
         self._here = False
@@ -247,17 +334,26 @@ class MakeWay:
             d_safety_m: the safety margin of Eq. (8).
             static: the scenario's static discs.
         """
+        full = others
+        if len(others):
+            gaps = (np.hypot(*(others.position_m - ego_m).T) - others.radius_m - radius_m)
+            if at_goal and not (others.is_robot & (gaps <= PRESS_VIEW_M)).any():
+                others = Others.empty()  # the press rules see no one (`PRESS_VIEW_M`)
         ids = others.ids
         if self._aside is not None:
             aside = self._aside
-            if not self._gone(aside.presser, goal_m, radius_m, others, d_safety_m) and \
-                    now_s - aside.since_s < HOLD_MAX_S:
+            lingered = aside.lingered_from_m is not None
+            gone = self._gone(aside.presser, goal_m, radius_m, full if lingered else others,
+                              d_safety_m, aside.lingered_from_m)
+            if not gone and now_s - aside.since_s < HOLD_MAX_S:
                 return aside.refuge_m
-            if not self._gone(aside.presser, goal_m, radius_m, others, d_safety_m):
-                self._present.add(aside.presser)  # it stays: parked, or cannot go either
+            if not gone:  # it stays: parked, or cannot go either
+                self._present.add(aside.presser)
+                self._near.add(aside.presser)
             self._handed.add(aside.presser)
             self._aside = None
             self._press.clear()
+            self._linger.clear()
             follow = self._next_in_queue(goal_m, radius_m, ego_m, others, d_safety_m)
             if follow is not None:  # let the queue through without going back in between
                 k = int(np.flatnonzero(ids == follow)[0])
@@ -267,25 +363,30 @@ class MakeWay:
                                      now_s)
                 self.handovers += 1
                 return self._aside.refuge_m
-        gaps = (np.hypot(*(others.position_m - ego_m).T) - others.radius_m - radius_m
-                if len(others) else np.zeros(0))
-        close = {int(i) for i in ids[others.is_robot & (gaps <= PRESS_GAP_M)]}
+        gaps = (np.hypot(*(full.position_m - ego_m).T) - full.radius_m - radius_m
+                if len(full) else np.zeros(0))
+        near = {int(i) for i in full.ids[full.is_robot & (gaps <= LINGER_GAP_M)]}
+        close = {int(i) for i in full.ids[full.is_robot & (gaps <= PRESS_GAP_M)]}
         home = at_goal or (self._arrived and float(np.hypot(*(ego_m - goal_m)))
                            <= HOME_FRACTION * radius_m)
         if not home:
             self._here = False
             self._press.clear()
+            self._linger.clear()
             return None
         if not self._here:  # (re)arrived
             self._here = True
             self._press.clear()
+            self._linger.clear()
             self._handed.clear()
             if not self._arrived:  # whoever is this close on arrival does not count
                 self._arrived = True
                 self._present = set(close)
+                self._near = set(near)
                 self._spots = {int(i): others.position_m[k].copy()
                                for k, i in enumerate(ids) if int(i) in close}
         self._present &= close
+        self._near &= near
         self._release_drifted(others)
         self._press = {i: self._press.get(i, now_s) for i in sorted(close - self._present)}
         due = sorted((t, i) for i, t in self._press.items() if now_s - t >= PRESS_S)
@@ -295,6 +396,39 @@ class MakeWay:
                                  float(others.radius_m[k]), others, k, d_safety_m, static)
             if refuge is not None:
                 self._aside = _Aside(presser, refuge, now_s)
+                self.steps += 1
+                return refuge
+        return self._lingered(now_s, goal_m, radius_m, full, near, d_safety_m, static)
+
+    def _lingered(self, now_s: float, goal_m: np.ndarray, radius_m: float, others: Others,
+                  near: set[int], d_safety_m: float, static: StaticMap | None
+                  ) -> np.ndarray | None:
+        """Step aside for a robot that has lingered within `LINGER_GAP_M` for `LINGER_S`
+        where this robot closes its way past (`closes_passage`); None: no such robot.
+        Lingerers are pressers that keep their distance: blocked in a corridor, a robot
+        loops or shuffles in front of the parked one, mostly outside the press gap."""
+        ids = others.ids
+        spells: dict[int, _Spell] = {}
+        for rid in sorted(near - self._near - self._present):
+            where = others.position_m[int(np.flatnonzero(ids == rid)[0])]
+            spell = self._linger.get(rid)
+            if spell is None:
+                spell = _Spell(now_s, where.copy(), now_s)
+            elif float(np.hypot(*(where - spell.anchor_m))) >= LINGER_MOVE_M:
+                spell = _Spell(spell.since_s, where.copy(), now_s)
+            spells[rid] = spell
+        self._linger = spells
+        due = sorted((spell.since_s, rid) for rid, spell in spells.items()
+                     if now_s - spell.since_s >= LINGER_S
+                     and now_s - spell.moved_s <= LINGER_STILL_S)
+        for _, rid in due:
+            k = int(np.flatnonzero(ids == rid)[0])
+            where, r_k = others.position_m[k], float(others.radius_m[k])
+            if not closes_passage(goal_m, radius_m, where, r_k, static):
+                continue
+            refuge = aside_point(goal_m, radius_m, where, r_k, others, k, d_safety_m, static)
+            if refuge is not None:
+                self._aside = _Aside(rid, refuge, now_s, where.copy())
                 self.steps += 1
                 return refuge
         return None
@@ -312,13 +446,22 @@ class MakeWay:
 
     @staticmethod
     def _gone(robot: int, goal_m: np.ndarray, radius_m: float, others: Others,
-              d_safety_m: float) -> bool:
-        """Whether `robot` is out of sight or `PASSED_M` beyond L from the goal."""
+              d_safety_m: float, lingered_from_m: np.ndarray | None = None) -> bool:
+        """Whether `robot` is out of sight or `PASSED_M` beyond L from the goal; a lingerer
+        (`lingered_from_m`: where it lingered) only on the far side of the goal from there,
+        or `LINGER_GONE_M` beyond L on any side."""
         where = np.flatnonzero(others.ids == robot)
         if where.size == 0:
             return True
-        reach = radius_m + d_safety_m + PASSED_M + float(others.radius_m[where[0]])
-        return float(np.hypot(*(others.position_m[where[0]] - goal_m))) >= reach
+        big_l = radius_m + d_safety_m + float(others.radius_m[where[0]])
+        offset = others.position_m[where[0]] - goal_m
+        dist = float(np.hypot(*offset))
+        if lingered_from_m is None:
+            return dist >= big_l + PASSED_M
+        axis = goal_m - lingered_from_m
+        length = float(np.hypot(*axis))
+        beyond = float(offset @ axis) / length if length > 1e-9 else 0.0
+        return beyond >= big_l + PASSED_M or dist >= big_l + LINGER_GONE_M
 
     def _next_in_queue(self, goal_m: np.ndarray, radius_m: float, ego_m: np.ndarray,
                        others: Others, d_safety_m: float) -> int | None:

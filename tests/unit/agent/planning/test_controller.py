@@ -300,9 +300,12 @@ def test_controller_only_ever_accepts_newer_snapshots(latency, jitter, drop, dup
 
 @pytest.mark.parametrize("planner", PLANNER_NAMES)
 def test_a_robot_at_its_goal_stops_without_estimating_the_others(planner: str) -> None:
+    from agent.planning.make_way import LINGER_VIEW_M, PRESS_VIEW_M
+
     ctrl = RobotController(spec(planner, start=(20.0, 0.0, 0.0)), PlannerConfig(), TOL_M)
+    beyond = 20.0 + 2 * RADIUS_M + max(PRESS_VIEW_M, LINGER_VIEW_M) + 0.2  # out of view
     for k in range(3):
-        ctrl.observe(snap(0.1 * k, 5 * k, {0: (20.0, 0.0, 0.0), 1: (22.0, 0.0, math.pi)}))
+        ctrl.observe(snap(0.1 * k, 5 * k, {0: (20.0, 0.0, 0.0), 1: (beyond, 0.0, math.pi)}))
 
     def no_estimates(**kwargs):
         raise AssertionError("others estimated for a robot at its goal")
@@ -335,13 +338,14 @@ def test_a_parked_robot_watches_the_others_only_while_a_moving_obstacle_is_in_vi
 
 
 def test_a_parked_robot_with_make_way_estimates_the_others_only_while_a_robot_is_close() -> None:
-    """`make_way` needs to see a robot pressed against a parked one; farther off than the
-    press gap (plus `CLOSE_SLACK_M`) nobody is estimated, as before."""
+    """`make_way` needs to see a robot pressed against a parked one, or lingering by it;
+    farther off than the larger of the press and linger gaps (plus `CLOSE_SLACK_M`) nobody
+    is estimated, as before."""
     from agent.planning.controller import CLOSE_SLACK_M
-    from agent.planning.make_way import PRESS_GAP_M
+    from agent.planning.make_way import LINGER_GAP_M, PRESS_GAP_M
 
     ctrl = RobotController(spec("eifp-mpc", start=(20.0, 0.0, 0.0)), PlannerConfig(), TOL_M)
-    far = 20.0 + 2 * RADIUS_M + PRESS_GAP_M + CLOSE_SLACK_M + 0.05
+    far = 20.0 + 2 * RADIUS_M + max(PRESS_GAP_M, LINGER_GAP_M) + CLOSE_SLACK_M + 0.05
     ctrl.observe(snap(0.0, 0, {0: (20.0, 0.0, 0.0), 1: (far, 0.0, math.pi)}))
     ctrl.plan(0.0)
     assert len(ctrl.last_observation.others) == 0

@@ -3,6 +3,8 @@ it, and when (the press clocks: who counts as a presser, how long, when it retur
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -10,10 +12,16 @@ from agent.core.types import Others
 from agent.planning.make_way import (
     ASIDE_MARGIN_M,
     HOLD_MAX_S,
+    LINGER_GAP_M,
+    LINGER_GONE_M,
+    LINGER_S,
+    PASSED_M,
+    PRESS_GAP_M,
     PRESS_S,
     WALL_GAP_M,
     MakeWay,
     aside_point,
+    closes_passage,
 )
 from agent.planning.routing import StaticMap
 
@@ -204,3 +212,105 @@ def test_a_robot_there_on_arrival_that_shuffles_against_it_becomes_a_presser():
         t += 0.1
     assert refuge is not None and way.steps == 1
     assert t - 0.1 == pytest.approx(drifted + PRESS_S, abs=0.11)  # pressed since it drifted
+
+
+def corridor(clear_m: float, radius: float = 0.6) -> StaticMap:
+    """Two walls of touching discs along x (from -12 to 12 m), `clear_m` apart edge to
+    edge (the `dead_end` corridors: discs of 0.6 m, 2.6-3.2 m clear)."""
+    y = clear_m / 2 + radius
+    xs = np.arange(-12.0, 12.01, 2 * radius * 0.95)
+    return walls(*[(x, s * y) for x in xs for s in (1, -1)], radius=radius)
+
+
+def test_a_parked_robot_closes_a_corridor_too_narrow_to_pass_it_but_not_the_open():
+    lingerer = np.array([-2.0, 0.0])
+    assert closes_passage(GOAL, R, lingerer, R, corridor(2.86))  # dead_end 6, seed 102
+    assert closes_passage(GOAL, R, lingerer, R, corridor(2.6))
+    assert not closes_passage(GOAL, R, lingerer, R, corridor(4.4))  # room beside it
+    assert not closes_passage(GOAL, R, lingerer, R, None)  # no map: in the open
+    assert not closes_passage(GOAL, R, lingerer, R, walls((0.0, 1.5)))  # one wall only
+    # Across the corridor (a robot coming from the wall's side) the way is open along it.
+    assert not closes_passage(GOAL, R, np.array([0.0, -1.2]), R, corridor(2.86))
+
+
+def linger(way: MakeWay, t0: float, t1: float, at: tuple[float, float], static: StaticMap,
+           shuffle_m: float = 0.25) -> tuple[float, np.ndarray | None]:
+    """Robot 7 shuffles along x about `at` (amplitude `shuffle_m`, period about 3 s) from
+    t0 until the parked robot steps aside, or t1."""
+    t, refuge = t0, None
+    while refuge is None and t < t1 + 1e-9:
+        x = at[0] + shuffle_m * math.sin(2.0 * (t - t0))
+        refuge = way.refuge(t, GOAL, R, GOAL, True, robots((7, x, at[1])), D_SAFETY, static)
+        t += 0.1
+    return t - 0.1, refuge
+
+
+def test_in_a_corridor_a_robot_that_lingers_outside_the_press_gap_sends_it_aside():
+    """`dead_end` 6, tuning seed 102: the blocked robot loops 0.4-1.7 m off, within the
+    press gap at most a second at a time; within `LINGER_GAP_M` for `LINGER_S` in a
+    corridor the parked robot closes, it steps aside (to the wall: room for one robot)."""
+    static = corridor(2.86)
+    way = MakeWay()
+    assert way.refuge(0.0, GOAL, R, GOAL, True, robots((7, -8.0, 0.0)), D_SAFETY,
+                      static) is None  # arrives: nobody near
+    gap = 0.9  # outside the press gap, inside the linger gap, shuffling 0.25 m either way
+    assert gap - 0.25 > PRESS_GAP_M and gap + 0.25 < LINGER_GAP_M
+    t, refuge = linger(way, 1.0, 20.0, (-(2 * R + gap), 0.0), static)
+    assert refuge is not None and way.steps == 1
+    assert t == pytest.approx(1.0 + LINGER_S, abs=0.11)
+    assert abs(refuge[1]) > 0.5 and abs(refuge[0]) < 1e-9  # across, towards a wall
+
+
+def test_in_the_open_lingering_is_not_pressing():
+    """A robot 0.8 m off in the open has room to go round: only a press sends the robot
+    aside there (goals 1.5 m apart in a block keep neighbours 0.5 m off all the time)."""
+    way = MakeWay()
+    way.refuge(0.0, GOAL, R, GOAL, True, robots((7, -8.0, 0.0)), D_SAFETY, None)
+    _, refuge = linger(way, 1.0, 30.0, (-2.0, 0.0), walls((0.0, 1.5)))
+    assert refuge is None and way.steps == 0
+
+
+def test_a_neighbour_within_the_linger_gap_on_arrival_does_not_linger():
+    static = corridor(2.86)
+    way = MakeWay()
+    _, refuge = linger(way, 0.0, 30.0, (-1.9, 0.0), static)  # there when it arrived
+    assert refuge is None and way.steps == 0
+
+
+def test_a_neighbour_that_parks_in_the_linger_gap_after_it_does_not_linger():
+    """`dead_end`: goals 2.4 m apart along the corridor, a 1.4 m gap. A neighbour that
+    drives up after the robot parked and parks at its own goal stands still: not a
+    lingerer, though it stays within `LINGER_GAP_M` for good."""
+    static = corridor(2.86)
+    way = MakeWay()
+    way.refuge(0.0, GOAL, R, GOAL, True, robots((7, -9.0, 0.0)), D_SAFETY, static)
+    t, parked_at = 0.1, -2.4
+    assert parked_at + 2 * R + LINGER_GAP_M > 0.0  # its spot is within the linger gap
+    for k in range(400):  # drives in at 1 m/s from -6 m, then stands at -2.4 m
+        x = min(-6.0 + 0.1 * k, parked_at)
+        assert way.refuge(t, GOAL, R, GOAL, True, robots((7, x, 0.0)), D_SAFETY,
+                          static) is None
+        t += 0.1
+    assert way.steps == 0
+
+
+def test_a_lingerer_that_loops_out_and_back_has_not_gone_by():
+    """The first version counted the lingerer as gone once it was `PASSED_M` beyond L from
+    the goal: the looping robot was, 1.7 s later, and the parked robot went back in front
+    of it. Now only the far side of the goal, or `LINGER_GONE_M` beyond L, counts."""
+    static = corridor(2.86)
+    way = MakeWay()
+    way.refuge(0.0, GOAL, R, GOAL, True, robots((7, -8.0, 0.0)), D_SAFETY, static)
+    t, refuge = linger(way, 1.0, 20.0, (-2.0, 0.0), static)
+    assert refuge is not None
+    big_l = 2 * R + D_SAFETY
+    here = tuple(refuge)
+    # Loops out 0.2 m short of LINGER_GONE_M beyond L, behind: not gone, it stays aside.
+    out = (-(big_l + LINGER_GONE_M - 0.2), 0.0)
+    assert big_l + PASSED_M < -out[0]
+    np.testing.assert_allclose(way.refuge(t + 1.0, GOAL, R, np.array(here), False,
+                                          robots((7, *out)), D_SAFETY, static), refuge)
+    # Goes past the goal on the far side: gone, the robot returns.
+    past = (big_l + PASSED_M + 0.05, 0.0)
+    assert way.refuge(t + 3.0, GOAL, R, np.array(here), False, robots((7, *past)),
+                      D_SAFETY, static) is None
