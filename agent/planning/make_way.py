@@ -28,6 +28,17 @@ the presser is `PASSED_M` beyond the inflated radius L from the goal, or after
 instead: one standing where going back would press on it (within L of the goal, or the
 press gap of the robot), which has not had a turn in this spell aside.
 
+A blocked robot does not always press. In a corridor too narrow to pass the parked robot,
+one that wants past loops or shuffles in front of it, 0.4-1.7 m off, inside the press gap
+for at most a second at a time (`dead_end` 6, tuning seeds 102, 105 and 109: 100 s of it,
+to the time limit). So where the parked robot closes the way (`closes_passage`: no room
+for the other robot on either side of it, from the static map), a robot that *lingers*,
+within `LINGER_GAP_M` for `LINGER_S` without a break while it keeps moving
+(`LINGER_MOVE_M`), counts as a presser too. In the open, or beside a single wall, there is
+a way round, and neighbours that park nearby stand still: neither lingers. A lingerer has
+gone by only once it is `PASSED_M` beyond L on the far side of the goal from where it
+lingered, or `LINGER_GONE_M` beyond L on any side: one that loops out and back has not.
+
 A robot that has parked once is *home* while it is within its radius of its goal
 (`HOME_FRACTION`), also outside the arrival tolerance: back from a step aside, a crowd may
 keep it from the last few centimetres, and it must still make way there.
@@ -38,7 +49,8 @@ their own goals, never count until they have left it, or have moved `PRESENT_DRI
 within it: no parked neighbour does, a robot stuck against it does; once per robot), for
 one presser at a time, for at most `HOLD_MAX_S`; a presser that has not gone by when that
 runs out counts as parked there too (it does not need the way, or cannot take it), so it
-never sends the robot aside again until it has left the gap. A spell aside waits for each
+never sends the robot aside again until it has left the gap (a lingerer that has not
+gone by likewise, until it has left the linger gap). A spell aside waits for each
 robot of a queue at most once. Every press therefore sends the robot aside at most once,
 and two robots parked next to each other cannot keep stepping aside for each other (a
 robot released by its drift presses like one that came up later). Robots that came up
