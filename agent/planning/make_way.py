@@ -121,6 +121,14 @@ stuck against this one shuffles (`cross_corridors` 12, seed 112, one of the extr
 seeds: a robot pressed 0.2-0.4 m against one that parked in front of it, moving up to
 0.8 m about, for 90 s, and was never a presser). Once per robot."""
 
+PRESENT_PATH_M = 1.0
+"""Where the parked robot closes the way past it (`closes_passage`), a robot present on
+arrival is a presser once its centre has travelled this far in all within the gap [m]: a
+robot wedged against it in a corridor, turning on the spot and shuffling a few centimetres
+at a time, never drifts `PRESENT_DRIFT_M` (`cross_corridors` 12, tuning seed 111: 0.1-0.2 m
+about one spot for 70 s, between two parked robots), where a parked neighbour does not
+move at all."""
+
 HOLD_MAX_S = 15.0
 """The longest a robot stands aside for one presser [s]: one that parks beside the goal
 never goes by."""
@@ -308,6 +316,9 @@ class MakeWay:
     for twice in one spell aside."""
     _spots: dict[int, np.ndarray] = field(default_factory=dict)
     """id -> where a robot present on arrival stood then (`PRESENT_DRIFT_M`)."""
+    _travel: dict[int, tuple[np.ndarray, float]] = field(default_factory=dict)
+    """id -> where a robot present on arrival was last seen, and how far it has travelled
+    since the robot arrived (`PRESENT_PATH_M`)."""
     _linger: dict[int, _Spell] = field(default_factory=dict)
     """id -> its current spell within `LINGER_GAP_M` (robots not near on arrival)."""
     _near: set[int] = field(default_factory=set)
@@ -326,6 +337,7 @@ class MakeWay:
         self._press.clear()
         self._present.clear()
         self._spots.clear()
+        self._travel.clear()
         self._linger.clear()
         self._near.clear()
         self._handed.clear()
@@ -395,11 +407,12 @@ class MakeWay:
                 self._arrived = True
                 self._present = set(close)
                 self._near = set(near)
+                self._travel = {}
                 self._spots = {int(i): others.position_m[k].copy()
                                for k, i in enumerate(ids) if int(i) in close}
         self._present &= close
         self._near &= near
-        self._release_drifted(others)
+        self._release_drifted(others, goal_m, radius_m, static)
         self._press = {i: self._press.get(i, now_s) for i in sorted(close - self._present)}
         due = sorted((t, i) for i, t in self._press.items() if now_s - t >= PRESS_S)
         for _, presser in due:
@@ -445,16 +458,29 @@ class MakeWay:
                 return refuge
         return None
 
-    def _release_drifted(self, others: Others) -> None:
+    def _release_drifted(self, others: Others, goal_m: np.ndarray, radius_m: float,
+                         static: StaticMap | None) -> None:
         """Robots present on arrival that have moved `PRESENT_DRIFT_M` from where they
-        stood then (still within the gap: the others left it) are present no longer."""
+        stood then (still within the gap: the others left it), or, where this robot closes
+        their way past it (`closes_passage`), have travelled `PRESENT_PATH_M` in all since
+        it arrived, are present no longer."""
         for rid, spot in list(self._spots.items()):
             where = np.flatnonzero(others.ids == rid)
             if rid not in self._present or where.size == 0:
                 del self._spots[rid]
-            elif float(np.hypot(*(others.position_m[where[0]] - spot))) > PRESENT_DRIFT_M:
+                self._travel.pop(rid, None)
+                continue
+            k = int(where[0])
+            here = others.position_m[k]
+            last, path = self._travel.get(rid, (spot, 0.0))
+            path += float(np.hypot(*(here - last)))
+            self._travel[rid] = (here.copy(), path)
+            if float(np.hypot(*(here - spot))) > PRESENT_DRIFT_M or (
+                    path >= PRESENT_PATH_M and closes_passage(
+                        goal_m, radius_m, here, float(others.radius_m[k]), static)):
                 self._present.discard(rid)
                 del self._spots[rid]
+                self._travel.pop(rid, None)
 
     @staticmethod
     def _gone(robot: int, goal_m: np.ndarray, radius_m: float, others: Others,

@@ -16,6 +16,8 @@ from agent.planning.make_way import (
     LINGER_GONE_M,
     LINGER_S,
     PASSED_M,
+    PRESENT_DRIFT_M,
+    PRESENT_PATH_M,
     PRESS_GAP_M,
     PRESS_S,
     WALL_GAP_M,
@@ -314,3 +316,32 @@ def test_a_lingerer_that_loops_out_and_back_has_not_gone_by():
     past = (big_l + PASSED_M + 0.05, 0.0)
     assert way.refuge(t + 3.0, GOAL, R, np.array(here), False, robots((7, *past)),
                       D_SAFETY, static) is None
+
+
+def wedged(way: MakeWay, static: StaticMap | None, t1: float) -> tuple[float, np.ndarray | None]:
+    """Robot 7, 0.2 m off when the robot arrived, shuffles 0.1 m back and forth along the
+    corridor (a robot turning on the spot between two parked ones) until t1."""
+    t, refuge, k = 0.0, None, 0
+    while refuge is None and t < t1 + 1e-9:
+        x = -1.2 - 0.1 * ((k // 5) % 2)  # 0.1 m every half second
+        refuge = way.refuge(t, GOAL, R, GOAL, True, robots((7, x, 0.0)), D_SAFETY, static)
+        t, k = t + 0.1, k + 1
+    return t - 0.1, refuge
+
+
+def test_in_a_corridor_a_robot_wedged_against_it_on_arrival_becomes_a_presser():
+    """`cross_corridors` 12, tuning seed 111: a robot wedged between two parked robots
+    turns on the spot and shuffles 0.1-0.2 m about one place for 70 s; it never drifts
+    `PRESENT_DRIFT_M`, but it travels, where a parked neighbour stays put."""
+    assert PRESENT_DRIFT_M > 0.1
+    t, refuge = wedged(MakeWay(), corridor(2.86), 60.0)
+    assert refuge is not None
+    # 0.1 m every 0.5 s: PRESENT_PATH_M after 5 s, then a press of PRESS_S.
+    assert t == pytest.approx(PRESENT_PATH_M / 0.2 + PRESS_S, abs=0.6)
+
+
+def test_in_the_open_a_robot_shuffling_against_it_on_arrival_stays_a_neighbour():
+    """Without a passage it closes (goals packed in a block), only the drift rule frees
+    a robot present on arrival: neighbours stepping about the block are not pressers."""
+    _, refuge = wedged(MakeWay(), None, 60.0)
+    assert refuge is None
