@@ -46,7 +46,8 @@ keep it from the last few centimetres, and it must still make way there.
 Why it ends (`MakeWay.refuge`): a robot steps aside only for a press that *began after it
 first parked* (robots already within the gap when it arrives, such as neighbours parked at
 their own goals, never count until they have left it, or have moved `PRESENT_DRIFT_M`
-within it: no parked neighbour does, a robot stuck against it does; once per robot), for
+within it, or, in a passage it closes, travelled `PRESENT_PATH_M` in all: no parked
+neighbour does, a robot stuck against it does; once per robot), for
 one presser at a time, for at most `HOLD_MAX_S`; a presser that has not gone by when that
 runs out counts as parked there too (it does not need the way, or cannot take it), so it
 never sends the robot aside again until it has left the gap (a lingerer that has not
