@@ -366,28 +366,10 @@ class MakeWay:
                 others = Others.empty()  # the press rules see no one (`PRESS_VIEW_M`)
         ids = others.ids
         if self._aside is not None:
-            aside = self._aside
-            lingered = aside.lingered_from_m is not None
-            gone = self._gone(aside.presser, goal_m, radius_m, full if lingered else others,
-                              d_safety_m, aside.lingered_from_m)
-            if not gone and now_s - aside.since_s < HOLD_MAX_S:
-                return aside.refuge_m
-            if not gone:  # it stays: parked, or cannot go either
-                self._present.add(aside.presser)
-                self._near.add(aside.presser)
-            self._handed.add(aside.presser)
-            self._aside = None
-            self._press.clear()
-            self._linger.clear()
-            follow = self._next_in_queue(goal_m, radius_m, ego_m, others, d_safety_m)
-            if follow is not None:  # let the queue through without going back in between
-                k = int(np.flatnonzero(ids == follow)[0])
-                refuge = aside_point(goal_m, radius_m, others.position_m[k],
-                                     float(others.radius_m[k]), others, k, d_safety_m, static)
-                self._aside = _Aside(follow, aside.refuge_m if refuge is None else refuge,
-                                     now_s)
-                self.handovers += 1
-                return self._aside.refuge_m
+            held = self._hold_aside(self._aside, now_s, goal_m, radius_m, ego_m, others,
+                                    full, d_safety_m, static)
+            if held is not None:
+                return held
         gaps = (np.hypot(*(full.position_m - ego_m).T) - full.radius_m - radius_m
                 if len(full) else np.zeros(0))
         near = {int(i) for i in full.ids[full.is_robot & (gaps <= LINGER_GAP_M)]}
@@ -425,6 +407,36 @@ class MakeWay:
                 self.steps += 1
                 return refuge
         return self._lingered(now_s, goal_m, radius_m, full, near, d_safety_m, static)
+
+    def _hold_aside(self, aside: _Aside, now_s: float, goal_m: np.ndarray, radius_m: float,
+                    ego_m: np.ndarray, others: Others, full: Others, d_safety_m: float,
+                    static: StaticMap | None) -> np.ndarray | None:
+        """While the robot stands aside: the refuge while its presser has not gone by and
+        `HOLD_MAX_S` has not run out; then the refuge for the next robot of a queue, if
+        any; else None (the spell ends and the robot goes back). `others` is what the press
+        rules see (`PRESS_VIEW_M`), `full` everyone (a lingerer's view)."""
+        lingered = aside.lingered_from_m is not None
+        gone = self._gone(aside.presser, goal_m, radius_m, full if lingered else others,
+                          d_safety_m, aside.lingered_from_m)
+        if not gone and now_s - aside.since_s < HOLD_MAX_S:
+            return aside.refuge_m
+        if not gone:  # it stays: parked, or cannot go either
+            self._present.add(aside.presser)
+            self._near.add(aside.presser)
+        self._handed.add(aside.presser)
+        self._aside = None
+        self._press.clear()
+        self._linger.clear()
+        follow = self._next_in_queue(goal_m, radius_m, ego_m, others, d_safety_m)
+        if follow is None:
+            return None
+        # let the queue through without going back in between
+        k = int(np.flatnonzero(others.ids == follow)[0])
+        refuge = aside_point(goal_m, radius_m, others.position_m[k],
+                             float(others.radius_m[k]), others, k, d_safety_m, static)
+        self._aside = _Aside(follow, aside.refuge_m if refuge is None else refuge, now_s)
+        self.handovers += 1
+        return self._aside.refuge_m
 
     def _lingered(self, now_s: float, goal_m: np.ndarray, radius_m: float, others: Others,
                   near: set[int], d_safety_m: float, static: StaticMap | None
