@@ -111,6 +111,10 @@ class RobotController:
         self.movers_in_view = False
         mech = getattr(self.planner, "mech", None)
         self._watch_robots = bool(getattr(mech, "make_way", False))
+        # the linger rule needs static discs (`make_way.closes_passage`): without any, a
+        # parked robot looks only as far as the press rules see
+        self._view_m = (max(PRESS_VIEW_M, LINGER_VIEW_M)
+                        if static_map is not None and len(static_map) else PRESS_VIEW_M)
 
     def observe(self, snapshot: PoseSnapshot) -> bool:
         """Accept a snapshot if it is newer than the last one and shows this robot.
@@ -178,13 +182,14 @@ class RobotController:
 
     def _robot_close(self, snap: PoseSnapshot, row: int) -> bool:
         """Whether another robot is within `make_way`'s press or linger gap (the larger,
-        plus `CLOSE_SLACK_M`) of this one, from the snapshot's raw positions: a parked robot
-        with `make_way` estimates the others only then (a few microseconds against the
-        estimates' 0.25 ms)."""
+        plus `CLOSE_SLACK_M`; the press gap alone on a map with no static discs, where no
+        passage is closed and nobody lingers) of this one, from the snapshot's raw
+        positions: a parked robot with `make_way` estimates the others only then (a few
+        microseconds against the estimates' 0.25 ms)."""
         ids, pose = snap.ids, snap.pose
         gap = (np.hypot(pose[:, 0] - pose[row, 0], pose[:, 1] - pose[row, 1])
                - snap.radius_m - snap.radius_m[row])
-        close = (ids >= 0) & (gap <= max(PRESS_VIEW_M, LINGER_VIEW_M))
+        close = (ids >= 0) & (gap <= self._view_m)
         close[row] = False
         return bool(close.any())
 

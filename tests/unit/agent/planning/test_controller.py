@@ -14,6 +14,7 @@ from agent.core.config import PLANNER_NAMES, PlannerConfig, RobotLimits
 from agent.core.scenario import RobotSpec
 from agent.core.types import PlanStatus, PoseSnapshot
 from agent.planning.controller import MAX_COMPENSATED_AGE_S, RobotController
+from agent.planning.routing import StaticMap
 
 RADIUS_M = 0.5
 TOL_M = 0.25
@@ -338,20 +339,24 @@ def test_a_parked_robot_watches_the_others_only_while_a_moving_obstacle_is_in_vi
 
 
 def test_a_parked_robot_with_make_way_estimates_the_others_only_while_a_robot_is_close() -> None:
-    """`make_way` needs to see a robot pressed against a parked one, or lingering by it;
-    farther off than the larger of the press and linger gaps (plus `CLOSE_SLACK_M`) nobody
-    is estimated, as before."""
+    """`make_way` needs to see a robot pressed against a parked one, or (on a map with
+    static discs, where a passage can be closed) lingering by it; farther off than the
+    press gap, or with a map the larger of the press and linger gaps (plus
+    `CLOSE_SLACK_M`), nobody is estimated."""
     from agent.planning.controller import CLOSE_SLACK_M
     from agent.planning.make_way import LINGER_GAP_M, PRESS_GAP_M
 
-    ctrl = RobotController(spec("eifp-mpc", start=(20.0, 0.0, 0.0)), PlannerConfig(), TOL_M)
-    far = 20.0 + 2 * RADIUS_M + max(PRESS_GAP_M, LINGER_GAP_M) + CLOSE_SLACK_M + 0.05
-    ctrl.observe(snap(0.0, 0, {0: (20.0, 0.0, 0.0), 1: (far, 0.0, math.pi)}))
-    ctrl.plan(0.0)
-    assert len(ctrl.last_observation.others) == 0
-    ctrl.observe(snap(0.1, 5, {0: (20.0, 0.0, 0.0), 1: (far - 0.1, 0.0, math.pi)}))
-    assert ctrl.plan(0.1).status == PlanStatus.ARRIVED
-    assert ctrl.last_observation.others.ids.tolist() == [1]
+    wall = StaticMap(np.array([[20.0, 10.0]]), np.array([0.5]))
+    for static, gap_m in ((None, PRESS_GAP_M), (wall, max(PRESS_GAP_M, LINGER_GAP_M))):
+        ctrl = RobotController(spec("eifp-mpc", start=(20.0, 0.0, 0.0)), PlannerConfig(),
+                               TOL_M, static_map=static)
+        far = 20.0 + 2 * RADIUS_M + gap_m + CLOSE_SLACK_M + 0.05
+        ctrl.observe(snap(0.0, 0, {0: (20.0, 0.0, 0.0), 1: (far, 0.0, math.pi)}))
+        ctrl.plan(0.0)
+        assert len(ctrl.last_observation.others) == 0
+        ctrl.observe(snap(0.1, 5, {0: (20.0, 0.0, 0.0), 1: (far - 0.1, 0.0, math.pi)}))
+        assert ctrl.plan(0.1).status == PlanStatus.ARRIVED
+        assert ctrl.last_observation.others.ids.tolist() == [1]
     for name in ("ifp", "eifp"):  # no make_way: nobody is estimated
         other = RobotController(spec(name, start=(20.0, 0.0, 0.0)), PlannerConfig(), TOL_M)
         other.observe(snap(0.1, 5, {0: (20.0, 0.0, 0.0), 1: (20.6 + 2 * RADIUS_M, 0.0, 0.0)}))
