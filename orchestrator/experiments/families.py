@@ -511,6 +511,7 @@ FAMILIES: dict[str, tuple[int, str]] = {
     "parking": (12, "N robots from a ring to goals packed 1.5 m apart"),
     "pocket": (6, "N robots start in U-shaped pockets open away from their goals"),
     "random_walls": (14, "N random starts and goals among six random walls, 26 m square"),
+    "maze": (12, "N/2 each way through three walls 2.8-3.6 m apart, a 2.8-3.2 m door each"),
 }
 
 

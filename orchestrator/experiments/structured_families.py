@@ -301,6 +301,51 @@ def dead_end(n: int, rng: np.random.Generator) -> Scenario:
                      f"clear, in random order", list(zip(starts, goals)), walls)
 
 
+MAZE_HALF_WIDTH_M = 12.0
+"""The maze's walls run from x = -12 to 12 m [m]."""
+MAZE_CORRIDOR_M = (2.8, 3.6)
+"""Clear width between two of the maze's walls [m]: around two robots with their margins
+(`passages.two_lane_width_m`, 3.3 m)."""
+MAZE_DOOR_M = (2.8, 3.2)
+"""Clear width of each of its doors [m]."""
+
+
+def maze(n: int, rng: np.random.Generator) -> Scenario:
+    """Three parallel walls `MAZE_HALF_WIDTH_M` x 2 long, 2.8-3.6 m clear apart, each with
+    one door 2.8-3.2 m wide 3-8 m off the middle, the middle wall's on the other side from
+    the outer two's, closed at both ends by side walls a little longer; n/2 robots below go
+    to points above, mirrored through the middle, and n/2 above go the other way, so the
+    two flows meet head-on in the corridors and doors (found on a probe of this kind,
+    `maze_counterflow`, docs/results.md, "A maze with counterflow")."""
+    require(n >= 2 and n % 2 == 0 and n <= 16, f"maze: --agents must be even, 2 to 16, got {n}")
+    spacing = _uniform(rng, MAZE_CORRIDOR_M) + 2.0 * WALL_DISC_RADIUS_M
+    half = MAZE_HALF_WIDTH_M
+    side = 1.0 if rng.uniform() < 0.5 else -1.0
+    lines: list[tuple[Point, Point, Sequence[Opening]]] = []
+    for k, y in enumerate((-spacing, 0.0, spacing)):
+        offset = side * (1.0 if k != 1 else -1.0) * _uniform(rng, (3.0, 8.0))
+        lines.append(((-half, y), (half, y), ((half + offset, _uniform(rng, MAZE_DOOR_M)),)))
+    top = spacing + 3.0
+    for x in (-half - 1.0, half + 1.0):
+        lines.append(((x, -top - 1.0), (x, top + 1.0), ()))
+    walls = _walls(lines)
+    per_side = n // 2
+    xs = _spread(per_side, rng, -half + 2.0, half - 2.0, SPACING_M)
+    pairs = [((x, -top), (-x, top)) for x in xs] + [((x, top), (-x, -top)) for x in xs]
+    return _scenario(f"maze_{n}", f"{per_side} robots each way through three walls "
+                     f"{spacing - 2.0 * WALL_DISC_RADIUS_M:.2f} m clear apart, one door each",
+                     pairs, walls)
+
+
+def _spread(k: int, rng: np.random.Generator, lo: float, hi: float, gap: float) -> list[float]:
+    """k random values in [lo, hi], at least `gap` apart, sorted."""
+    for _ in range(MAX_TRIES):
+        xs = sorted(round(float(v), 2) for v in rng.uniform(lo, hi, size=k))
+        if all(b - a >= gap for a, b in zip(xs, xs[1:])):
+            return xs
+    raise ScenarioError(f"could not spread {k} points {gap} m apart")
+
+
 def parking(n: int, rng: np.random.Generator) -> Scenario:
     """n robots from a ring of radius `PARKING_RING_M` to goals packed `PARKING_SPACING_M`
     apart (0.5 m between parked robots) in a block 4 wide, assigned at random."""
@@ -380,5 +425,6 @@ def random_walls(n: int, rng: np.random.Generator) -> Scenario:
 GENERATORS: dict[str, Callable[[int, np.random.Generator], Scenario]] = {
     "rooms": rooms, "evacuate": evacuate, "cross_corridors": cross_corridors,
     "dead_end": dead_end, "parking": parking, "pocket": pocket, "random_walls": random_walls,
+    "maze": maze,
 }
 """Family name -> generator (`families.FAMILIES` has their default sizes and summaries)."""
