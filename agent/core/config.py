@@ -27,13 +27,15 @@ MECHANISM_NAMES: tuple[str, ...] = (
     "direct_leg_check", "goal_tcpa_filter", "encounter_rules", "inflated_threats", "commitment",
     "via_margin_m", "escape_band_m", "escape_all", "horizon_via_points",
     "lines_arcs", "clamp_heading", "braking_guard", "keep_plan", "routing", "liveness",
-    "turn_when_stuck", "goal_guard", "passages", "make_way")
+    "turn_when_stuck", "goal_guard", "passages", "make_way", "lanes")
 """The additions to the paper's cycle that `PlannerConfig.without` can switch off: the fields
 of `agent.planning.mechanisms.Mechanisms` (a unit test keeps the two lists equal)."""
 
-PROFILES: tuple[str, ...] = ("default", "paper")
-"""Planner profiles: ``default`` (this project's additions on) and ``paper`` (the paper's
-method as written, `paper_config`)."""
+PROFILES: tuple[str, ...] = ("default", "paper", "lanes")
+"""Planner profiles: ``default`` (this project's additions on), ``paper`` (the paper's
+method as written, `paper_config`) and ``lanes`` (the default and, for eIFP-MPC, lanes in
+corridors: `agent.planning.mechanisms.Mechanisms.lanes`, an experiment not in the default;
+docs/results.md, "Lanes in corridors: an opt-in profile")."""
 
 POSITIVE_FIELDS = frozenset({
     "v_max_mps", "omega_max_radps", "accel_max_mps2", "alpha_max_radps2",
@@ -218,8 +220,9 @@ class PlannerConfig:
 
     Args:
         safety, threats, cost, reference, mpc, orca: the sub-configs.
-        profile: ``default`` (this project's additions on) or ``paper`` (the paper's method
-            as written; `paper_config`). The planners derive their mechanisms from it
+        profile: ``default`` (this project's additions on), ``paper`` (the paper's method
+            as written; `paper_config`) or ``lanes`` (the default with lanes in
+            corridors). The planners derive their mechanisms from it
             (`agent.planning.mechanisms.mechanisms`).
         without: comma-separated `MECHANISM_NAMES` switched off (set to the paper's value)
             in the default profile: ablations (``"routing,liveness"``); empty: none.
@@ -359,6 +362,9 @@ def profile_config(profile: str, base: PlannerConfig | None = None) -> PlannerCo
         return paper_config(base)
     if profile == "default":
         return base if base is not None else PlannerConfig()
+    if profile == "lanes":
+        return dataclasses.replace(base if base is not None else PlannerConfig(),
+                                   profile="lanes")
     raise ValueError(f"unknown profile {profile!r}; expected one of {', '.join(PROFILES)}")
 
 

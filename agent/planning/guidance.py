@@ -96,15 +96,19 @@ class RouteGuide:
         passages: centre routes in their narrow passages, plan against a passage's discs
             with the margin it leaves, and take one-lane passages one way at a time
             (`Mechanisms.passages`, `agent.planning.passages`).
+        lanes: with `passages`, drive corridors in lanes, each robot on its right
+            (`Mechanisms.lanes`).
     """
 
     def __init__(self, static: StaticMap, d_safety_m: float, *, routes: bool = True,
-                 liveness: LivenessConfig | None = None, passages: bool = False) -> None:
+                 liveness: LivenessConfig | None = None, passages: bool = False,
+                 lanes: bool = False) -> None:
         self.static = static
         self.d_safety_m = float(d_safety_m)
         self.routes = routes and static.routable
         self.liveness = Liveness(liveness) if liveness is not None else None
         self.passages_on = passages
+        self.lanes_on = lanes
         self._passages: tuple[Passage, ...] = ()
         self._passage_ends: tuple[int, ...] = ()  # route index of each passage's far mouth
         self._passage_starts: tuple[int, ...] = ()  # and of its first point (lead-in)
@@ -154,7 +158,7 @@ class RouteGuide:
         if self.passages_on:
             full = radius_m + self.d_safety_m + ROUTE_MARGIN_M
             route, self._passages = centre_route(route, self.static, radius_m,
-                                                 self.d_safety_m, full)
+                                                 self.d_safety_m, full, lanes=self.lanes_on)
             wps = route.waypoints_m
             found = [np.flatnonzero((wps == p.far_mouth_m).all(axis=1))
                      for p in self._passages]
@@ -177,7 +181,8 @@ class RouteGuide:
         while self._left < len(self._passages):
             line = self._passages[self._left].line_m
             s, _ = distance_along(line, here)
-            if s < float(np.hypot(*np.diff(line, axis=0).T).sum()) - 1e-6:
+            if s < float(np.hypot(*np.diff(line, axis=0).T).sum()) - 1e-6 \
+                    and not self._cut_out(self._left, here):
                 return self._left
             if self._follower is not None:  # aim on from the far mouth
                 self._follower.skip_to(self._passage_ends[self._left])
@@ -259,6 +264,20 @@ class RouteGuide:
                         left_m=self._follower.progress_left_m(here), strategy=strategy,
                         squeeze=squeeze, stuck=stuck, passage_ids=ids,
                         passage_margin_m=margin)
+
+    def _cut_out(self, index: int, here: np.ndarray) -> bool:
+        """Whether the robot has left lane `index` (`passages.Passage.lane`) before its far
+        mouth, towards the route's next waypoint: it is nearer that waypoint than the far
+        mouth is. A lane does not hold a robot in as a one-lane gap's walls do; one that
+        cut the corner at its end stood beside the far mouth, aiming back at it, until the
+        time limit (`maze_counterflow`, docs/results.md)."""
+        passage = self._passages[index]
+        wps = self._follower.route.waypoints_m if self._follower is not None else None
+        end = self._passage_ends[index]
+        if not passage.lane or wps is None or end + 1 >= wps.shape[0]:
+            return False
+        after = wps[end + 1]
+        return bool(math.hypot(*(after - here)) < math.hypot(*(after - passage.far_mouth_m)))
 
     def _track(self, ahead: int | None, here: np.ndarray
                ) -> tuple[np.ndarray, np.ndarray] | None:

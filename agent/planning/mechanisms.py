@@ -108,6 +108,11 @@ class Mechanisms:
             it for `make_way.PRESS_S`, and returns once that robot has gone by
             (`agent.planning.make_way`): where a parked robot stands in the only way to
             another's goal (a corridor, a doorway), nothing else opens it.
+        lanes: with `passages`, a corridor wider than one lane but narrower than two
+            robots on routes along opposite walls is driven in lanes, each robot on its
+            right (`agent.planning.passages`, "Lanes"). Only in the ``lanes`` profile: on
+            its tuning scenes it helped a maze with counterflow and hurt a crossing of
+            corridors (docs/results.md, "Lanes in corridors: an opt-in profile").
         primary_hold_s: with `commitment`, how much later than the most imminent threat's
             the TCPA of last cycle's first threat may be for it to stay first [s].
     """
@@ -131,6 +136,7 @@ class Mechanisms:
     goal_guard: bool = False
     passages: bool = False
     make_way: bool = False
+    lanes: bool = False
     primary_hold_s: float = PRIMARY_HOLD_S
 
 
@@ -150,7 +156,10 @@ EIFP_MPC_MECHANISMS = dataclasses.replace(
     escape_band_m=ESCAPE_BAND_M, escape_all=True, horizon_via_points=True,
     lines_arcs=True, clamp_heading=False, braking_guard=True, keep_plan=True, routing=True,
     liveness=LivenessConfig(), turn_when_stuck=True, passages=True, make_way=True)
-"""eifp-mpc in the default profile: every mechanism."""
+"""eifp-mpc in the default profile: every mechanism but `Mechanisms.lanes`."""
+
+EIFP_MPC_LANES_MECHANISMS = dataclasses.replace(EIFP_MPC_MECHANISMS, lanes=True)
+"""eifp-mpc in the ``lanes`` profile."""
 
 
 def mechanisms(planner: str, config: PlannerConfig) -> Mechanisms:
@@ -159,7 +168,8 @@ def mechanisms(planner: str, config: PlannerConfig) -> Mechanisms:
     if config.is_paper:
         return PAPER_MECHANISMS
     if planner == "eifp-mpc":
-        chosen = EIFP_MPC_MECHANISMS
+        chosen = (EIFP_MPC_LANES_MECHANISMS if config.profile == "lanes"
+                  else EIFP_MPC_MECHANISMS)
     elif planner == "eifp":
         chosen = EIFP_MECHANISMS
     else:

@@ -46,6 +46,24 @@ The rules here, in the order a cycle applies them:
   compute the same priority; a robot that gives way to one that stands still (parked,
   or stuck itself) stops giving way after `HOLD_STILL_S`, so no wait is for ever.
 
+**Lanes** (`Mechanisms.lanes`, the ``lanes`` profile only; docs/results.md, "Lanes in
+corridors: an opt-in profile"). A corridor at least `one_lane_width_m` wide but narrower
+than `two_lane_width_m` (two robots on routes along opposite walls, each the full route
+clearance from its wall, would come within L of each other: 3.3 m for r = 0.5 m) is driven
+in lanes: the route's samples there move to the lane on the robot's right of travel
+(`_lane_offset_m`: the middle of the right half, but at least L/2 + `LANE_SLACK_M` from the
+middle and never nearer the wall than the radius plus `TRACKING_TUBE_M`), and the stretch
+is a passage (`Passage.lane`: followed along its line, its wall planned against with the
+margin the lane leaves, never one way at a time). Routes round inner corners otherwise put
+robots going both ways on the same side of such a corridor: in a maze of 3 m corridors
+and doors with six robots each way (`maze_counterflow`) 9 of 12 stood at a door. A
+stretch is a lane only between walls that face each other across the route
+(`_walls_across`), and only along a corridor at least `LANE_MIN_M` long, with the short
+stretches next to one (the door between two corridors) joined to it (`_corridors`): not
+at a door in a thin wall, nor between two pillars. A robot that leaves a lane short of its
+far mouth, towards the route's next waypoint, has left it (`guidance.RouteGuide`): a lane
+does not hold a robot in as a one-lane gap's walls do.
+
 Why the one-way rule cannot deadlock: right of way is a strict order (past the hold line,
 then distance to the mouth, then id), the same for both robots, so of two robots at
 opposite mouths exactly one holds; a robot inside never holds; and a hold on a robot that
@@ -108,6 +126,23 @@ ALIGN_M = 1.0
 is on the line when it gets there (about the reference's corner radius) [m]."""
 SLOW_MPS = 0.1
 """Slower than this, a robot stands (for `HOLD_STILL_S` and for the direction test) [m/s]."""
+LANE_SLACK_M = 0.05
+"""Two robots in opposite lanes pass this much outside each other's inflated radius [m]."""
+ACROSS_RAD = math.radians(30.0)
+"""A stretch is driven in lanes only where its walls face each other within this of square
+across the route (`_walls_across`)."""
+OPPOSITE_RAD = math.radians(40.0)
+"""... and its nearest disc edges either side within this of straight opposite
+(`_walls_across`): 148 degrees apart between the discs of a wall of 1.14 m spacing in a
+corridor 3 m wide, 136 degrees just out of a door 3 m wide."""
+LANE_MIN_M = 3.0
+"""A stretch is driven in lanes only where it is at least this long: a corridor, not a
+door in a wall or the gap between two pillars, where robots meeting pass by the planner's
+own rules as before (the suite's `obstacles_circle` has hundreds of such gaps)."""
+FILL_SAMPLES = 10
+"""Samples (`SAMPLE_STEP_M` each) of a notch between lane samples filled in (`_closed`)."""
+_CENTRED, _LANE = 1, 2
+"""What `centre_route` does with a route sample: centre it, or move it to the right lane."""
 _END_M = 1e-6
 """Arc lengths this close to a line's ends are at the ends (rounding) [m]."""
 
@@ -134,6 +169,7 @@ class Passage:
     one_lane: bool
     margin_m: float
     entered: bool = False
+    lane: bool = False
 
     @property
     def mouth_m(self) -> np.ndarray:
@@ -181,6 +217,79 @@ def _side_gaps(points: np.ndarray, dirs: np.ndarray, static: StaticMap, tree: cK
     return left, right
 
 
+def _lane_samples(pts: np.ndarray, dirs: np.ndarray, width: np.ndarray, narrow: np.ndarray,
+                  static: StaticMap, tree: cKDTree, two_lane_m: float) -> np.ndarray:
+    """Which route samples are driven in a lane (module docstring, "Lanes"): not narrow,
+    narrower than `two_lane_m`, between walls across the route, along a corridor."""
+    lane: np.ndarray = ~narrow & (width < two_lane_m)
+    if lane.any():
+        lane &= _closed(_walls_across(pts, dirs, static, tree), FILL_SAMPLES)
+        lane = _corridors(lane, math.ceil(LANE_MIN_M / SAMPLE_STEP_M), FILL_SAMPLES)
+    return lane
+
+
+def _walls_across(points: np.ndarray, dirs: np.ndarray, static: StaticMap, tree: cKDTree
+                  ) -> np.ndarray:
+    """Whether a point is between two walls that face each other across the direction:
+    the nearest disc edges on its left and right lie within `OPPOSITE_RAD` of straight
+    opposite each other, and the line between them within `ACROSS_RAD` of square to the
+    direction. Not so at a door crossed at a slant, or just out of it, where the nearest
+    discs on both sides are behind the point and a lane drawn across from them would
+    lead a metre or more off the route."""
+    k = min(NEAREST_DISCS, len(static))
+    _, idx = tree.query(points, k=k)
+    idx = np.reshape(idx, (points.shape[0], k))
+    rel = static.center_m[idx] - points[:, None, :]
+    dist = np.hypot(rel[..., 0], rel[..., 1])
+    edge = dist - static.radius_m[idx]
+    cross = dirs[:, None, 0] * rel[..., 1] - dirs[:, None, 1] * rel[..., 0]
+    rows = np.arange(points.shape[0])
+    near_left = np.argmin(np.where(cross > 0.0, edge, np.inf), axis=1)
+    near_right = np.argmin(np.where(cross <= 0.0, edge, np.inf), axis=1)
+    unit = rel / np.maximum(dist, 1e-9)[..., None]
+    to_left, to_right = unit[rows, near_left], unit[rows, near_right]
+    span = to_left - to_right  # from the right wall to the left
+    norm = np.maximum(np.hypot(span[:, 0], span[:, 1]), 1e-9)
+    along = np.abs((span * dirs).sum(axis=1)) / norm
+    opposite = (to_left * to_right).sum(axis=1)  # -1: the walls straight either side
+    across: np.ndarray = (along < math.sin(ACROSS_RAD)) & (opposite < -math.cos(OPPOSITE_RAD))
+    return across
+
+
+def _closed(mask: np.ndarray, gap: int) -> np.ndarray:
+    """`mask` with runs of at most `gap` False samples between two True ones set True
+    (a wall of discs leaves notches between them, where the nearest discs either side
+    are not straight across)."""
+    true = np.flatnonzero(mask)
+    out = mask.copy()
+    for a, b in zip(true[:-1], true[1:]):
+        if 1 < b - a <= gap + 1:
+            out[a:b] = True
+    return out
+
+
+def _corridors(mask: np.ndarray, samples: int, gap: int) -> np.ndarray:
+    """`mask` kept in its runs of True at least `samples` long (corridors), and in the
+    shorter runs within `gap` samples of a kept one (the door between two corridors, or
+    at a corridor's end), with the gaps between those filled (`_closed`); every other
+    run set False (a door in a wall, the gap between two pillars)."""
+    edges = np.flatnonzero(np.diff(np.r_[False, mask, False].astype(np.int8)))
+    runs = list(zip(edges[0::2].tolist(), edges[1::2].tolist()))
+    kept = [b - a >= samples for a, b in runs]
+    grown = True
+    while grown:
+        grown = False
+        for k, (a, b) in enumerate(runs):
+            near = (k > 0 and kept[k - 1] and a - runs[k - 1][1] <= gap) or \
+                (k + 1 < len(runs) and kept[k + 1] and runs[k + 1][0] - b <= gap)
+            if not kept[k] and near:
+                kept[k] = grown = True
+    out = np.zeros_like(mask)
+    for (a, b), keep in zip(runs, kept):
+        out[a:b] = keep
+    return _closed(out, gap)
+
+
 def _thin(points: np.ndarray, tolerance_m: float) -> np.ndarray:
     """Douglas-Peucker: the points whose removal would move the line more than
     `tolerance_m` (the ends always)."""
@@ -213,12 +322,14 @@ def _margin(width_m: float, radius_m: float, usual_m: float) -> float:
 
 
 def centre_route(route: Route, static: StaticMap, radius_m: float, d_safety_m: float,
-                 full_clearance_m: float) -> tuple[Route, tuple[Passage, ...]]:
+                 full_clearance_m: float, *, lanes: bool = False
+                 ) -> tuple[Route, tuple[Passage, ...]]:
     """The route with its narrow stretches centred, and those stretches (module
     docstring): on a tight route, where the clear width is less than twice the full
-    clearance; on any other route, where it is less than `one_lane_width_m`. A route with
-    no such stretch, or whose centred form would not keep its own clearance, comes back
-    as it was, with no passages.
+    clearance; on any other route, where it is less than `one_lane_width_m`; and, with
+    `lanes`, its corridors driven in lanes (module docstring, "Lanes"). A route with no
+    such stretch, or whose centred form would not keep its own clearance (a lane's own,
+    nearer its wall, on a route with lanes), comes back as it was, with no passages.
 
     Args:
         route: a route from `routing.route_or_tight`.
@@ -226,6 +337,7 @@ def centre_route(route: Route, static: StaticMap, radius_m: float, d_safety_m: f
         radius_m: the robot's radius [m].
         d_safety_m: the usual margin of Eq. (8) [m].
         full_clearance_m: the full route clearance (robot radius + d_safety + margin) [m].
+        lanes: drive corridors in lanes (`Mechanisms.lanes`; the ``lanes`` profile).
     """
     if len(static) == 0:
         return route, ()
@@ -233,61 +345,79 @@ def centre_route(route: Route, static: StaticMap, radius_m: float, d_safety_m: f
     pts, dirs = _resample(route.waypoints_m, SAMPLE_STEP_M)
     left, right = _side_gaps(pts, dirs, static, tree)
     one_lane = one_lane_width_m(radius_m, d_safety_m)
-    narrow = (left + right) < (2.0 * full_clearance_m if route.tight else one_lane)
-    start_inside = bool(narrow[0])  # a route planned from inside a gap
-    narrow[0] = narrow[-1] = False  # the start and the goal stay where they are
-    if not narrow.any():
+    width = left + right
+    narrow = width < (2.0 * full_clearance_m if route.tight else one_lane)
+    lane = _lane_samples(pts, dirs, width, narrow, static, tree,
+                         two_lane_width_m(radius_m, d_safety_m, full_clearance_m)) \
+        if lanes else np.zeros_like(narrow)
+    kind = np.where(narrow, _CENTRED, np.where(lane, _LANE, 0)).astype(np.int8)
+    start_inside = bool(kind[0])  # a route planned from inside a gap
+    kind[0] = kind[-1] = 0  # the start and the goal stay where they are
+    if not kind.any():
         return route, ()
     normal = np.stack((-dirs[:, 1], dirs[:, 0]), axis=1)
-    shift = np.where(narrow, (left - right) / 2.0, 0.0)
+    shift = np.where(kind > 0, (left - right) / 2.0, 0.0)
+    shift -= np.where(kind == _LANE, _lane_offset_m(width, radius_m, d_safety_m), 0.0)
     shift = np.where(np.isfinite(shift), shift, 0.0)
     centred = pts + normal * shift[:, None]
-    edges = np.flatnonzero(np.diff(narrow.astype(np.int8)))
-    starts, ends = edges[0::2] + 1, edges[1::2]
+    edges = np.flatnonzero(np.diff(kind))
+    starts, ends = edges[:-1] + 1, edges[1:]
+    runs = [(a, b) for a, b in zip(starts, ends) if kind[a]]
     out: list[np.ndarray] = []
     passages: list[Passage] = []
     cursor = 0  # samples before this are placed
     vertex_s = _vertex_samples(route.waypoints_m, pts)
-    for a, b in zip(starts, ends):
+    for a, b in runs:
         line = _thin(centred[a:b + 1], THIN_TOLERANCE_M)
-        width = float((left[a:b + 1] + right[a:b + 1]).min())
-        axis = line[min(1, line.shape[0] - 1)] - line[0]
-        if float(math.hypot(*axis)) <= 1e-9:
-            axis = dirs[a]
-        unit = axis / max(float(math.hypot(*axis)), 1e-9)
-        lead = line[0] - unit * LEAD_IN_M
+        narrowest = float(width[a:b + 1].min())
+        in_lane = bool(kind[a] == _LANE)
         # route corners within a lead-in of the mouth are dropped (the centred line
         # replaces them), the start never
         before = [i for i in vertex_s if cursor <= i < a
                   and (i == 0 or math.hypot(*(pts[i] - line[0])) > LEAD_IN_M + SAMPLE_STEP_M)]
         head = [pts[i] for i in before]
         prev = head[-1] if head else (out[-1][-1] if out else pts[0])
-        keep = route.clearance_m
-        lead_ok = bool(float((prev - line[0]) @ unit) <= -LEAD_IN_M
-                       and segment_clears(prev[None], lead[None], static.center_m,
-                                          static.radius_m + keep).all()
-                       and segment_clears(lead[None], line[:1], static.center_m,
-                                          static.radius_m + keep).all())
-        full_line = np.concatenate((lead[None], line)) if lead_ok else line
+        full_line = _with_lead_in(line, dirs[a], prev, static, route.clearance_m)
+        lead_ok = full_line.shape[0] > line.shape[0]
         out.append(np.array(head).reshape(-1, 2))
         out.append(full_line)
         discs = _bounding_discs(line, static, full_clearance_m)
         passages.append(Passage(
-            line_m=full_line, mouth_index=1 if lead_ok else 0, width_m=width,
-            disc_index=discs, one_lane=width < one_lane,
-            margin_m=_margin(width, radius_m, d_safety_m),
-            entered=start_inside and a == 1))
+            line_m=full_line, mouth_index=1 if lead_ok else 0, width_m=narrowest,
+            disc_index=discs, one_lane=narrowest < one_lane,
+            margin_m=(_lane_margin if in_lane else _margin)(narrowest, radius_m, d_safety_m),
+            entered=start_inside and a == 1, lane=in_lane))
         cursor = b + 1
     out.append(np.array([pts[i] for i in vertex_s if i >= cursor]).reshape(-1, 2))
     wps = np.concatenate(out)
     wps = wps[np.r_[True, np.hypot(*np.diff(wps, axis=0).T) > 1e-6]]
     if wps.shape[0] < 2 or not (wps[0] == route.waypoints_m[0]).all():
         return route, ()
-    legs = segment_clears(wps[:-1], wps[1:], static.center_m,
-                          static.radius_m + route.clearance_m)
+    # a lane runs nearer its right-hand wall than the route's clearance, by design
+    floor_m = (route.clearance_m if not any(p.lane for p in passages)
+            else min(route.clearance_m, radius_m + TRACKING_TUBE_M))
+    legs = segment_clears(wps[:-1], wps[1:], static.center_m, static.radius_m + floor_m)
     if not legs.all():
         return route, ()
     return Route(wps, route.clearance_m, tight=route.tight), tuple(passages)
+
+
+def _with_lead_in(line: np.ndarray, direction: np.ndarray, prev: np.ndarray,
+                  static: StaticMap, clearance_m: float) -> np.ndarray:
+    """`line` with a lead-in point `LEAD_IN_M` before its mouth on its axis, where the
+    route's previous point `prev` is at least that far back and the way from it to the
+    lead-in and on to the mouth keeps `clearance_m`; else `line` as it is."""
+    axis = line[min(1, line.shape[0] - 1)] - line[0]
+    if float(math.hypot(*axis)) <= 1e-9:
+        axis = direction
+    unit = axis / max(float(math.hypot(*axis)), 1e-9)
+    lead = line[0] - unit * LEAD_IN_M
+    lead_ok = bool(float((prev - line[0]) @ unit) <= -LEAD_IN_M
+                   and segment_clears(prev[None], lead[None], static.center_m,
+                                      static.radius_m + clearance_m).all()
+                   and segment_clears(lead[None], line[:1], static.center_m,
+                                      static.radius_m + clearance_m).all())
+    return np.concatenate((lead[None], line)) if lead_ok else line
 
 
 def one_lane_width_m(radius_m: float, d_safety_m: float) -> float:
@@ -295,6 +425,34 @@ def one_lane_width_m(radius_m: float, d_safety_m: float) -> float:
     d_safety between them and `TRACKING_TUBE_M` to either wall: a stretch of any route
     narrower than this is a passage taken one way at a time [m]."""
     return 4.0 * radius_m + d_safety_m + 2.0 * TRACKING_TUBE_M
+
+
+def two_lane_width_m(radius_m: float, d_safety_m: float, full_clearance_m: float) -> float:
+    """The clear width below which two robots of `radius_m` following routes along
+    opposite walls (each the full route clearance from its wall) would come within the
+    inflated radius L = 2 r + d_safety of each other, with `TRACKING_TUBE_M` either side:
+    a stretch narrower than this (and at least `one_lane_width_m`) is driven in lanes,
+    each robot on its right [m]. 3.3 m for r = 0.5 m, d_safety = 0.3 m."""
+    return 2.0 * full_clearance_m + 2.0 * radius_m + d_safety_m + 2.0 * TRACKING_TUBE_M
+
+
+def _lane_offset_m(width_m: np.ndarray, radius_m: float, d_safety_m: float) -> np.ndarray:
+    """How far right of a stretch's middle its right-hand lane runs [m]: the middle of
+    the right half, but at least half the inflated radius L plus `LANE_SLACK_M` (two
+    robots in opposite lanes then pass outside each other's L), and never nearer the wall
+    than the robot's radius plus `TRACKING_TUBE_M`."""
+    half_l = radius_m + d_safety_m / 2.0 + LANE_SLACK_M
+    offset: np.ndarray = np.minimum(width_m / 2.0 - radius_m - TRACKING_TUBE_M,
+                                    np.maximum(half_l, width_m / 4.0))
+    floored: np.ndarray = np.maximum(offset, 0.0)
+    return floored
+
+
+def _lane_margin(width_m: float, radius_m: float, usual_m: float) -> float:
+    """The margin against the discs bounding a lane: what its right-hand wall leaves
+    less `TRACKING_TUBE_M`, within [`MIN_MARGIN_M`, d_safety]."""
+    wall = width_m / 2.0 - float(_lane_offset_m(np.array(width_m), radius_m, usual_m))
+    return float(min(usual_m, max(MIN_MARGIN_M, wall - radius_m - TRACKING_TUBE_M)))
 
 
 def _vertex_samples(wps: np.ndarray, pts: np.ndarray) -> list[int]:

@@ -259,7 +259,8 @@ class ViaPointPlanner:
             self.guide = RouteGuide(
                 static_map if static_map is not None else StaticMap.empty(),
                 config.safety.d_safety_m, routes=self.mech.routing,
-                liveness=self.mech.liveness, passages=self.mech.passages)
+                liveness=self.mech.liveness, passages=self.mech.passages,
+                lanes=self.mech.lanes)
         self._passage: tuple[frozenset[int], float] = (frozenset(), math.inf)
 
     def reset(self) -> None:

@@ -10,12 +10,12 @@ import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
 
-from agent.core.config import PlannerConfig
+from agent.core.config import PlannerConfig, profile_config
 from agent.core.types import Others
 from agent.planning import passages as P
 from agent.planning.guidance import RouteGuide
 from agent.planning.liveness import LivenessConfig, Strategy
-from agent.planning.mechanisms import EIFP_MPC_MECHANISMS
+from agent.planning.mechanisms import EIFP_MPC_MECHANISMS, mechanisms
 from agent.planning.planners import make_planner
 from agent.planning.routing import (
     ROUTE_MARGIN_M,
@@ -73,12 +73,15 @@ def test_a_tight_route_is_centred_in_its_gap_with_a_lead_in_on_the_centre_line()
 
 
 def test_a_route_with_full_clearance_is_left_alone() -> None:
-    static = walled_corridor(half_clear_m=1.5)  # 3 m clear: full clearance, two lanes
-    route = route_or_tight(np.array([-9.0, 0.4]), np.array([9.0, 0.0]), static, RADIUS,
-                           D_SAFETY)
-    assert route is not None and not route.tight
-    centred, found = P.centre_route(route, static, RADIUS, D_SAFETY, FULL)
-    assert centred is route and found == ()
+    """A corridor 3 m clear, without lanes (the default profile); and 4 m clear, with
+    lanes too (wider than `two_lane_width_m`: robots pass in it at will)."""
+    for half, lanes in ((1.5, False), (2.0, False), (2.0, True)):
+        static = walled_corridor(half_clear_m=half)
+        route = route_or_tight(np.array([-9.0, 0.4]), np.array([9.0, 0.0]), static, RADIUS,
+                               D_SAFETY)
+        assert route is not None and not route.tight
+        centred, found = P.centre_route(route, static, RADIUS, D_SAFETY, FULL, lanes=lanes)
+        assert centred is route and found == ()
 
 
 def test_on_track_aims_along_the_line_and_joins_it_short_of_the_mouth() -> None:
@@ -268,3 +271,103 @@ def test_a_door_two_robots_cannot_pass_in_is_one_lane_on_a_full_route() -> None:
     inside = passage.line_m[passage.mouth_index:]
     assert np.abs(inside[:, 1]).max() <= P.THIN_TOLERANCE_M + 1e-9  # centred
     assert math.isclose(P.one_lane_width_m(RADIUS, D_SAFETY), 2.5)
+
+
+def lanes(start: tuple[float, float], goal: tuple[float, float], half_clear_m: float = 1.5
+          ) -> tuple[StaticMap, tuple[P.Passage, ...]]:
+    static = walled_corridor(half_clear_m=half_clear_m)
+    route = route_or_tight(np.array(start), np.array(goal), static, RADIUS, D_SAFETY)
+    assert route is not None and not route.tight
+    _, found = P.centre_route(route, static, RADIUS, D_SAFETY, FULL, lanes=True)
+    return static, found
+
+
+def test_a_corridor_two_robots_barely_pass_in_is_driven_in_lanes_each_on_its_right() -> None:
+    """A corridor 3 m clear is wider than one lane (2.5 m) but narrower than two robots
+    on routes along opposite walls (`two_lane_width_m`, 3.3 m). Routes round inner
+    corners put robots going both ways on the same side of such a corridor, and 9 of 12
+    robots stood at a door of a maze of them (`maze_counterflow`, docs/results.md). Each
+    robot's route runs in the lane on its right: going +x at y = -0.75, going -x at
+    y = +0.75, 1.5 m apart (more than the inflated radius L = 1.3 m), 0.25 m from the
+    walls; it is not one-lane, and the walls get the margin the lane leaves."""
+    assert math.isclose(P.two_lane_width_m(RADIUS, D_SAFETY, FULL), 3.3)
+    _, east = lanes((-9.0, 0.4), (9.0, 0.0))
+    _, west = lanes((9.0, -0.4), (-9.0, 0.0))
+    for found, y_lane in ((east, -0.75), (west, 0.75)):
+        assert len(found) == 1
+        lane = found[0]
+        assert lane.lane and not lane.one_lane and math.isclose(lane.width_m, 3.0, abs_tol=0.02)
+        line = lane.line_m[np.argsort(lane.line_m[:, 0])]
+        assert line[0, 0] < -3.5 and line[-1, 0] > 3.5  # through it
+        inside = np.interp(np.linspace(-3.5, 3.5, 15), line[:, 0], line[:, 1])
+        assert np.abs(inside - y_lane).max() <= P.THIN_TOLERANCE_M + 1e-9
+        assert math.isclose(lane.margin_m, 1.5 - 0.75 - RADIUS - P.TRACKING_TUBE_M, abs_tol=1e-3)
+    apart = 2 * 0.75
+    assert apart >= 2 * RADIUS + D_SAFETY + 2 * P.LANE_SLACK_M
+    assert 1.5 - 0.75 - RADIUS >= P.TRACKING_TUBE_M
+
+
+def test_lanes_narrow_with_the_corridor_but_keep_the_robots_apart_and_off_the_walls() -> None:
+    """From one lane's width to two: the lanes' offset from the middle never brings two
+    robots in opposite lanes within L (+ slack) of each other, unless the corridor
+    cannot hold that and the robot's radius plus the tracking tube from the wall."""
+    one = P.one_lane_width_m(RADIUS, D_SAFETY)
+    for width in np.linspace(one, P.two_lane_width_m(RADIUS, D_SAFETY, FULL), 9):
+        offset = float(P._lane_offset_m(np.array(width), RADIUS, D_SAFETY))
+        wall = width / 2.0 - offset - RADIUS
+        assert wall >= P.TRACKING_TUBE_M - 1e-9
+        assert 2 * offset >= 2 * RADIUS + D_SAFETY - 1e-9  # never within L
+        assert P.MIN_MARGIN_M <= P._lane_margin(width, RADIUS, D_SAFETY) <= D_SAFETY
+
+
+def test_a_lane_is_drawn_only_between_walls_that_face_each_other_across_the_route() -> None:
+    """Where the nearest discs either side are both behind the point (just out of a door)
+    or the route crosses the gap at a slant, "the middle" is not a place to drive: a lane
+    drawn from them ran a metre off the route, beside the door, and a robot stood there
+    aiming back at its end (`maze_counterflow`)."""
+    xs = [x for x in np.arange(-12.0, 12.5, 1.0) if abs(x) > 1.6]
+    static = StaticMap(np.array([(x, 0.0) for x in xs]), np.full(len(xs), 0.5))  # door 3 m
+    tree = P.cKDTree(static.center_m)
+    north, slant = np.array([0.0, 1.0]), np.array([math.sin(0.7), math.cos(0.7)])
+    east = np.array([1.0, 0.0])
+    pts = np.array([(0.3, 0.0), (0.3, 1.2), (0.3, 0.0), (0.3, 0.0)])
+    dirs = np.stack((north, north, slant, east))
+    across = P._walls_across(pts, dirs, static, tree)
+    assert across.tolist() == [True, False, False, False]
+
+
+def test_a_robot_that_cuts_the_corner_at_a_lanes_end_has_left_it() -> None:
+    """A lane does not hold a robot in: one that left it short of the far mouth, towards
+    the route's next waypoint, no longer aims back at the far mouth; one still on the
+    line does."""
+    static = walled_corridor(half_clear_m=1.5)
+    guide = RouteGuide(static, D_SAFETY, liveness=LivenessConfig(), passages=True, lanes=True)
+    walls = as_others(static)
+    goal = (6.5, -7.0)  # out of the corridor's east end, then round its wall to the south
+    guide.guide(observation(-9.0, 0.4, 0.0, 0.0, goal, walls), 0.0)
+    assert len(guide._passages) == 1 and guide._passages[0].lane
+    lane, end = guide._passages[0], guide._passage_ends[0]
+    assert guide._follower is not None
+    after = guide._follower.route.waypoints_m[end + 1]
+    far = lane.far_mouth_m
+    back = lane.line_m[-2] - far
+    back /= np.hypot(*back)
+    on_line = far + 0.6 * back
+    g = guide.guide(observation(*on_line, 0.0, 0.5, goal, walls), 0.1)
+    assert guide._left == 0 and math.dist(g.goal_m, far) < 1e-6
+    beside = far + 0.6 * back + 0.7 * (after - far) / math.dist(after, far)
+    assert math.dist(beside, after) < math.dist(far, after)
+    g = guide.guide(observation(*beside, 0.0, 0.5, goal, walls), 0.2)
+    assert guide._left == 1 and math.dist(g.goal_m, far) > 0.5
+
+
+def test_lanes_are_the_lanes_profile_s_alone() -> None:
+    """Lanes are an experiment (docs/results.md, "Lanes in corridors: an opt-in
+    profile"): eIFP-MPC drives in them in the ``lanes`` profile only, with every default
+    mechanism as well; the default profile and the other planners never do."""
+    lanes = mechanisms("eifp-mpc", profile_config("lanes"))
+    assert lanes.lanes and dataclasses.replace(lanes, lanes=False) == EIFP_MPC_MECHANISMS
+    assert not mechanisms("eifp-mpc", PlannerConfig()).lanes
+    assert not mechanisms("eifp", profile_config("lanes")).lanes
+    planner = make_planner("eifp-mpc", profile_config("lanes"), static_map=walled_corridor())
+    assert planner.guide.lanes_on  # type: ignore[attr-defined]
