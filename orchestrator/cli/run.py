@@ -70,8 +70,9 @@ def choose_launcher(requested: str, robots: int, faults: FaultPlan | None) -> st
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("run", help="run one scenario")
     p.add_argument("--profile", choices=PROFILES, default=None,
-                   help="planner configuration: default or paper (the paper\'s method as "
-                        "written); default: the scenario\'s own")
+                   help="planner configuration: default, paper (the paper\'s method as "
+                        "written) or lanes (the default with lanes in corridors, "
+                        "docs/method.md); default: the scenario\'s own")
     p.add_argument("--without", default=None, metavar="LIST",
                    help="mechanisms of the default profile to switch off, comma-separated "
                         "(ablations; docs/method.md): e.g. routing,liveness")

@@ -28,8 +28,9 @@ from orchestrator.cli.common import (
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("stress", help="fault levels x planners x seeds: table and envelope")
     p.add_argument("--profile", choices=PROFILES, default=None,
-                   help="planner configuration: default or paper (the paper\'s method as "
-                        "written); default: the scenario\'s own")
+                   help="planner configuration: default, paper (the paper\'s method as "
+                        "written) or lanes (the default with lanes in corridors, "
+                        "docs/method.md); default: the scenario\'s own")
     p.add_argument("setup", help="a setup, family or scenario file (as for run)")
     p.add_argument("--sweep", action="append", metavar="KEY=V1,V2,...",
                    help="latency_ms, jitter_ms, drop, dup or reorder; repeat for a grid")

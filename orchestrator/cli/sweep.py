@@ -32,8 +32,9 @@ SWEEP_RUN_TIMEOUT_S = 4 * 3600.0
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("sweep", help="many runs: setups x planners x seeds")
     p.add_argument("--profile", choices=PROFILES, default=None,
-                   help="planner configuration: default or paper (the paper\'s method as "
-                        "written); default: the scenario\'s own")
+                   help="planner configuration: default, paper (the paper\'s method as "
+                        "written) or lanes (the default with lanes in corridors, "
+                        "docs/method.md); default: the scenario\'s own")
     p.add_argument("--setups", required=True, help="comma-separated names, or 'all' (A-G)")
     p.add_argument("--planners", required=True, help="comma-separated names, or 'all'")
     p.add_argument("--seeds", type=int, default=1, help="seeds 0..N-1 (default 1)")
