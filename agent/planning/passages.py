@@ -397,14 +397,22 @@ def centre_route(route: Route, static: StaticMap, radius_m: float, d_safety_m: f
     wps = wps[np.r_[True, np.hypot(*np.diff(wps, axis=0).T) > 1e-6]]
     if wps.shape[0] < 2 or not (wps[0] == route.waypoints_m[0]).all():
         return route, ()
-    # a lane runs nearer its right-hand wall than the route's clearance, by design
-    floor_m = (route.clearance_m if not any(p.lane for p in passages)
-            else min(route.clearance_m, radius_m + TRACKING_TUBE_M))
-    legs = segment_clears(wps[:-1], wps[1:], static.center_m, static.radius_m + floor_m)
-    if not legs.all():  # with lanes, the route centred without them
+    if not _legs_clear(wps, passages, static, route.clearance_m, radius_m):
+        # with lanes, the route centred without them
         return centre_route(route, static, radius_m, d_safety_m, full_clearance_m) \
             if lanes else (route, ())
     return Route(wps, route.clearance_m, tight=route.tight), tuple(passages)
+
+
+def _legs_clear(wps: np.ndarray, passages: list[Passage], static: StaticMap,
+                clearance_m: float, radius_m: float) -> bool:
+    """Whether every leg of `wps` keeps `clearance_m` from the static discs, or with a
+    lane among `passages` the robot's radius plus `TRACKING_TUBE_M` (a lane runs nearer
+    its right-hand wall than the route's clearance, by design)."""
+    floor_m = (min(clearance_m, radius_m + TRACKING_TUBE_M) if any(p.lane for p in passages)
+               else clearance_m)
+    return bool(segment_clears(wps[:-1], wps[1:], static.center_m,
+                               static.radius_m + floor_m).all())
 
 
 def _with_lead_in(line: np.ndarray, direction: np.ndarray, prev: np.ndarray,
