@@ -371,3 +371,24 @@ def test_lanes_are_the_lanes_profile_s_alone() -> None:
     assert not mechanisms("eifp", profile_config("lanes")).lanes
     planner = make_planner("eifp-mpc", profile_config("lanes"), static_map=walled_corridor())
     assert planner.guide.lanes_on  # type: ignore[attr-defined]
+
+
+def test_a_corridor_keeps_its_lanes_through_notches_and_the_doors_next_to_it() -> None:
+    """A wall of discs is scalloped, so the lane test comes and goes along a corridor:
+    notches up to `FILL_SAMPLES` are filled; a short stretch (a door) within that of a
+    corridor at least `LANE_MIN_M` long joins it, one farther off (a gap between two
+    pillars) does not."""
+    mask = np.zeros(120, dtype=bool)
+    mask[10:20] = mask[23:50] = True  # a corridor with a 3-sample notch
+    mask[60:65] = True  # a door 10 samples past its end
+    mask[100:105] = True  # a gap between pillars, far off
+    gap = P.FILL_SAMPLES
+    closed = P._closed(mask, gap)
+    assert closed[10:50].all() and closed[50:60].any()  # notch and door gap filled
+    assert not P._closed(mask, 2)[20:23].any()  # a notch wider than the fill stays
+    long_m = math.ceil(P.LANE_MIN_M / P.SAMPLE_STEP_M)
+    kept = P._corridors(closed, long_m, gap)
+    assert kept[10:65].all() and not kept[:10].any()
+    assert not kept[65:].any()  # the far gap is dropped
+    assert not P._corridors(mask, long_m, gap).any()  # unfilled: no run long enough
+    assert not P._corridors(closed, 100, gap).any()  # no corridor long enough: no lanes
