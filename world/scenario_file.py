@@ -9,7 +9,7 @@ File format (YAML, SI units: metres, seconds, radians)::
     name: setup_d                # required, non-empty string
     description: four robots ... # optional, default ""
     profile: default             # optional: default | paper (the paper's method as written;
-                                 #   the keys under `defaults` still override it)
+                                 #   the keys under `defaults` still override it) | lanes
     without: [routing, liveness] # optional: mechanisms of the default profile switched off
                                  #   (ablations; agent.core.config.MECHANISM_NAMES)
     time_limit: 140              # required [s], > 0: the run fails if not all arrived by then

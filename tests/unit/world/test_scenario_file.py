@@ -375,6 +375,18 @@ def test_profile_paper_loads_the_paper_config(tmp_path):
     assert not is_paper_config(default) and default == PlannerConfig()
 
 
+def test_profile_lanes_loads_the_default_with_lanes_and_round_trips(tmp_path):
+    from agent.core.config import PlannerConfig
+    from agent.planning.mechanisms import mechanisms
+    from world.scenario_file import scenario_from_dict, scenario_to_dict
+
+    s = _load_profile_doc(tmp_path, "profile: lanes")
+    config = s.planner_config
+    assert config == dataclasses.replace(PlannerConfig(), profile="lanes")
+    assert mechanisms("eifp-mpc", config).lanes
+    assert scenario_from_dict(scenario_to_dict(s), "dict") == s  # as robot processes get it
+
+
 def test_defaults_override_the_profile(tmp_path):
     from agent.core.config import is_paper_config
 
