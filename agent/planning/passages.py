@@ -208,15 +208,23 @@ def _side_gaps(points: np.ndarray, dirs: np.ndarray, static: StaticMap, tree: cK
                ) -> tuple[np.ndarray, np.ndarray]:
     """Distance from each point to the nearest disc edge on its left and on its right of
     the direction (inf where none of the nearest discs is on that side)."""
+    _, _, left_edge, right_edge = _sided_discs(points, dirs, static, tree)
+    return left_edge.min(axis=1), right_edge.min(axis=1)
+
+
+def _sided_discs(points: np.ndarray, dirs: np.ndarray, static: StaticMap, tree: cKDTree
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The `NEAREST_DISCS` discs nearest each point: their centres relative to it (n, k,
+    2), their distances (n, k), and their edge distances on its left and on its right of
+    the direction (n, k each; inf for a disc on the other side)."""
     k = min(NEAREST_DISCS, len(static))
     _, idx = tree.query(points, k=k)
     idx = np.reshape(idx, (points.shape[0], k))
     rel = static.center_m[idx] - points[:, None, :]
-    edge = np.hypot(rel[..., 0], rel[..., 1]) - static.radius_m[idx]
+    dist = np.hypot(rel[..., 0], rel[..., 1])
+    edge = dist - static.radius_m[idx]
     cross = dirs[:, None, 0] * rel[..., 1] - dirs[:, None, 1] * rel[..., 0]
-    left = np.where(cross > 0.0, edge, np.inf).min(axis=1)
-    right = np.where(cross <= 0.0, edge, np.inf).min(axis=1)
-    return left, right
+    return rel, dist, np.where(cross > 0.0, edge, np.inf), np.where(cross <= 0.0, edge, np.inf)
 
 
 def _lane_samples(pts: np.ndarray, dirs: np.ndarray, width: np.ndarray, narrow: np.ndarray,
@@ -240,16 +248,10 @@ def _walls_across(points: np.ndarray, dirs: np.ndarray, static: StaticMap, tree:
     direction. Not so at a door crossed at a slant, or just out of it, where the nearest
     discs on both sides are behind the point and a lane drawn across from them would
     lead a metre or more off the route."""
-    k = min(NEAREST_DISCS, len(static))
-    _, idx = tree.query(points, k=k)
-    idx = np.reshape(idx, (points.shape[0], k))
-    rel = static.center_m[idx] - points[:, None, :]
-    dist = np.hypot(rel[..., 0], rel[..., 1])
-    edge = dist - static.radius_m[idx]
-    cross = dirs[:, None, 0] * rel[..., 1] - dirs[:, None, 1] * rel[..., 0]
+    rel, dist, left_edge, right_edge = _sided_discs(points, dirs, static, tree)
     rows = np.arange(points.shape[0])
-    near_left = np.argmin(np.where(cross > 0.0, edge, np.inf), axis=1)
-    near_right = np.argmin(np.where(cross <= 0.0, edge, np.inf), axis=1)
+    near_left = np.argmin(left_edge, axis=1)
+    near_right = np.argmin(right_edge, axis=1)
     unit = rel / np.maximum(dist, 1e-9)[..., None]
     to_left, to_right = unit[rows, near_left], unit[rows, near_right]
     span = to_left - to_right  # from the right wall to the left
