@@ -133,8 +133,9 @@ ACROSS_RAD = math.radians(30.0)
 across the route (`_walls_across`)."""
 OPPOSITE_RAD = math.radians(40.0)
 """... and its nearest disc edges either side within this of straight opposite
-(`_walls_across`): 148 degrees apart between the discs of a wall of 1.14 m spacing in a
-corridor 3 m wide, 136 degrees just out of a door 3 m wide."""
+(`_walls_across`). Worked by hand for one point each: 148 degrees apart 0.3 m off the
+middle of a corridor 3 m wide between discs 1.14 m apart, 136 degrees 0.5 m out of a door
+3 m wide on a route crossing it at a slant."""
 LANE_MIN_M = 3.0
 """A stretch is driven in lanes only where it is at least this long: a corridor, not a
 door in a wall or the gap between two pillars, where robots meeting pass by the planner's
